@@ -1,0 +1,95 @@
+"""Recording format v1: the in-memory model of a recording (see docs/recording-format.md).
+
+A recording holds one sensor stream (``/suit/sensors``: tendon path lengths in mm on the
+device clock, ~250 Hz, sequence numbers whose gaps mean dropped frames) and any number of
+motion-capture streams (``/mocap/<joint>``: joint angles in degrees, ~120 Hz), plus the
+``exohil.recording`` metadata record. Times are seconds; both clocks are assumed to share
+an origin unless a lag/clock-offset effect says otherwise.
+
+Reading and writing MCAP files lives in :mod:`exohil.formats.mcap_io`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FORMAT_NAME = "exohil-recording"
+FORMAT_VERSION = 1
+SENSOR_TOPIC = "/suit/sensors"
+MOCAP_PREFIX = "/mocap/"
+
+
+@dataclass
+class SensorStream:
+    """Sensor frames in arrival order.
+
+    Attributes:
+        seq: (N,) int64 sequence numbers as sent by the device (monotonic, unwrapped).
+        t: (N,) float64 device-clock time of each frame, seconds.
+        values: (N, S) float64 sensor values, in ``Recording.sensor_units`` (mm by default).
+    """
+
+    seq: np.ndarray
+    t: np.ndarray
+    values: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass
+class AngleStream:
+    """One joint's motion-capture angles.
+
+    Attributes:
+        t: (M,) float64 seconds.
+        names: angle field names in column order, e.g. ("elv_angle", "shoulder_elv", "shoulder_rot").
+        angles: (M, A) float64 degrees.
+    """
+
+    t: np.ndarray
+    names: tuple[str, ...]
+    angles: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    def column(self, name: str) -> np.ndarray:
+        """The (M,) series of one angle field, degrees."""
+        return self.angles[:, self.names.index(name)]
+
+
+@dataclass
+class Segment:
+    """A labelled time span (e.g. one movement of a protocol), seconds on the sensor clock."""
+
+    name: str
+    t0: float
+    t1: float
+
+
+@dataclass
+class Recording:
+    """A whole recording.
+
+    Attributes:
+        sensor_names: names of the sensor columns in order (e.g. F, SF, SR, R).
+        sensors: the sensor stream.
+        mocap: joint name (the topic suffix, e.g. "shoulder") → angle stream.
+        sensor_units: unit of the sensor values ("mm" for tendon lengths; other tools may
+            write other units, e.g. normalised resistance for textile strain sensors).
+        sensor_rate_hz / mocap_rate_hz: nominal rates from the metadata.
+        segments: labelled spans (movement types); empty when the writer gave none.
+        metadata: the full ``exohil.recording`` metadata as str → str, as stored.
+    """
+
+    sensor_names: tuple[str, ...]
+    sensors: SensorStream
+    mocap: dict[str, AngleStream] = field(default_factory=dict)
+    sensor_units: str = "mm"
+    sensor_rate_hz: float = 250.0
+    mocap_rate_hz: float = 120.0
+    segments: list[Segment] = field(default_factory=list)
+    metadata: dict[str, str] = field(default_factory=dict)

@@ -1,0 +1,29 @@
+"""The ``exohil`` command line: one group, one module per command family.
+
+Heavy imports (torch, matplotlib, mcap) happen inside the commands, so ``exohil --help``
+stays fast.
+"""
+
+from __future__ import annotations
+
+import click
+
+from exohil import __version__
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="exohil")
+def main() -> None:
+    """exohil: hardware-in-the-loop harness and conformance suite for a soft shoulder
+    sensing exosuit (four tendon sensors → shoulder angles → NAO teleoperation)."""
+
+
+def _register() -> None:
+    from exohil.harness import cmd_convert
+
+    for module in (cmd_convert,):
+        for command in module.COMMANDS:
+            main.add_command(command)
+
+
+_register()

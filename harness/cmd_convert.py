@@ -1,0 +1,2 @@
+"""``exohil convert``: placeholder replaced below."""
+COMMANDS: list = []
