@@ -45,7 +45,7 @@ class AngleStream:
 
     Attributes:
         t: (M,) float64 seconds.
-        names: angle field names in column order, e.g. ("elv_angle", "shoulder_elv", "shoulder_rot").
+        names: angle field names in column order, e.g. ("elv_angle", "shoulder_elv").
         angles: (M, A) float64 degrees.
     """
 

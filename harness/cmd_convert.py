@@ -1,2 +1,127 @@
-"""``exohil convert``: placeholder replaced below."""
-COMMANDS: list = []
+"""``exohil convert``: one shoulder pose from one convention to another, printed as JSON.
+
+Angles are degrees at the command line and in the output; quaternions are (x, y, z, w).
+"""
+
+from __future__ import annotations
+
+import json
+
+import click
+import numpy as np
+
+from exohil.kinematics import (
+    NAO_JOINTS,
+    humerus_to_nao,
+    isb_to_quat,
+    ms_to_quat,
+    quat_to_isb,
+    quat_to_ms,
+    quat_to_zyx,
+)
+from exohil.kinematics.rotations import normalize_quat
+
+_SOURCES = {
+    "ms": ("elv_angle", "shoulder_elv", "shoulder_rot"),
+    "isb": ("plane_of_elevation", "elevation", "axial_rotation"),
+    "quat": ("x", "y", "z", "w"),
+}
+#: Decimal places in the JSON output (1e-9 deg, far below any physical meaning).
+_DECIMALS = 9
+
+
+def _clean(values: np.ndarray) -> list[float]:
+    """Round for display and turn −0.0 into 0.0."""
+    return (np.round(values, _DECIMALS) + 0.0).tolist()
+
+
+_TARGET_FIELDS = {
+    "ms": _SOURCES["ms"],
+    "isb": _SOURCES["isb"],
+    "quat": _SOURCES["quat"],
+    "zyx": ("z", "y_prime", "x_double_prime"),
+    "nao": NAO_JOINTS,
+}
+
+
+def _to_quat(source: str, values: np.ndarray, convention: str, axes: str) -> np.ndarray:
+    if source == "quat":
+        return normalize_quat(values)
+    radians = np.deg2rad(values)
+    if source == "ms":
+        return ms_to_quat(radians, axes=axes, convention=convention)
+    return isb_to_quat(radians)
+
+
+def _from_quat(target: str, q: np.ndarray, convention: str, side: str, hint_deg: float) -> dict:
+    hint = np.deg2rad(hint_deg)
+    if target == "quat":
+        return {"values": dict(zip(_TARGET_FIELDS["quat"], _clean(q), strict=True))}
+    if target == "nao":
+        arm = humerus_to_nao(q, side=side, hint=np.array([hint, 0.0, 0.0]))
+        names = [f"{'R' if side == 'right' else 'L'}{n}" for n in NAO_JOINTS]
+        return {
+            "values": dict(zip(names, _clean(np.rad2deg(arm.angles)), strict=True)),
+            "clamped": dict(zip(names, arm.clamped.tolist(), strict=True)),
+            "any_clamped": bool(arm.any_clamped),
+            "unclamped": dict(zip(names, _clean(np.rad2deg(arm.unclamped)), strict=True)),
+        }
+    if target == "ms":
+        angles = quat_to_ms(q, plane_hint=hint, convention=convention)
+    elif target == "isb":
+        angles = quat_to_isb(q, plane_hint=hint)
+    else:
+        angles = quat_to_zyx(q, yaw_hint=hint)
+    return {"values": dict(zip(_TARGET_FIELDS[target], _clean(np.rad2deg(angles)), strict=True))}
+
+
+@click.command(context_settings={"ignore_unknown_options": True})
+@click.option("--from", "source", type=click.Choice(sorted(_SOURCES)), required=True,
+              help="Input convention: ms (MoBL-ARMS θ φ ψ), isb (Y-X'-Y'' α β γ), quat (x y z w).")
+@click.option("--to", "target", type=click.Choice(sorted(_TARGET_FIELDS)), required=True,
+              help="Output: ms, isb, quat, zyx (intrinsic Z-Y'-X'', V-REP) or nao (arm joints).")
+@click.option("--convention", type=click.Choice(["coupled", "paper"]), default="coupled",
+              show_default=True,
+              help="MS↔ISB step: 'coupled' (ISB γ = ψ − θ, the model's coupler) or the paper's.")
+@click.option("--axes", type=click.Choice(["ideal", "mobl"]), default="ideal", show_default=True,
+              help="MS → rotation with ideal ISB axes or the MoBL-ARMS model file's axes.")
+@click.option("--side", type=click.Choice(["right", "left"]), default="right", show_default=True,
+              help="Arm side for --to nao.")
+@click.option("--hint", type=float, default=0.0, show_default=True,
+              help="Degrees used at singularities: plane of elevation (ms/isb), yaw (zyx), "
+                   "pitch (nao).")
+@click.argument("values", nargs=-1, required=True)
+def convert(source: str, target: str, convention: str, axes: str, side: str, hint: float,
+            values: tuple[str, ...]) -> None:
+    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w).
+
+    Example: exohil convert --from ms --to nao 90 90 0
+    """
+    expected = len(_SOURCES[source])
+    try:
+        numbers = np.array([float(v) for v in values])
+    except ValueError as err:
+        raise click.BadParameter(f"VALUES must be numbers ({err})", param_hint="VALUES") from None
+    if numbers.size != expected or not np.all(np.isfinite(numbers)):
+        raise click.BadParameter(
+            f"--from {source} takes {expected} finite numbers "
+            f"({' '.join(_SOURCES[source])}), got {len(values)}",
+            param_hint="VALUES",
+        )
+    try:
+        q = _to_quat(source, numbers, convention, axes)
+    except ValueError as err:
+        raise click.BadParameter(str(err), param_hint="VALUES") from None
+    result = {
+        "from": source,
+        "to": target,
+        "units": "deg" if target != "quat" else "unitless",
+        "input": dict(zip(_SOURCES[source], numbers.tolist(), strict=True)),
+        "convention": convention,
+        "axes": axes,
+    }
+    result.update(_from_quat(target, q, convention, side, hint))
+    click.echo(json.dumps(result, indent=2))
+
+
+COMMANDS = [convert]

@@ -1,1 +1,46 @@
-"""kinematics layer."""
+"""Kinematics layer: pure math for shoulder conventions, conversions and arm geometry. No I/O.
+
+Radians everywhere; degrees only at the edges (CLI, files). See docs/conventions.md.
+"""
+
+from exohil.kinematics.arm import humerus_direction
+from exohil.kinematics.robot import NAO_JOINTS, NAO_LIMITS, NaoArm, humerus_to_nao, quat_to_zyx
+from exohil.kinematics.rotations import (
+    matrix_to_quat,
+    normalize_quat,
+    quat_multiply,
+    quat_to_matrix,
+    rotation_angle_between,
+)
+from exohil.kinematics.shoulder import (
+    MOBL_RANGES,
+    isb_to_ms,
+    isb_to_quat,
+    ms_to_isb,
+    ms_to_matrix,
+    ms_to_quat,
+    quat_to_isb,
+    quat_to_ms,
+)
+
+__all__ = [
+    "MOBL_RANGES",
+    "NAO_JOINTS",
+    "NAO_LIMITS",
+    "NaoArm",
+    "humerus_direction",
+    "humerus_to_nao",
+    "isb_to_ms",
+    "isb_to_quat",
+    "matrix_to_quat",
+    "ms_to_isb",
+    "ms_to_matrix",
+    "ms_to_quat",
+    "normalize_quat",
+    "quat_multiply",
+    "quat_to_isb",
+    "quat_to_matrix",
+    "quat_to_ms",
+    "quat_to_zyx",
+    "rotation_angle_between",
+]

@@ -1,0 +1,91 @@
+"""NAO arm mapping: known poses, limits and clamp reporting, singularity handling."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from hypothesis import given
+from hypothesis import strategies as st
+
+from exohil.harness.cli import main
+from exohil.kinematics import NAO_LIMITS, humerus_to_nao, ms_to_quat, rotation_angle_between
+from exohil.kinematics.robot import HUMERUS_FROM_NAO_ARM, NAO_FROM_ISB
+from exohil.kinematics.rotations import X, Y, Z, elementary_matrix, matrix_to_quat
+
+pytestmark = pytest.mark.filterwarnings("error")
+deg = np.deg2rad
+
+
+def nao(theta_deg, phi_deg, psi_deg=0.0, side="right"):
+    return humerus_to_nao(ms_to_quat(deg(theta_deg), deg(phi_deg), deg(psi_deg)), side=side)
+
+
+def test_arm_hanging_is_pitch_90_roll_0():
+    arm = nao(0, 0)
+    assert np.allclose(np.rad2deg(arm.angles[:2]), [90.0, 0.0], atol=1e-9)
+    assert not arm.any_clamped
+
+
+def test_forward_flexion_90_is_pitch_0_roll_0():
+    arm = nao(90, 90)
+    assert np.allclose(np.rad2deg(arm.angles[:2]), [0.0, 0.0], atol=1e-9)
+    assert not arm.any_clamped
+
+
+def test_right_abduction_90_is_roll_minus_90_clamped_and_reported():
+    arm = nao(0, 90)
+    assert np.rad2deg(arm.unclamped[1]) == pytest.approx(-90.0, abs=1e-9)
+    assert np.rad2deg(arm.angles[1]) == pytest.approx(-76.0)
+    assert arm.clamped.tolist() == [False, True, False]
+
+
+def test_left_arm_mirrors_roll_and_yaw():
+    right, left = nao(30, 60, -20), nao(30, 60, -20, side="left")
+    assert np.allclose(left.unclamped, right.unclamped * [1, -1, -1])
+    left_abd = nao(0, 90, side="left")
+    assert np.rad2deg(left_abd.angles[1]) == pytest.approx(76.0)
+    assert left_abd.clamped[1]
+
+
+@given(st.floats(-np.pi, np.pi), st.floats(-1.5, 1.5), st.floats(-np.pi, np.pi))
+def test_nao_angles_reconstruct_the_humerus_orientation(pitch, roll, yaw):
+    # Build a humerus orientation from NAO joints, map back, compare rotations.
+    arm_in_nao = (elementary_matrix(Y, pitch) @ elementary_matrix(Z, roll)
+                  @ elementary_matrix(X, yaw))
+    humerus = NAO_FROM_ISB.T @ arm_in_nao @ HUMERUS_FROM_NAO_ARM.T
+    got = humerus_to_nao(matrix_to_quat(humerus))
+    p, r, y = got.unclamped
+    rebuilt = elementary_matrix(Y, p) @ elementary_matrix(Z, r) @ elementary_matrix(X, y)
+    assert rotation_angle_between(matrix_to_quat(rebuilt), matrix_to_quat(arm_in_nao)) < 1e-6
+    low, high = NAO_LIMITS["right"][:, 0], NAO_LIMITS["right"][:, 1]
+    assert np.all((got.angles >= low) & (got.angles <= high))
+    assert np.array_equal(got.clamped, (got.unclamped < low) | (got.unclamped > high))
+
+
+def test_roll_singularity_uses_the_pitch_hint_and_never_nans():
+    q = ms_to_quat(0.0, deg(90), deg(10))  # right abduction 90°: roll = -90°
+    for hint_pitch in (-0.5, 0.0, 0.7):
+        arm = humerus_to_nao(q, hint=np.array([hint_pitch, 0.0, 0.0]))
+        assert arm.unclamped[0] == pytest.approx(hint_pitch)
+        assert np.all(np.isfinite(arm.angles))
+
+
+def test_cli_convert_ms_to_nao_prints_json_with_clamp_flags():
+    result = CliRunner().invoke(main, ["convert", "--from", "ms", "--to", "nao", "0", "90", "0"])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output)
+    assert out["values"]["RShoulderRoll"] == pytest.approx(-76.0)
+    assert out["clamped"]["RShoulderRoll"] is True and out["any_clamped"] is True
+    flex = json.loads(CliRunner().invoke(main, ["convert", "--from", "ms", "--to", "nao",
+                                                "90", "90", "0"]).output)
+    assert flex["any_clamped"] is False
+    assert flex["values"]["RShoulderPitch"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_cli_convert_accepts_negative_values_and_rejects_bad_counts():
+    ok = CliRunner().invoke(main, ["convert", "--from", "ms", "--to", "isb", "-90", "45", "10"])
+    assert ok.exit_code == 0
+    assert json.loads(ok.output)["values"]["axial_rotation"] == pytest.approx(100.0)
+    bad = CliRunner().invoke(main, ["convert", "--from", "ms", "--to", "isb", "1", "2"])
+    assert bad.exit_code != 0 and "takes 3" in bad.output

@@ -1,0 +1,186 @@
+"""Property-based tests of the shoulder angle conversions (hypothesis).
+
+Run with HYPOTHESIS_PROFILE=ci for ≥ 1000 examples per property. Warnings are errors here:
+no conversion may leak a RuntimeWarning, even at singularities.
+"""
+
+import numpy as np
+import pytest
+import transforms3d.euler as t3e
+from hypothesis import given
+from hypothesis import strategies as st
+
+from exohil.kinematics import (
+    isb_to_quat,
+    ms_to_isb,
+    ms_to_quat,
+    quat_to_isb,
+    quat_to_ms,
+    quat_to_zyx,
+    rotation_angle_between,
+)
+from exohil.kinematics.rotations import (
+    X,
+    Y,
+    Z,
+    elementary_matrix,
+    matrix_to_quat,
+    quat_to_matrix,
+    wrap_angle,
+)
+
+pytestmark = pytest.mark.filterwarnings("error")
+
+PI = np.pi
+theta_range = st.floats(np.deg2rad(-90.0), np.deg2rad(130.0))
+psi_range = st.floats(np.deg2rad(-90.0), np.deg2rad(20.0))
+# "away from 0/180°": at least 1e-3 rad (0.057°) from the singular elevations.
+phi_regular = st.floats(1e-3, PI - 1e-3)
+any_angle = st.floats(-PI, PI)
+hints = st.floats(-PI, PI)
+
+
+@st.composite
+def unit_quaternions(draw):
+    """Uniform-ish random unit quaternions plus, often, exactly singular ones (β = 0 or −π)."""
+    kind = draw(st.sampled_from(["random", "random", "hanging", "overhead", "axis"]))
+    if kind == "random":
+        v = np.array(draw(st.lists(st.floats(-1, 1), min_size=4, max_size=4)))
+        if np.linalg.norm(v) < 1e-3:
+            v = np.array([0.0, 0.0, 0.0, 1.0])
+        return v / np.linalg.norm(v)
+    if kind == "axis":  # rotations about a single principal axis, incl. half turns
+        q = np.zeros(4)
+        angle = draw(any_angle)
+        q[draw(st.sampled_from([0, 1, 2]))] = np.sin(angle / 2)
+        q[3] = np.cos(angle / 2)
+        return q
+    beta = 0.0 if kind == "hanging" else -PI
+    return isb_to_quat(draw(any_angle), beta, draw(any_angle))
+
+
+def angle_diff(a, b):
+    return np.abs(wrap_angle(np.asarray(a) - np.asarray(b)))
+
+
+@given(theta_range, phi_regular, psi_range)
+def test_ms_quat_ms_round_trip(theta, phi, psi):
+    back = quat_to_ms(ms_to_quat(theta, phi, psi))
+    assert np.all(angle_diff(back, [theta, phi, psi]) < 1e-9)
+
+
+@given(theta_range, phi_regular, psi_range)
+def test_ms_quat_ms_round_trip_paper_convention(theta, phi, psi):
+    q = ms_to_quat(theta, phi, psi, convention="paper")
+    back = quat_to_ms(q, convention="paper")
+    assert np.all(angle_diff(back, [theta, phi, psi]) < 1e-9)
+
+
+@given(unit_quaternions(), hints)
+def test_quat_isb_quat_same_rotation_everywhere(q, hint):
+    isb = quat_to_isb(q, plane_hint=hint)
+    assert np.all(np.isfinite(isb))
+    assert -PI <= isb[1] <= 0.0
+    assert rotation_angle_between(isb_to_quat(isb), q) < 1e-6
+
+
+@given(any_angle, st.floats(-PI, 0.0), any_angle)
+def test_isb_to_quat_matches_transforms3d(alpha, beta, gamma):
+    ours = isb_to_quat(alpha, beta, gamma)
+    w, x, y, z = t3e.euler2quat(alpha, beta, gamma, axes="ryxy")  # intrinsic Y-X'-Y''
+    theirs = np.array([x, y, z, w])
+    assert min(np.max(np.abs(ours - theirs)), np.max(np.abs(ours + theirs))) < 1e-12
+
+
+@given(theta_range, theta_range, psi_range)
+def test_orientation_at_zero_elevation_does_not_depend_on_plane(theta1, theta2, psi):
+    q1 = ms_to_quat(theta1, 0.0, psi)
+    q2 = ms_to_quat(theta2, 0.0, psi)
+    assert rotation_angle_between(q1, q2) < 1e-12
+    q1m = ms_to_quat(theta1, 0.0, psi, axes="mobl")
+    q2m = ms_to_quat(theta2, 0.0, psi, axes="mobl")
+    assert rotation_angle_between(q1m, q2m) < 1e-12
+
+
+@given(theta_range, st.floats(0.0, PI), psi_range)
+def test_paper_convention_differs_by_an_axial_rotation_of_theta(theta, phi, psi):
+    coupled = ms_to_quat(theta, phi, psi)
+    paper = ms_to_quat(theta, phi, psi, convention="paper")
+    assert abs(rotation_angle_between(coupled, paper) - abs(wrap_angle(theta))) < 1e-9
+    # ... about the humerus long axis: the elbow stays where it was.
+    elbow = np.array([0.0, -1.0, 0.0])
+    assert np.allclose(quat_to_matrix(coupled) @ elbow, quat_to_matrix(paper) @ elbow, atol=1e-12)
+
+
+@given(theta_range, st.floats(0.0, PI), psi_range)
+def test_mobl_axes_stay_within_documented_distance_of_ideal_axes(theta, phi, psi):
+    ideal = ms_to_quat(theta, phi, psi)
+    mobl = ms_to_quat(theta, phi, psi, axes="mobl")
+    assert rotation_angle_between(ideal, mobl) <= np.deg2rad(8.5)  # docs/conventions.md
+
+
+@given(unit_quaternions(), hints)
+def test_quat_to_zyx_reconstructs_rotation(q, hint):
+    yaw, pitch, roll = quat_to_zyx(q, yaw_hint=hint)
+    assert -PI / 2 <= pitch <= PI / 2
+    m = elementary_matrix(Z, yaw) @ elementary_matrix(Y, pitch) @ elementary_matrix(X, roll)
+    assert rotation_angle_between(matrix_to_quat(m), q) < 1e-6
+
+
+@given(any_angle, st.floats(-PI / 2 + 1e-3, PI / 2 - 1e-3), any_angle)
+def test_quat_to_zyx_matches_transforms3d_away_from_gimbal_lock(yaw, pitch, roll):
+    w, x, y, z = t3e.euler2quat(yaw, pitch, roll, axes="rzyx")
+    ours = quat_to_zyx([x, y, z, w])
+    assert np.all(angle_diff(ours, [yaw, pitch, roll]) < 1e-9)
+
+
+@given(unit_quaternions())
+def test_matrix_quaternion_round_trip(q):
+    back = matrix_to_quat(quat_to_matrix(q))
+    assert rotation_angle_between(back, q) < 1e-9
+    assert back[3] >= 0.0
+
+
+def test_vectorised_matches_scalar():
+    rng = np.random.default_rng(7)
+    ms = np.stack([rng.uniform(-1.5, 2.2, 50), rng.uniform(0.01, 3.1, 50),
+                   rng.uniform(-1.5, 0.3, 50)], axis=-1)
+    batch = quat_to_ms(ms_to_quat(ms))
+    for row, back in zip(ms, batch, strict=True):
+        assert np.allclose(quat_to_ms(ms_to_quat(*row)), back, atol=1e-12)
+    assert ms_to_isb(ms.reshape(5, 10, 3)).shape == (5, 10, 3)
+
+
+def test_singular_orientations_take_the_plane_from_the_hint():
+    q = ms_to_quat(0.7, 0.0, 0.2)  # arm hanging: plane of elevation undefined
+    for hint in (-1.0, 0.0, 0.5, 2.0):
+        theta, phi, psi = quat_to_ms(q, plane_hint=hint)
+        assert theta == pytest.approx(hint)
+        assert phi == pytest.approx(0.0, abs=1e-12)
+        assert rotation_angle_between(ms_to_quat(theta, phi, psi), q) < 1e-12
+    overhead = isb_to_quat(0.3, -PI, 0.1)
+    alpha, beta, gamma = quat_to_isb(overhead, plane_hint=1.2)
+    assert alpha == pytest.approx(1.2) and beta == pytest.approx(-PI)
+    assert rotation_angle_between(isb_to_quat(alpha, beta, gamma), overhead) < 1e-12
+
+
+def test_hint_keeps_a_stream_continuous_through_the_hanging_pose():
+    # Lower the arm to 0 and raise it again in the same plane: θ must not jump.
+    phi = np.concatenate([np.linspace(0.5, 0.0, 50), np.linspace(0.0, 0.5, 50)])
+    q = ms_to_quat(0.8, phi, 0.0)
+    hint = 0.8
+    thetas = []
+    for qi in q:
+        theta = quat_to_ms(qi, plane_hint=hint)[0]
+        thetas.append(theta)
+        hint = theta
+    assert np.max(np.abs(np.diff(thetas))) < 1e-6
+
+
+def test_bad_quaternions_raise_value_error():
+    with pytest.raises(ValueError):
+        quat_to_isb([0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError):
+        quat_to_isb([np.nan, 0.0, 0.0, 1.0])
+    with pytest.raises(ValueError):
+        quat_to_isb([1.0, 0.0, 0.0])
