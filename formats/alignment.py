@@ -1,0 +1,49 @@
+"""Aligning motion capture with sensor frames (the two streams run at different rates)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from exohil.formats.errors import RecordingError
+from exohil.formats.recording import Recording
+
+
+def angles_at_sensor_times(
+    rec: Recording, joint: str = "shoulder", names: Sequence[str] | None = None
+) -> np.ndarray:
+    """Mocap angles linearly interpolated at each sensor frame time.
+
+    Both clocks are taken as sharing an origin (seconds). Sensor frames before the first or
+    after the last mocap sample get NaN, so callers can drop them explicitly.
+
+    Args:
+        rec: the recording.
+        joint: mocap joint (topic suffix), e.g. "shoulder".
+        names: angle fields in the wanted column order (default: all, in stream order).
+
+    Returns:
+        (N, A) float64 degrees, N = sensor frames, A = len(names).
+
+    Raises:
+        RecordingError: unknown joint or angle name.
+    """
+    if joint not in rec.mocap:
+        raise RecordingError(f"recording has no mocap joint {joint!r} (has {sorted(rec.mocap)})")
+    stream = rec.mocap[joint]
+    wanted = tuple(stream.names if names is None else names)
+    missing = [name for name in wanted if name not in stream.names]
+    if missing:
+        raise RecordingError(f"mocap joint {joint!r} has no angle(s) {missing} ({stream.names})")
+    t_sensor = np.asarray(rec.sensors.t, dtype=np.float64)
+    out = np.full((t_sensor.size, len(wanted)), np.nan)
+    if len(stream) == 0 or t_sensor.size == 0:
+        return out
+    order = np.argsort(stream.t, kind="stable")
+    t_mocap = np.asarray(stream.t, dtype=np.float64)[order]
+    inside = (t_sensor >= t_mocap[0]) & (t_sensor <= t_mocap[-1])
+    for k, name in enumerate(wanted):
+        column = stream.column(name)[order]
+        out[inside, k] = np.interp(t_sensor[inside], t_mocap, column)
+    return out

@@ -1,0 +1,332 @@
+"""Recording format v1 MCAP I/O: round trip, determinism, foreign writers, bad files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+from recording_raw_mcap import write_raw_recording
+
+from exohil.formats.errors import RecordingError
+from exohil.formats.mcap_io import RecordingWriter, read_recording, scan_recording, write_recording
+from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
+from exohil.formats.sequence import sequence_gaps
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+SHOULDER_ANGLES = ("elv_angle", "shoulder_elv", "shoulder_rot")
+FOREIGN = SHARED / "samples" / "foreign-recording-v1.mcap"
+
+finite = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False, allow_infinity=False)
+
+
+@st.composite
+def recordings(draw: st.DrawFn) -> Recording:
+    """Small random recordings: 0-5 sensors, 0-2 joints, random seq gaps and segments."""
+    sensor_count = draw(st.integers(0, 5))
+    frames = draw(st.integers(0, 30)) if sensor_count else 0
+    steps = draw(st.lists(st.integers(1, 4), min_size=frames, max_size=frames))
+    seq = np.cumsum(np.asarray(steps, dtype=np.int64)) + draw(st.integers(0, 1000))
+    t = np.sort(np.asarray(draw(st.lists(st.floats(0, 1e4), min_size=frames, max_size=frames))))
+    values = np.asarray(
+        draw(st.lists(finite, min_size=frames * sensor_count, max_size=frames * sensor_count))
+    ).reshape(frames, sensor_count)
+    mocap = {}
+    for joint in draw(st.lists(st.sampled_from(["shoulder", "knee", "elbow"]), unique=True)):
+        names = tuple(draw(st.lists(st.sampled_from(["a", "b", "c"]), min_size=1, unique=True)))
+        samples = draw(st.integers(0, 20))
+        mocap[joint] = AngleStream(
+            t=np.asarray(draw(st.lists(st.floats(0, 1e4), min_size=samples, max_size=samples))),
+            names=names,
+            angles=np.asarray(
+                draw(st.lists(finite, min_size=samples * len(names), max_size=samples * len(names)))
+            ).reshape(samples, len(names)),
+        )
+    segments = [
+        Segment(name, t0, t0 + 1.0)
+        for name, t0 in draw(
+            st.lists(st.tuples(st.text(max_size=5), st.floats(0, 100)), max_size=3)
+        )
+    ]
+    return Recording(
+        sensor_names=tuple(f"s{k}" for k in range(sensor_count)),
+        sensors=SensorStream(seq=seq, t=t, values=values),
+        mocap=mocap,
+        sensor_units=draw(st.sampled_from(["mm", "dR/R0"])),
+        sensor_rate_hz=draw(st.sampled_from([250.0, 100.0, 59.94])),
+        mocap_rate_hz=draw(st.sampled_from([120.0, 100.0])),
+        segments=segments,
+        metadata=draw(st.dictionaries(st.sampled_from(["generator", "seed", "x"]), st.text())),
+    )
+
+
+@settings(max_examples=40, deadline=None)
+@given(rec=recordings())
+def test_round_trip_preserves_everything_up_to_documented_rounding(
+    tmp_path_factory: pytest.TempPathFactory, rec: Recording
+) -> None:
+    path = tmp_path_factory.mktemp("rt") / "rec.mcap"
+    write_recording(path, rec)
+    back = read_recording(path)
+    assert back.sensor_names == rec.sensor_names
+    np.testing.assert_array_equal(back.sensors.seq, rec.sensors.seq)
+    np.testing.assert_array_equal(back.sensors.t, np.round(rec.sensors.t, 6))
+    np.testing.assert_array_equal(back.sensors.values, np.round(rec.sensors.values, 4))
+    assert list(back.mocap) == list(rec.mocap)
+    for joint, stream in rec.mocap.items():
+        order = np.argsort(np.round(stream.t, 6), kind="stable")
+        assert back.mocap[joint].names == stream.names
+        np.testing.assert_array_equal(back.mocap[joint].t, np.round(stream.t, 6)[order])
+        np.testing.assert_array_equal(back.mocap[joint].angles, np.round(stream.angles, 4)[order])
+    assert back.sensor_units == rec.sensor_units
+    assert back.sensor_rate_hz == rec.sensor_rate_hz
+    assert back.mocap_rate_hz == rec.mocap_rate_hz
+    assert back.segments == rec.segments
+    for key, value in rec.metadata.items():
+        assert back.metadata[key] == value
+
+
+def _demo_recording(seconds: float = 20.0) -> Recording:
+    seq = np.arange(int(seconds * 250))
+    seq = seq[seq % 101 != 50]
+    t = seq * 0.004 + 1e-5 * np.sin(seq)
+    values = 300 + 20 * np.sin(np.outer(t, [1.0, 1.3, 1.7, 2.1])) + 1e-7 * seq[:, None]
+    mocap_t = np.arange(int(seconds * 120)) / 120.0
+    angles = np.column_stack([30 * np.sin(mocap_t), 45 + 40 * np.sin(mocap_t / 2), 0 * mocap_t])
+    return Recording(
+        sensor_names=("F", "SF", "SR", "R"),
+        sensors=SensorStream(seq=seq, t=t, values=values),
+        mocap={"shoulder": AngleStream(mocap_t, SHOULDER_ANGLES, angles)},
+        segments=[Segment("abduction", 1.0, 5.0)],
+        metadata={"generator": "test", "seed": "7"},
+    )
+
+
+@pytest.mark.parametrize("compression", ["none", "lz4", "zstd"])
+def test_writing_twice_gives_identical_bytes(tmp_path: Path, compression: str) -> None:
+    rec = _demo_recording()
+    write_recording(tmp_path / "a.mcap", rec, compression=compression)
+    write_recording(tmp_path / "b.mcap", rec, compression=compression)
+    assert (tmp_path / "a.mcap").read_bytes() == (tmp_path / "b.mcap").read_bytes()
+
+
+def test_streaming_writer_matches_whole_recording_writer(tmp_path: Path) -> None:
+    rec = _demo_recording(4.0)
+    write_recording(tmp_path / "whole.mcap", rec)
+    mocap = rec.mocap["shoulder"]
+    with RecordingWriter(
+        tmp_path / "live.mcap",
+        rec.sensor_names,
+        mocap_joints={"shoulder": mocap.names},
+        metadata=rec.metadata,
+    ) as writer:
+        events = sorted(
+            [(round(t * 1e9), 0, k) for k, t in enumerate(np.round(rec.sensors.t, 6))]
+            + [(round(t * 1e9), 1, k) for k, t in enumerate(np.round(mocap.t, 6))]
+        )
+        for _, kind, k in events:
+            if kind == 0:
+                writer.add_sensor_frame(
+                    int(rec.sensors.seq[k]), rec.sensors.t[k], rec.sensors.values[k]
+                )
+            else:
+                writer.add_mocap_sample("shoulder", mocap.t[k], mocap.angles[k])
+        writer.add_segment(rec.segments[0])
+    assert (tmp_path / "live.mcap").read_bytes() == (tmp_path / "whole.mcap").read_bytes()
+
+
+def test_written_messages_validate_against_their_jsonschema(tmp_path: Path) -> None:
+    path = tmp_path / "rec.mcap"
+    write_recording(path, _demo_recording(2.0))
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}["exohil.recording"]
+        checked = 0
+        for schema, channel, message in reader.iter_messages():
+            assert schema.encoding == "jsonschema" and channel.message_encoding == "json"
+            body = json.loads(message.data)
+            jsonschema.validate(body, json.loads(schema.data))
+            assert message.log_time == message.publish_time == round(body["t"] * 1e9)
+            checked += 1
+    assert checked == 2 * 250 - 5 + 2 * 120  # seq 50,151,…,454 dropped
+    assert metadata["format"] == "exohil-recording" and metadata["version"] == "1"
+    assert metadata["units"] == "mm,deg" and metadata["sensors"] == "F,SF,SR,R"
+    assert json.loads(metadata["segments"]) == [{"name": "abduction", "t0": 1.0, "t1": 5.0}]
+
+
+def test_full_length_protocol_fits_ten_megabytes(tmp_path: Path) -> None:
+    path = tmp_path / "long.mcap"
+    write_recording(path, _demo_recording(246.0))
+    assert path.stat().st_size <= 10_000_000
+    assert len(read_recording(path).sensors) == len(_demo_recording(246.0).sensors)
+
+
+@pytest.mark.parametrize(
+    ("compression", "chunked", "summary"),
+    [
+        (CompressionType.LZ4, True, True),
+        (CompressionType.ZSTD, True, True),
+        (CompressionType.NONE, False, True),
+        (CompressionType.ZSTD, True, False),
+        (CompressionType.NONE, False, False),
+    ],
+)
+def test_reads_recordings_from_an_independent_writer(
+    tmp_path: Path, compression: CompressionType, chunked: bool, summary: bool
+) -> None:
+    path = tmp_path / "other.mcap"
+    expected = write_raw_recording(
+        path, compression=compression, chunked=chunked, summary=summary, extra_channel=True
+    )
+    scan = scan_recording(path)
+    rec = scan.recording
+    assert len(rec.sensors) == expected["sensor_frames"] == 59940
+    assert len(rec.mocap["shoulder"]) == expected["mocap_samples"] == 28800
+    gaps = sequence_gaps(rec.sensors.seq)
+    assert (gaps.gaps, gaps.missing, gaps.largest) == (expected["gaps"], expected["missing"], 1)
+    rates = {c.topic: c.mean_rate_hz for c in scan.channels}
+    assert rates["/suit/sensors"] == pytest.approx(250.0 * 59940 / 60000, rel=1e-3)
+    assert rates["/mocap/shoulder"] == pytest.approx(120.0, rel=1e-4)
+    assert rec.metadata["operator"] == "someone else"
+    assert any("/debug/text" in note for note in scan.notes)
+    assert any("other.lab" in note for note in scan.notes)
+    assert rec.mocap["shoulder"].names == ("elv_angle", "shoulder_elv", "shoulder_rot")
+
+
+def test_missing_optional_metadata_gets_documented_defaults(tmp_path: Path) -> None:
+    path = tmp_path / "bare.mcap"
+    bare = {"format": "exohil-recording", "version": "1"}
+    write_raw_recording(path, duration_s=2.0, metadata=bare)
+    scan = scan_recording(path)
+    rec = scan.recording
+    assert rec.sensor_names == ("F", "SF", "SR", "R")
+    assert rec.sensor_units == "mm"
+    assert rec.sensor_rate_hz == pytest.approx(250.0)
+    assert rec.mocap_rate_hz == pytest.approx(120.0)
+    assert rec.segments == []
+    assert any("sensors" in note for note in scan.notes)
+
+
+@pytest.mark.skipif(not FOREIGN.exists(), reason="shared/samples foreign recording absent")
+def test_foreign_sample_reads_as_it_is() -> None:
+    scan = scan_recording(FOREIGN)
+    rec = scan.recording
+    assert len(rec.sensors) == 14962
+    assert len(rec.mocap["shoulder"]) == 7200
+    assert rec.sensor_names == ("F", "SF", "SR", "R")
+    assert rec.sensors.values.shape == (14962, 4)
+    assert sequence_gaps(rec.sensors.seq).missing == 15000 - 14962
+    assert scan.notes == []
+
+
+# ----------------------------------------------------------------------------- bad files
+
+
+def _write_messages(
+    path: Path,
+    sensor_bodies: list[bytes],
+    metadata: dict[str, str] | None = None,
+    metadata_name: str = "exohil.recording",
+) -> Path:
+    with open(path, "wb") as stream:
+        writer = Writer(stream, compression=CompressionType.NONE)
+        writer.start()
+        schema = writer.register_schema("s", "jsonschema", b"{}")
+        channel = writer.register_channel("/suit/sensors", "json", schema)
+        writer.add_metadata(
+            metadata_name,
+            metadata
+            or {"format": "exohil-recording", "version": "1", "sensors": "F,SF,SR,R"},
+        )
+        for k, body in enumerate(sensor_bodies):
+            writer.add_message(channel, k * 4_000_000, body, k * 4_000_000)
+        writer.finish()
+    return path
+
+
+def _frame(seq: int, values: list[float] | None = None) -> bytes:
+    return json.dumps({"seq": seq, "t": seq * 0.004, "values": values or [1, 2, 3, 4]}).encode()
+
+
+def test_good_hand_written_file_reads(tmp_path: Path) -> None:
+    rec = read_recording(_write_messages(tmp_path / "ok.mcap", [_frame(0), _frame(2)]))
+    np.testing.assert_array_equal(rec.sensors.seq, [0, 2])
+
+
+@pytest.mark.parametrize(
+    ("case", "problem"),
+    [
+        ("not_mcap", "not an MCAP file"),
+        ("truncated", "truncated"),
+        ("empty", "not an MCAP file"),
+        ("wrong_format", "metadata format is 'rosbag'"),
+        ("wrong_version", "unsupported recording format version '2'"),
+        ("no_metadata", "no 'exohil.recording' metadata"),
+        ("bad_json", "invalid JSON"),
+        ("string_value", "'values' must be a list of numbers"),
+        ("missing_seq", "'seq' must be an integer"),
+        ("wrong_count", "has 3 values; metadata lists 4 sensors"),
+        ("non_monotonic", "non-monotonic seq"),
+        ("bad_segments", "'segments' is not a JSON list"),
+        ("bad_rate", "sensor_rate_hz='fast'"),
+    ],
+)
+def test_bad_files_raise_one_clear_error(tmp_path: Path, case: str, problem: str) -> None:
+    path = tmp_path / f"{case}.mcap"
+    good_meta = {"format": "exohil-recording", "version": "1", "sensors": "F,SF,SR,R"}
+    if case == "not_mcap":
+        path.write_text("seq,t,F\n0,0.0,1.0\n")
+    elif case == "empty":
+        path.write_bytes(b"")
+    elif case == "truncated":
+        write_recording(path, _demo_recording(2.0))
+        path.write_bytes(path.read_bytes()[:5000])
+    elif case == "wrong_format":
+        _write_messages(path, [_frame(0)], {**good_meta, "format": "rosbag"})
+    elif case == "wrong_version":
+        _write_messages(path, [_frame(0)], {**good_meta, "version": "2"})
+    elif case == "no_metadata":
+        _write_messages(path, [_frame(0)], metadata_name="exohil.recordings")
+    elif case == "bad_json":
+        _write_messages(path, [_frame(0), b"{seq: 1"])
+    elif case == "string_value":
+        _write_messages(path, [_frame(0), _frame(1, [1, 2, "3", 4])])
+    elif case == "missing_seq":
+        _write_messages(path, [b'{"t": 0.0, "values": [1, 2, 3, 4]}'])
+    elif case == "wrong_count":
+        _write_messages(path, [_frame(0), _frame(1, [1, 2, 3])])
+    elif case == "non_monotonic":
+        _write_messages(path, [_frame(0), _frame(5), _frame(3)])
+    elif case == "bad_segments":
+        _write_messages(path, [_frame(0)], {**good_meta, "segments": "[{name: x}]"})
+    elif case == "bad_rate":
+        _write_messages(path, [_frame(0)], {**good_meta, "sensor_rate_hz": "fast"})
+    with pytest.raises(RecordingError, match=problem) as info:
+        read_recording(path)
+    message = str(info.value)
+    assert str(path) in message and "\n" not in message
+
+
+def test_missing_file_is_a_recording_error(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="cannot read"):
+        read_recording(tmp_path / "nope.mcap")
+
+
+def test_writer_refuses_what_the_reader_would_reject(tmp_path: Path) -> None:
+    with RecordingWriter(tmp_path / "w.mcap", ("F", "SF")) as writer:
+        writer.add_sensor_frame(3, 0.0, [1.0, 2.0])
+        with pytest.raises(RecordingError, match="increase strictly"):
+            writer.add_sensor_frame(3, 0.004, [1.0, 2.0])
+        with pytest.raises(RecordingError, match=r"must be \(1, 2\)"):
+            writer.add_sensor_frame(4, 0.004, [1.0])
+        with pytest.raises(RecordingError, match="finite"):
+            writer.add_sensor_frame(4, 0.004, [1.0, float("nan")])
+        with pytest.raises(RecordingError, match="not declared"):
+            writer.add_mocap_sample("knee", 0.0, [1.0])
+    assert len(read_recording(tmp_path / "w.mcap").sensors) == 1
