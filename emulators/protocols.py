@@ -1,0 +1,249 @@
+"""Movements that drive the simulated suit: the paper's protocol and real recorded motion.
+
+A :class:`Trajectory` gives the MoBL-ARMS shoulder angles (θ = elv_angle, φ = shoulder_elv,
+ψ = shoulder_rot, degrees) at any time, plus labelled :class:`Segment` spans (seconds on the
+trajectory's clock, which is the motion-capture clock).
+
+* :func:`paper_protocol` — the movements of Varghese et al. Table III with their exact
+  motion-capture frame counts at 120 Hz (29,551 frames ≈ 246.3 s), seeded: point-to-point
+  minimum-jerk moves with holds, partial reversals and several amplitudes and speeds.
+* :func:`mot_trajectory` — real shoulder motion from OpenSim ``.mot`` IK results (e.g. the
+  shoulder-ik data set), several trials concatenated with smooth bridges.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from exohil.formats.opensim_mot import read_mot
+from exohil.formats.recording import Segment
+from exohil.kinematics.shoulder import isb_to_ms
+
+ANGLE_NAMES = ("elv_angle", "shoulder_elv", "shoulder_rot")
+MOCAP_RATE_HZ = 120.0
+
+#: Varghese et al. Table III: movement label → motion-capture frames at 120 Hz.
+PAPER_MOVEMENT_FRAMES: dict[str, int] = {
+    "flexion_extension": 3037,
+    "abduction_adduction": 3630,
+    "azimuth_fixed_elevation_varied": 5814,
+    "elevation_fixed_azimuth_varied": 6757,
+    "random": 10313,
+}
+
+
+def minimum_jerk(tau: np.ndarray) -> np.ndarray:
+    """Normalised minimum-jerk position profile 10τ³ − 15τ⁴ + 6τ⁵ for τ in [0, 1]."""
+    tau = np.clip(tau, 0.0, 1.0)
+    return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+
+
+@dataclass
+class Trajectory:
+    """Shoulder angles as knots plus an interpolation rule.
+
+    Attributes:
+        knot_t: (K,) increasing knot times, s, starting at 0.
+        knot_deg: (K, 3) θ, φ, ψ at the knots, degrees.
+        interpolation: "minimum_jerk" (rest-to-rest minimum-jerk move between consecutive
+            knots) or "pchip" (shape-preserving cubic through dense samples).
+        duration_s: length of the trajectory, s (≥ the last knot; the last pose holds).
+        segments: labelled spans, s.
+        source: short provenance text (e.g. "paper_protocol seed=7").
+    """
+
+    knot_t: np.ndarray
+    knot_deg: np.ndarray
+    interpolation: str
+    duration_s: float
+    segments: list[Segment] = field(default_factory=list)
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if self.interpolation not in ("minimum_jerk", "pchip"):
+            raise ValueError(f"unknown interpolation {self.interpolation!r}")
+        if self.knot_deg.shape != (self.knot_t.shape[0], 3) or self.knot_t.shape[0] < 2:
+            raise ValueError("a trajectory needs at least two knots of (θ, φ, ψ)")
+        if np.any(np.diff(self.knot_t) <= 0):
+            raise ValueError("knot times must increase")
+
+    def sample(self, t: np.ndarray) -> np.ndarray:
+        """(N, 3) θ, φ, ψ in degrees at times ``t`` (s); clamps outside the knots."""
+        t = np.clip(np.asarray(t, dtype=np.float64), self.knot_t[0], self.knot_t[-1])
+        if self.interpolation == "pchip":
+            return PchipInterpolator(self.knot_t, self.knot_deg, axis=0)(t)
+        i = np.clip(np.searchsorted(self.knot_t, t, side="right") - 1, 0, len(self.knot_t) - 2)
+        t0, t1 = self.knot_t[i], self.knot_t[i + 1]
+        s = minimum_jerk((t - t0) / (t1 - t0))[:, None]
+        return self.knot_deg[i] + (self.knot_deg[i + 1] - self.knot_deg[i]) * s
+
+    def frame_times(self, rate_hz: float) -> np.ndarray:
+        """Frame times k / rate_hz for the ``round(duration_s · rate_hz)`` frames, s."""
+        return np.arange(int(round(self.duration_s * rate_hz))) / rate_hz
+
+
+class _Path:
+    """Builds a rest-to-rest minimum-jerk knot sequence, one step at a time (degrees, s)."""
+
+    def __init__(self, theta: float, phi: float) -> None:
+        self.durations: list[float] = []
+        self.poses: list[tuple[float, float]] = [(theta, phi)]
+
+    def move(self, theta: float, phi: float, duration_s: float) -> None:
+        self.durations.append(duration_s)
+        self.poses.append((theta, phi))
+
+    def hold(self, duration_s: float) -> None:
+        self.move(*self.poses[-1], duration_s)
+
+    def elevate(self, theta: float, amplitude: float, rng: np.random.Generator,
+                hold_s: float, speed_deg_s: float) -> None:
+        """Raise the arm in plane θ to ``amplitude`` and lower it, sometimes with a partial
+        reversal on the way up (a minor hysteresis loop)."""
+        start_phi = self.poses[-1][1]
+        if amplitude > 45 and rng.random() < 0.35:
+            mid = amplitude * rng.uniform(0.5, 0.75)
+            back = mid - rng.uniform(10.0, 25.0)
+            self.move(theta, mid, _move_time(mid - start_phi, speed_deg_s))
+            self.move(theta, back, _move_time(mid - back, speed_deg_s))
+        self.move(theta, amplitude, _move_time(amplitude - self.poses[-1][1], speed_deg_s))
+        self.hold(hold_s)
+        self.move(theta, start_phi, _move_time(amplitude - start_phi, speed_deg_s))
+
+
+def _move_time(distance_deg: float, speed_deg_s: float) -> float:
+    """Duration of a minimum-jerk move of ``distance_deg`` at mean speed ``speed_deg_s``."""
+    return max(0.4, abs(distance_deg) / speed_deg_s)
+
+
+def _flexion_extension(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+    for rep in range(4):
+        speed = rng.uniform(35.0, 90.0)
+        path.move(90.0, 0.0, 0.5)  # change plane while the arm hangs
+        path.elevate(90.0, (90.0, 60.0, 80.0, 45.0)[rep] * rng.uniform(0.95, 1.0), rng,
+                     hold_s=rng.uniform(0.3, 2.0), speed_deg_s=speed)
+        path.move(-90.0, 0.0, 0.5)
+        path.elevate(-90.0, (60.0, 40.0, 50.0, 30.0)[rep] * rng.uniform(0.9, 1.0), rng,
+                     hold_s=rng.uniform(0.3, 1.5), speed_deg_s=speed)
+
+
+def _abduction_adduction(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+    path.move(0.0, 0.0, 0.5)
+    for rep in range(4):
+        path.elevate(0.0, (90.0, 70.0, 90.0, 50.0)[rep] * rng.uniform(0.95, 1.0), rng,
+                     hold_s=(1.0, 0.5, 4.0, 0.3)[rep] * rng.uniform(0.8, 1.2),
+                     speed_deg_s=rng.uniform(30.0, 90.0))
+        path.hold(rng.uniform(0.3, 1.0))
+
+
+def _azimuth_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+    for theta in (-40.0, 0.0, 30.0, 60.0, 90.0):
+        path.move(theta, 0.0, 0.6)
+        for _ in range(2):
+            path.elevate(theta, rng.uniform(60.0, 90.0), rng, hold_s=rng.uniform(0.3, 2.5),
+                         speed_deg_s=rng.uniform(30.0, 80.0))
+            path.hold(rng.uniform(0.2, 0.8))
+
+
+def _elevation_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+    for phi in (20.0, 40.0, 60.0, 75.0, 90.0):
+        speed = rng.uniform(35.0, 80.0)
+        path.move(0.0, 0.0, 0.5)
+        path.move(0.0, phi, _move_time(phi, 45.0))
+        for _ in range(2):
+            path.move(-40.0, phi, _move_time(40.0, speed))
+            path.hold(rng.uniform(0.2, 1.5))
+            path.move(90.0, phi, _move_time(130.0, speed))
+            path.hold(rng.uniform(0.2, 1.5))
+        path.move(0.0, phi, _move_time(90.0, speed))
+        path.move(0.0, 0.0, _move_time(phi, 45.0))
+        path.hold(rng.uniform(0.3, 1.0))
+
+
+def _random_movements(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+    first = len(path.durations)
+    while sum(path.durations[first:]) < span_s - 3.0:
+        theta, phi = rng.uniform(-40.0, 90.0), rng.uniform(0.0, 90.0)
+        last_theta, last_phi = path.poses[-1]
+        distance = float(np.hypot(theta - last_theta, phi - last_phi))
+        path.move(theta, phi, _move_time(distance, rng.uniform(30.0, 110.0)))
+        if rng.random() < 0.35:
+            path.hold(rng.uniform(0.3, 4.0))
+    path.move(path.poses[-1][0], 0.0, _move_time(path.poses[-1][1], 60.0))
+
+
+_PAPER_BUILDERS = {
+    "flexion_extension": _flexion_extension,
+    "abduction_adduction": _abduction_adduction,
+    "azimuth_fixed_elevation_varied": _azimuth_fixed,
+    "elevation_fixed_azimuth_varied": _elevation_fixed,
+    "random": _random_movements,
+}
+
+
+def paper_protocol(seed: int) -> Trajectory:
+    """The Table III protocol, seeded; each movement spans exactly its frame count at 120 Hz.
+
+    Each movement starts and ends with the arm hanging (φ = 0; the plane of elevation changes
+    only while it hangs) and its steps are time-scaled to fill frames / 120 s; ψ = 0.
+    """
+    rng = np.random.default_rng(np.random.SeedSequence(int(seed)))
+    path = _Path(90.0, 0.0)
+    durations: list[float] = []
+    segments = []
+    start = 0.0
+    for label, frames in PAPER_MOVEMENT_FRAMES.items():
+        span = frames / MOCAP_RATE_HZ
+        first = len(path.durations)
+        _PAPER_BUILDERS[label](path, rng, span)
+        steps = np.asarray(path.durations[first:])
+        durations.extend((steps * (span / steps.sum())).tolist())
+        segments.append(Segment(label, start, start + span))
+        start += span
+    knot_t = np.concatenate([[0.0], np.cumsum(durations)])
+    knot_t[-1] = start  # exact end despite rounding in the cumulative sum
+    deg = np.column_stack([np.asarray(path.poses), np.zeros(len(path.poses))])
+    return Trajectory(knot_t, deg, "minimum_jerk", start, segments,
+                      source=f"paper_protocol seed={int(seed)}")
+
+
+def mot_trajectory(paths: Sequence[str | Path], bridge_s: float = 1.0) -> Trajectory:
+    """Real shoulder motion from OpenSim ``.mot`` files, concatenated in the given order.
+
+    Uses ``plane_elv`` → θ and ``shoulder_elv`` → φ as stored, and the MoBL-ARMS axial
+    rotation ψ = ``axial_rot`` + ``plane_elv`` (the coupled convention of
+    :func:`exohil.kinematics.shoulder.isb_to_ms`, treating the model's Y-X-Y shoulder angles as
+    ISB angles) minus its value at the trial's first frame (the suit is donned in that pose).
+    In the thoracoscapular model these angles are glenohumeral, not humerothoracic (see the
+    data set's SOURCE.md); they are used as if humerothoracic. Consecutive trials are joined by
+    a ``bridge_s`` gap that the shape-preserving interpolation fills smoothly.
+    """
+    if not paths:
+        raise ValueError("mot_trajectory needs at least one .mot file")
+    times, angles, segments = [], [], []
+    start = 0.0
+    for path in paths:
+        mot = read_mot(path)
+        missing = [c for c in ("plane_elv", "shoulder_elv", "axial_rot") if c not in mot.columns]
+        if missing:
+            raise ValueError(f"{path}: missing column(s) {', '.join(missing)}")
+        to_rad = np.deg2rad if mot.in_degrees else np.asarray
+        isb = np.column_stack([to_rad(mot.columns["plane_elv"]),
+                               -to_rad(mot.columns["shoulder_elv"]),
+                               to_rad(mot.columns["axial_rot"])])
+        ms = np.rad2deg(isb_to_ms(isb))
+        ms[:, 2] = np.rad2deg(np.unwrap(np.deg2rad(ms[:, 2])))
+        ms[:, 2] -= ms[0, 2]
+        t = mot.time - mot.time[0]
+        times.append(start + t)
+        angles.append(ms)
+        segments.append(Segment(Path(path).stem, start, start + float(t[-1])))
+        start += float(t[-1]) + bridge_s
+    knot_t = np.concatenate(times)
+    return Trajectory(knot_t, np.concatenate(angles), "pchip", float(knot_t[-1]), segments,
+                      source="mot:" + ",".join(Path(p).name for p in paths))

@@ -1,0 +1,168 @@
+"""Suit profiles: tendon geometry plus the default effect chain, stored as TOML.
+
+The schema is documented in docs/suit-model.md; ``emulators/profiles/default.toml`` is the
+packaged default. :func:`load_profile` reports the first problem in one clear line
+(:class:`ProfileError`), naming the file and the offending table or key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from exohil.emulators.effects import EffectChain, Signal, effect_from_dict
+from exohil.emulators.suit_geometry import SuitGeometry, Tendon
+
+PROFILE_SCHEMA = "exohil-suit-profile"
+PROFILE_VERSION = 1
+DEFAULT_PROFILE_PATH = Path(__file__).parent / "profiles" / "default.toml"
+
+
+class ProfileError(ValueError):
+    """A suit profile that cannot be used; the message says which file and what is wrong."""
+
+
+@dataclass(frozen=True)
+class SuitProfile:
+    """A simulated suit.
+
+    Attributes:
+        name: short profile name (stored in recordings' provenance).
+        description: free text.
+        geometry: shoulder cap and tendons (mm, thorax/humerus frames).
+        effects: the default effect chain, in order.
+    """
+
+    name: str
+    description: str
+    geometry: SuitGeometry
+    effects: EffectChain
+
+    @property
+    def sensor_names(self) -> tuple[str, ...]:
+        return self.geometry.sensor_names
+
+    def to_dict(self) -> dict[str, Any]:
+        """The profile as plain data in the TOML schema's layout."""
+        return {
+            "schema": PROFILE_SCHEMA,
+            "version": PROFILE_VERSION,
+            "name": self.name,
+            "description": self.description,
+            "cap": {"centre_mm": self.geometry.cap_centre_mm.tolist(),
+                    "radius_mm": self.geometry.cap_radius_mm},
+            "tendon": [{"name": t.name, "thorax_points_mm": t.thorax_points_mm.tolist(),
+                        "humerus_points_mm": t.humerus_points_mm.tolist()}
+                       for t in self.geometry.tendons],
+            "effect": self.effects.to_dicts(),
+        }
+
+    def sha256(self) -> str:
+        """Hash of the profile's content (canonical JSON), independent of TOML formatting."""
+        canonical = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+def load_profile(path: str | Path) -> SuitProfile:
+    """Read and validate a suit profile TOML file."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise ProfileError(f"{path}: no such suit profile") from exc
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ProfileError(f"{path}: not a readable TOML file ({exc})") from exc
+    try:
+        return profile_from_dict(data)
+    except ProfileError as exc:
+        raise ProfileError(f"{path}: {exc}") from exc
+
+
+def load_default_profile() -> SuitProfile:
+    """The packaged default profile (``emulators/profiles/default.toml``)."""
+    return load_profile(DEFAULT_PROFILE_PATH)
+
+
+def _points(value: Any, where: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ProfileError(f"{where}: expected a list of [x, y, z] points in mm") from exc
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < 1 or not np.isfinite(arr).all():
+        raise ProfileError(f"{where}: expected a non-empty list of finite [x, y, z] points in mm")
+    return arr
+
+
+def _require(table: dict, key: str, where: str) -> Any:
+    if key not in table:
+        raise ProfileError(f"{where}: missing key '{key}'")
+    return table[key]
+
+
+def profile_from_dict(data: dict[str, Any]) -> SuitProfile:
+    """Validate parsed TOML (or :meth:`SuitProfile.to_dict` output) into a profile."""
+    if data.get("schema") != PROFILE_SCHEMA:
+        raise ProfileError(f"'schema' must be \"{PROFILE_SCHEMA}\", got {data.get('schema')!r}")
+    if data.get("version") != PROFILE_VERSION:
+        raise ProfileError(f"unsupported profile version {data.get('version')!r} "
+                           f"(this exohil reads version {PROFILE_VERSION})")
+    name = _require(data, "name", "profile")
+    if not isinstance(name, str) or not name:
+        raise ProfileError("'name' must be a non-empty string")
+    cap = _require(data, "cap", "profile")
+    centre = np.asarray(_require(cap, "centre_mm", "[cap]"), dtype=np.float64)
+    if centre.shape != (3,):
+        raise ProfileError("[cap] centre_mm must be [x, y, z] in mm")
+    radius = _require(cap, "radius_mm", "[cap]")
+    if not isinstance(radius, int | float) or radius <= 0:
+        raise ProfileError("[cap] radius_mm must be a positive number (mm)")
+    tendon_tables = data.get("tendon")
+    if not isinstance(tendon_tables, list) or not tendon_tables:
+        raise ProfileError("at least one [[tendon]] table is required")
+    tendons = []
+    for i, table in enumerate(tendon_tables):
+        where = f"[[tendon]] #{i + 1}"
+        tname = _require(table, "name", where)
+        where = f"[[tendon]] {tname!r}"
+        unknown = set(table) - {"name", "thorax_points_mm", "humerus_points_mm"}
+        if unknown:
+            raise ProfileError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
+        tendons.append(Tendon(
+            name=str(tname),
+            thorax_points_mm=_points(_require(table, "thorax_points_mm", where),
+                                     f"{where} thorax_points_mm"),
+            humerus_points_mm=_points(_require(table, "humerus_points_mm", where),
+                                      f"{where} humerus_points_mm"),
+        ))
+    names = [t.name for t in tendons]
+    if len(set(names)) != len(names):
+        raise ProfileError(f"tendon names must be unique, got {names}")
+    geometry = SuitGeometry(cap_centre_mm=centre, cap_radius_mm=float(radius),
+                            tendons=tuple(tendons))
+    effects = []
+    for i, table in enumerate(data.get("effect", [])):
+        try:
+            effect = effect_from_dict(table)
+        except (TypeError, ValueError) as exc:
+            raise ProfileError(f"[[effect]] #{i + 1}: {exc}") from exc
+        effects.append(effect)
+    try:
+        geometry.validate()
+        chain = EffectChain(effects)
+        _check_per_sensor_lengths(chain, len(tendons))
+    except ValueError as exc:
+        raise ProfileError(str(exc)) from exc
+    return SuitProfile(name=name, description=str(data.get("description", "")),
+                       geometry=geometry, effects=chain)
+
+
+def _check_per_sensor_lengths(chain: EffectChain, n_sensors: int) -> None:
+    """Apply the chain to a tiny flat signal so per-sensor list lengths are checked at load."""
+    probe = Signal.from_values(np.arange(3) / 250.0, np.full((3, n_sensors), 500.0))
+    chain.apply(probe, seed=0)
