@@ -21,8 +21,10 @@ from exohil.kinematics.rotations import (
     X,
     Y,
     Z,
+    elementary_matrix,
     intrinsic_euler_from_first_two,
     quat_to_matrix,
+    wrap_angle,
 )
 
 Side = Literal["right", "left"]
@@ -83,6 +85,11 @@ def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
 
     Known poses (right arm): arm hanging → pitch +π/2, roll 0; forward flexion 90° → pitch 0,
     roll 0; abduction 90° → roll −π/2, outside the limit, so clamped to −76° and reported.
+
+    Every orientation has two Y-Z'-X'' solutions, (p, r, y) and (p + π, π − r, y + π). The NAO
+    cannot reach most of either (roll −76°..18°), so the one whose *clamped* angles come closest
+    to the wanted orientation is returned (the first, |roll| ≤ π/2, on a tie). This keeps the
+    arm near horizontal when it sweeps through pure abduction instead of flipping pitch by π.
     At roll = ±π/2 (the chain's singularity) pitch is taken from ``hint`` (``(..., 3)`` previous
     joint angles, or None for pitch 0) and elbow yaw absorbs the rest; pass the previous output
     to keep a stream continuous. Never NaN, never raises for unit input.
@@ -96,9 +103,26 @@ def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
     pitch_regular = np.arctan2(-m[..., 2, 0], m[..., 0, 0])
     pitch_hint = 0.0 if hint is None else np.asarray(hint, dtype=float)[..., 0]
     pitch = np.where(cos_r < SINGULAR_EPS, np.broadcast_to(pitch_hint, roll.shape), pitch_regular)
-    angles = intrinsic_euler_from_first_two(m, (Y, Z, X), pitch, roll)
-    if side == "left":  # mirror image across the sagittal plane
-        angles = angles * np.array([1.0, -1.0, -1.0])
+    first = intrinsic_euler_from_first_two(m, (Y, Z, X), pitch, roll)
+    second = wrap_angle(np.stack([first[..., 0] + np.pi, np.pi - first[..., 1],
+                                  first[..., 2] + np.pi], axis=-1))
+    mirror = np.array([1.0, -1.0, -1.0]) if side == "left" else np.ones(3)
     limits = NAO_LIMITS[side]
-    clamped_angles = np.clip(angles, limits[:, 0], limits[:, 1])
+    candidates = []
+    for angles in (first * mirror, second * mirror):  # left arm: mirror image
+        clamped = np.clip(angles, limits[:, 0], limits[:, 1])
+        reached = _nao_matrix(clamped * mirror)
+        error = np.arccos(np.clip(0.5 * (np.trace(np.swapaxes(reached, -1, -2) @ m,
+                                                  axis1=-2, axis2=-1) - 1.0), -1.0, 1.0))
+        candidates.append((angles, clamped, error))
+    (a1, c1, e1), (a2, c2, e2) = candidates
+    use_second = (e2 < e1 - 1e-9)[..., None]
+    angles = np.where(use_second, a2, a1)
+    clamped_angles = np.where(use_second, c2, c1)
     return NaoArm(angles=clamped_angles, clamped=clamped_angles != angles, unclamped=angles)
+
+
+def _nao_matrix(angles: np.ndarray) -> np.ndarray:
+    """NAO torso ← upper arm rotation of right-arm joint angles ``(..., 3)``."""
+    return (elementary_matrix(Y, angles[..., 0]) @ elementary_matrix(Z, angles[..., 1])
+            @ elementary_matrix(X, angles[..., 2]))
