@@ -19,9 +19,9 @@ def main() -> None:
 
 
 def _register() -> None:
-    from exohil.harness import cmd_convert
+    from exohil.harness import cmd_convert, cmd_fixtures, cmd_simulate
 
-    for module in (cmd_convert,):
+    for module in (cmd_convert, cmd_fixtures, cmd_simulate):
         for command in module.COMMANDS:
             main.add_command(command)
 

@@ -1,0 +1,82 @@
+"""``exohil fixtures build [--check]``: regenerate or verify the simulated fixture recordings."""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+
+import click
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_FIXTURES_DIR = REPO_ROOT / "fixtures"
+DEFAULT_SHOULDER_IK_DIR = REPO_ROOT.parent / "shared" / "realdata" / "shoulder-ik"
+
+
+@click.group("fixtures")
+def fixtures_group() -> None:
+    """Simulated recordings committed under fixtures/ (see fixtures/README.md)."""
+
+
+@fixtures_group.command("build")
+@click.option("--check", is_flag=True,
+              help="Rebuild into a temporary folder and compare sha256 against "
+                   "fixtures/SHA256SUMS (and the committed files); exit 1 on any mismatch.")
+@click.option("--dir", "fixtures_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=DEFAULT_FIXTURES_DIR, show_default=True, help="Fixtures folder.")
+@click.option("--shoulder-ik", "shoulder_ik_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=DEFAULT_SHOULDER_IK_DIR, show_default=True,
+              help="Folder of the shoulder-ik .mot trials (real motion, CC BY 4.0).")
+def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> None:
+    """Regenerate every fixture (bit-identical on rebuild) and fixtures/SHA256SUMS.
+
+    With --check nothing under fixtures/ changes: the fixtures are rebuilt in a temporary
+    folder and their hashes compared with the recorded ones.
+    """
+    from exohil.emulators.fixture_specs import (
+        FIXTURES,
+        SHOULDER_IK_LICENSE,
+        SUMS_FILE,
+        build_fixture,
+        format_sums,
+        parse_sums,
+        sha256_file,
+    )
+
+    if not shoulder_ik_dir.is_dir():
+        raise click.ClickException(f"shoulder-ik data not found at {shoulder_ik_dir} "
+                                   f"(pass --shoulder-ik DIR)")
+    with tempfile.TemporaryDirectory(prefix="exohil-fixtures-") as tmp:
+        out_dir = Path(tmp) if check else fixtures_dir
+        out_dir.mkdir(parents=True, exist_ok=True)
+        hashes = {}
+        for spec in FIXTURES:
+            click.echo(f"building {spec.filename}: {spec.description}", err=True)
+            hashes[spec.filename] = sha256_file(build_fixture(spec, out_dir, shoulder_ik_dir))
+        if not check:
+            shutil.copyfile(shoulder_ik_dir / "LICENSE_data", fixtures_dir / SHOULDER_IK_LICENSE)
+            (fixtures_dir / SUMS_FILE).write_text(format_sums(hashes), encoding="utf-8")
+            click.echo(f"wrote {len(hashes)} fixtures and {SUMS_FILE} to {fixtures_dir}", err=True)
+            return
+    sums_path = fixtures_dir / SUMS_FILE
+    try:
+        recorded = parse_sums(sums_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise click.ClickException(f"cannot read {sums_path}: {exc}") from exc
+    problems = []
+    for name, digest in hashes.items():
+        committed = fixtures_dir / name
+        if recorded.get(name) != digest:
+            problems.append(f"{name}: rebuilt sha256 {digest[:12]}… != {SUMS_FILE} "
+                            f"{(recorded.get(name) or 'missing')[:12]}")
+        elif not committed.is_file() or sha256_file(committed) != digest:
+            problems.append(f"{name}: committed file differs from its rebuild")
+    for line in problems:
+        click.echo(f"MISMATCH {line}", err=True)
+    if problems:
+        raise click.ClickException(f"{len(problems)} fixture(s) do not match; "
+                                   f"run `exohil fixtures build` and commit the result")
+    click.echo(f"all {len(hashes)} fixtures match {SUMS_FILE}", err=True)
+
+
+COMMANDS: list[click.Command] = [fixtures_group]
