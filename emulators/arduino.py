@@ -1,0 +1,312 @@
+"""The software Arduino: replays sensor frames over a virtual serial port, with faults.
+
+``ArduinoEmulator`` runs in a thread. Frame ``k`` (unwrapped sequence number ``seq0 + k``) is
+sampled at device time ``k / rate_hz`` s, stamped ``t_us0 + round(k * 1e6 / rate_hz)`` µs
+(mod 2**32) and sent at the absolute deadline ``t0 + k / rate_hz`` on the host's
+``perf_counter`` clock, so the mean rate does not drift. Like the real device it streams
+whether or not a host is reading; frames that cannot be handed over are logged as
+``not_read``. Every fault and loss is in :attr:`ArduinoEmulator.fault_log` (docs/emulator.md).
+
+    with ArduinoEmulator.from_recording(rec, faults="drop:rate=0.01") as emu:
+        source = SerialFrameSource(emu.port)  # any pyserial client
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from exohil.emulators.effects import Signal
+from exohil.emulators.fault_spec import FaultPlan, fault_plan
+from exohil.emulators.faults import FaultRecord, FrameFaultInjector
+from exohil.emulators.pacing import sleep_until
+from exohil.emulators.pty_port import VirtualSerialPort
+from exohil.formats.recording import Recording
+from exohil.formats.wire import MM_PER_LSB, SEQ_MODULUS, TIME_MODULUS_US, WireFrame, encode_frame
+
+_IDLE_POLL_S = 0.001
+_RECENT_FRAMES = 8192
+
+
+class ArduinoEmulator:
+    """A device that streams wire protocol v1 on a pty; a context manager (see module doc).
+
+    Args:
+        values_mm: (N, S) sensor values to replay, mm (S = 1..16).
+        rate_hz: frame rate (250 for the real device; tests may run several kHz).
+        loop: replay the values cyclically.
+        duration_s: stop after this much device time (default: end of the values, or never
+            when looping).
+        faults: a :class:`FaultPlan`, a spec string or a TOML path (see fault_spec).
+        seed: seeds every random fault and effect.
+        seq0: sequence number of the first frame (wire value is mod 65536).
+        t_us0: device timestamp of the first frame, µs (wire value is mod 2**32).
+        autostart: start streaming as soon as the port exists; otherwise wait for
+            :meth:`begin` (tests use it to start once their reader is attached).
+        attach_grace_s: after a host opens the port, frames of this long are not handed over
+            (the host is still configuring the port and flushes its input; the real device
+            likewise only talks once the host's port is up).
+        drain_timeout_s: at a disconnect, how long to wait for the host to read what was
+            already written before the port vanishes (bytes still unread then are logged lost).
+        record_send_times: keep (seq, perf_counter_ns) of every write (benchmarks).
+    """
+
+    def __init__(
+        self,
+        values_mm: np.ndarray,
+        *,
+        rate_hz: float = 250.0,
+        loop: bool = False,
+        duration_s: float | None = None,
+        faults: FaultPlan | str | None = None,
+        seed: int = 0,
+        seq0: int = 0,
+        t_us0: int = 0,
+        autostart: bool = True,
+        attach_grace_s: float = 0.05,
+        drain_timeout_s: float = 0.5,
+        record_send_times: bool = False,
+    ) -> None:
+        values = np.asarray(values_mm, dtype=np.float64)
+        if values.ndim != 2 or values.shape[0] == 0 or not 1 <= values.shape[1] <= 16:
+            raise ValueError(f"values must be (N>0, 1..16) mm, got shape {values.shape}")
+        if not math.isfinite(rate_hz) or rate_hz <= 0:
+            raise ValueError("rate_hz must be a positive number")
+        if duration_s is not None and duration_s <= 0:
+            raise ValueError("duration_s must be > 0")
+        self.rate_hz = float(rate_hz)
+        self.plan = faults if isinstance(faults, FaultPlan) else fault_plan(faults)
+        self.seed = int(seed)
+        self.seq0 = int(seq0)
+        self.t_us0 = int(t_us0)
+        self.attach_grace_s = attach_grace_s
+        self.drain_timeout_s = drain_timeout_s
+        self.n_frames = self._frame_count(values.shape[0], loop, duration_s)
+        self._raw, self._keep = self._prepare(values, loop)
+        self.sensor_count = int(values.shape[1])
+
+        self._port = VirtualSerialPort()
+        self.port = self._port.path
+        self._log: list[FaultRecord] = []
+        self._recent: deque[tuple[int, int]] = deque(maxlen=_RECENT_FRAMES)
+        self.send_times: list[tuple[int, int]] | None = [] if record_send_times else None
+        self.frames_generated = 0
+        self.frames_written = 0
+        self.error: BaseException | None = None
+        self._attached_at: float | None = None
+        self._ready = threading.Event()
+        self._go = threading.Event()
+        self._stop = threading.Event()
+        self._finished = threading.Event()
+        if autostart:
+            self._go.set()
+        self._thread = threading.Thread(target=self._run, name="arduino-emulator", daemon=True)
+
+    @classmethod
+    def from_recording(cls, recording: Recording, **kwargs: Any) -> ArduinoEmulator:
+        """An emulator replaying ``recording``'s sensor values (mm); kwargs as ``__init__``."""
+        if recording.sensor_units != "mm":
+            raise ValueError(f"sensor values are in {recording.sensor_units!r}; the wire "
+                             "protocol carries mm")
+        return cls(recording.sensors.values, **kwargs)
+
+    # ---- lifecycle -------------------------------------------------------------------
+    def __enter__(self) -> ArduinoEmulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start(self) -> None:
+        """Create the port and start the emulator thread; returns once ``port`` exists."""
+        self._thread.start()
+        self._ready.wait()
+        if self.error is not None:
+            raise RuntimeError(f"emulator failed to start: {self.error}") from self.error
+
+    def begin(self) -> None:
+        """Start streaming (only needed with ``autostart=False``)."""
+        self._go.set()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Stop streaming, remove the port and join the thread (bounded by ``timeout_s``)."""
+        self._stop.set()
+        self._go.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+        self._port.close()
+
+    def wait_finished(self, timeout_s: float | None = None) -> bool:
+        """Block until every frame has been generated (the port stays up until stop)."""
+        return self._finished.wait(timeout_s)
+
+    @property
+    def finished(self) -> bool:
+        return self._finished.is_set()
+
+    @property
+    def fault_log(self) -> list[FaultRecord]:
+        """A copy of the fault log so far (complete once finished)."""
+        return list(self._log)
+
+    @property
+    def clipped_values(self) -> int:
+        """Values outside 0..655.35 mm that were clipped to the wire's range."""
+        return self._clipped
+
+    # ---- preparation -----------------------------------------------------------------
+    def _frame_count(self, n_values: int, loop: bool, duration_s: float | None) -> int | None:
+        by_duration = None if duration_s is None else max(1, round(duration_s * self.rate_hz))
+        if loop:
+            return by_duration
+        return n_values if by_duration is None else min(n_values, by_duration)
+
+    def _prepare(self, values: np.ndarray, loop: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Apply value-level effects and quantise to wire units: (raw (M, S), keep (M,))."""
+        if loop and self.n_frames is not None:
+            values = np.resize(values, (self.n_frames, values.shape[1]))
+        elif self.n_frames is not None:
+            values = values[: self.n_frames]
+        keep = np.ones(values.shape[0], dtype=bool)
+        if self.plan.value_effects:
+            t = np.arange(values.shape[0]) / self.rate_hz
+            signal = self.plan.effect_chain.apply(Signal(t=t, values=values, keep=keep), self.seed)
+            values, keep = signal.values, signal.keep
+        raw = np.rint(values / MM_PER_LSB)
+        self._clipped = int(np.count_nonzero((raw < 0) | (raw > 0xFFFF) | ~np.isfinite(raw)))
+        raw = np.clip(np.nan_to_num(raw, nan=0.0), 0, 0xFFFF).astype(np.int64)
+        return raw, keep
+
+    # ---- the device loop ---------------------------------------------------------------
+    def _log_fault(self, seq: int, kind: str, **details: Any) -> None:
+        self._log.append(FaultRecord(seq=seq, kind=kind, details=details))
+
+    def _run(self) -> None:
+        try:
+            self._port.connect()
+        except BaseException as exc:  # reported by start()
+            self.error = exc
+            self._ready.set()
+            return
+        self._ready.set()
+        try:
+            self._go.wait()
+            if not self._stop.is_set():
+                self._stream()
+        except BaseException as exc:
+            self.error = exc
+        finally:
+            self._finished.set()
+        while not self._stop.wait(_IDLE_POLL_S):
+            if self._port.connected:
+                self._port.flush_pending()
+
+    def _stream(self) -> None:
+        injector = FrameFaultInjector(self.plan.frame_faults, self.seed, self.rate_hz)
+        for effect in self.plan.value_effects:
+            self._log_fault(self.seq0, "effect", name=effect.name, params=vars(effect).copy())
+        held: list[tuple[int, bytes]] = []
+        stall_window: int | None = None
+        self._attached_at = -math.inf if self._port.host_attached() else None
+        period = 1.0 / self.rate_hz
+        t0 = time.perf_counter()
+        k = 0
+        while self.n_frames is None or k < self.n_frames:
+            if self._stop.is_set():
+                return
+            sleep_until(t0 + k * period)
+            seq = self.seq0 + k
+            self.frames_generated = k + 1
+            outage = injector.in_outage(k)
+            dropped = injector.drop(k)
+            if outage is not None:
+                if self._port.connected:
+                    for held_seq, _ in held:
+                        self._log_fault(held_seq, "disconnect", held_by_stall=True)
+                    held.clear()
+                    self._go_offline()
+                self._log_fault(seq, "disconnect", at_s=outage.at_s, for_s=outage.for_s)
+                k += 1
+                continue
+            if not self._port.connected:
+                self._port.connect()
+                self._attached_at = None
+            row = k % self._raw.shape[0]
+            if dropped is not None or not self._keep[row]:
+                details = dropped if dropped is not None else {"effect": "dropout"}
+                self._log_fault(seq, "drop", **details)
+                k += 1
+                continue
+            frame = WireFrame(seq=seq % SEQ_MODULUS,
+                              t_us=(self.t_us0 + round(k * 1e6 / self.rate_hz)) % TIME_MODULUS_US,
+                              raw=tuple(int(v) for v in self._raw[row]))
+            data, applied = injector.mangle(encode_frame(frame))
+            for kind, details in applied:
+                self._log_fault(seq, kind, **details)
+            stall = injector.stall_window(k)
+            if stall is not None:
+                if stall[0] != stall_window:
+                    self._release(held, stall_window)
+                    stall_window = stall[0]
+                held.append((seq, data))
+                k += 1
+                continue
+            self._release(held, stall_window)
+            stall_window = None
+            self._deliver(seq, data)
+            k += 1
+        self._release(held, stall_window)
+
+    def _release(self, held: list[tuple[int, bytes]], window: int | None) -> None:
+        """Send the frames held by a stall in one burst."""
+        if not held:
+            return
+        self._log_fault(held[0][0], "stall", window=window, frames_held=len(held),
+                        duration_ms=round(len(held) * 1000.0 / self.rate_hz, 3))
+        for seq, data in held:
+            self._deliver(seq, data)
+        held.clear()
+
+    def _go_offline(self) -> None:
+        """Disconnect: let the host read what it already has, then make the port vanish."""
+        if self._port.host_attached() and not self._port.drain(self.drain_timeout_s):
+            self._log_in_flight(self._port.unread_bytes())
+        lost = self._port.disconnect()
+        if lost is not None:
+            self._log_fault(lost, "disconnect", in_flight=True)
+
+    def _log_in_flight(self, unread: int) -> None:
+        """Log the most recent frames covering ``unread`` bytes as lost in flight."""
+        while unread > 0 and self._recent:
+            seq, size = self._recent.pop()
+            self._log_fault(seq, "disconnect", in_flight=True)
+            unread -= size
+
+    def _deliver(self, seq: int, data: bytes) -> None:
+        if not self._port.host_attached():
+            if self._attached_at is not None:
+                lost = self._port.discard_pending()
+                if lost is not None:
+                    self._log_fault(lost, "not_read", reason="host closed the port")
+            self._attached_at = None
+            self._log_fault(seq, "not_read", reason="no host")
+            return
+        now = time.perf_counter()
+        if self._attached_at is None:
+            self._attached_at = now
+        if now < self._attached_at + self.attach_grace_s:
+            self._log_fault(seq, "not_read", reason="host attaching")
+            return
+        if not self._port.send(data, seq):
+            self._log_fault(seq, "not_read", reason="buffer full")
+            return
+        self.frames_written += 1
+        self._recent.append((seq, len(data)))
+        if self.send_times is not None:
+            self.send_times.append((seq, time.perf_counter_ns()))

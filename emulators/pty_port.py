@@ -1,0 +1,162 @@
+"""A virtual serial port: a pseudo-terminal whose slave plays the device node.
+
+The host opens ``path``, a stable symlink to the current pty slave (like udev's
+``/dev/serial/by-id/...`` link to ``/dev/ttyACM0``). The emulator keeps only the master:
+
+* host presence: while no process has the slave open, ``poll()`` on the master reports
+  POLLHUP, so the emulator knows when nobody is listening (and does not write: a device's
+  frames are lost when no host reads them, they do not pile up for a later reader);
+* never blocking: the master is non-blocking; a write that does not fit keeps its tail in a
+  small pending buffer that is flushed first next time, and while it is not flushed new frames
+  are refused (the caller logs them as "not read");
+* disconnect: the symlink is removed and the master closed (the host's reads and ioctls fail
+  with EIO, a new open fails with ENOENT), then :meth:`connect` makes a fresh pty and points the
+  link at it (re-enumeration).
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import pty
+import select
+import struct
+import tempfile
+import termios
+import time
+import tty
+from pathlib import Path
+
+LINK_NAME = "ttyEXOHIL0"
+
+
+class VirtualSerialPort:
+    """One emulated device node; see the module docstring. Not thread-safe: one owner."""
+
+    def __init__(self, link_dir: Path | None = None) -> None:
+        self._dir = Path(link_dir) if link_dir else Path(tempfile.mkdtemp(prefix="exohil-emu-"))
+        self._own_dir = link_dir is None
+        self.path = str(self._dir / LINK_NAME)
+        self._master: int | None = None
+        self._slave_name = ""
+        self._poll = select.poll()
+        self._pending = bytearray()
+        self._pending_tag: int | None = None
+
+    @property
+    def connected(self) -> bool:
+        """True while the port exists (between connect and disconnect)."""
+        return self._master is not None
+
+    def connect(self) -> None:
+        """Create a fresh pty (slave in raw mode) and point ``path`` at its slave."""
+        master, slave = pty.openpty()
+        tty.setraw(slave)
+        self._slave_name = os.ttyname(slave)
+        os.close(slave)  # only the host holds the slave: POLLHUP on the master means "no host"
+        os.set_blocking(master, False)
+        self._master = master
+        self._poll = select.poll()
+        self._poll.register(master, select.POLLHUP)
+        tmp_link = self._dir / f".{LINK_NAME}.tmp"
+        tmp_link.unlink(missing_ok=True)
+        os.symlink(self._slave_name, tmp_link)
+        os.replace(tmp_link, self.path)
+
+    def host_attached(self) -> bool:
+        """True when some process has the slave open."""
+        if self._master is None:
+            return False
+        return not any(ev & select.POLLHUP for _, ev in self._poll.poll(0))
+
+    def unread_bytes(self) -> int:
+        """Bytes written that the host has not read yet (slave input queue), 0 without a host."""
+        if self._master is None or not self.host_attached():
+            return 0
+        try:
+            fd = os.open(self._slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError:
+            return 0
+        try:
+            buf = fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0")
+            return int(struct.unpack("I", buf)[0])
+        finally:
+            os.close(fd)
+
+    def drain(self, timeout_s: float, settle_s: float = 0.002) -> bool:
+        """Wait until the host has read everything written (stable for ``settle_s``), at most
+        ``timeout_s``; True when drained."""
+        self.flush_pending()
+        deadline = time.perf_counter() + timeout_s
+        empty_since: float | None = None
+        while time.perf_counter() < deadline:
+            now = time.perf_counter()
+            if self._pending or self.unread_bytes():
+                empty_since = None
+                self.flush_pending()
+            elif empty_since is None:
+                empty_since = now
+            elif now - empty_since >= settle_s:
+                return True
+            time.sleep(0.0005)
+        return False
+
+    def flush_pending(self) -> None:
+        """Write as much of the pending tail as fits (never blocks)."""
+        if self._pending and self._master is not None:
+            written = self._write_some(bytes(self._pending))
+            del self._pending[:written]
+            if not self._pending:
+                self._pending_tag = None
+
+    def send(self, data: bytes, tag: int) -> bool:
+        """Hand ``data`` (one frame, identified by ``tag``) to the host side without blocking.
+
+        Returns False when refused (the pending tail of an earlier frame still does not fit).
+        """
+        self.flush_pending()
+        if self._pending or self._master is None:
+            return False
+        written = self._write_some(data)
+        if written < len(data):
+            self._pending += data[written:]
+            self._pending_tag = tag
+        return True
+
+    def discard_pending(self) -> int | None:
+        """Drop the unsent tail; returns the tag of the frame it destroyed, if any."""
+        tag = self._pending_tag
+        self._pending.clear()
+        self._pending_tag = None
+        return tag
+
+    def disconnect(self) -> int | None:
+        """Make the port vanish; returns the tag of a frame destroyed mid-write, if any."""
+        tag = self.discard_pending()
+        Path(self.path).unlink(missing_ok=True)
+        if self._master is not None:
+            os.close(self._master)
+            self._master = None
+        return tag
+
+    def close(self) -> None:
+        """Disconnect and remove the link directory if this port created it."""
+        self.disconnect()
+        if self._own_dir:
+            (self._dir / f".{LINK_NAME}.tmp").unlink(missing_ok=True)
+            try:
+                self._dir.rmdir()
+            except OSError:
+                pass
+
+    def _write_some(self, data: bytes) -> int:
+        assert self._master is not None
+        try:
+            return os.write(self._master, data)
+        except BlockingIOError:
+            return 0
+        except OSError as exc:
+            if exc.errno in (errno.EIO, errno.EAGAIN):
+                return 0
+            raise

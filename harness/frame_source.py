@@ -1,0 +1,78 @@
+"""What the pipeline consumes: frames from a device, behind a small protocol.
+
+Following labgrid's Resource → Driver → Protocol split in spirit, the pipeline and the tests
+depend only on :class:`FrameSource`; :class:`~exohil.harness.acquisition.SerialFrameSource`
+(any pyserial URL: the emulator's pty, ``/dev/ttyACM0``, ``loop://``, ``socket://``) is one
+implementation, and a fake device drops straight in.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One sensor frame as delivered to the host.
+
+    Attributes:
+        seq: sequence number, unwrapped (continues past 65535) from the first frame received.
+        device_time_s: device timestamp, seconds, unwrapped past the u32 µs wrap.
+        values_mm: (S,) float64 tendon lengths, mm.
+        host_ns: host receive time, ``time.perf_counter_ns()`` when its bytes were read.
+    """
+
+    seq: int
+    device_time_s: float
+    values_mm: np.ndarray
+    host_ns: int
+
+
+@dataclass
+class LinkStats:
+    """Counters of one link since ``start()``.
+
+    Attributes:
+        frames: frames decoded with a valid CRC and delivered to the buffer.
+        dropped: frames missing by sequence number (gaps between delivered frames).
+        duplicates: frames whose sequence number did not advance (discarded).
+        crc_errors: packets whose CRC did not match.
+        decode_errors: packets that were not valid COBS or had a wrong length/type.
+        garbage_bytes: bytes discarded (rejected packets, partial packets at reconnect,
+            over-long runs without a delimiter).
+        resyncs: times the decoder discarded data and re-locked on the next delimiter.
+        reconnects: successful re-opens after a disconnect.
+        overflow: frames discarded because the buffer was full (oldest first).
+        bytes_read: bytes read from the link.
+    """
+
+    frames: int = 0
+    dropped: int = 0
+    duplicates: int = 0
+    crc_errors: int = 0
+    decode_errors: int = 0
+    garbage_bytes: int = 0
+    resyncs: int = 0
+    reconnects: int = 0
+    overflow: int = 0
+    bytes_read: int = 0
+
+
+@runtime_checkable
+class FrameSource(Protocol):
+    """A stream of :class:`Frame` objects fed by a background reader."""
+
+    def start(self) -> None:
+        """Begin acquiring (returns promptly; connecting happens in the background)."""
+
+    def stop(self) -> None:
+        """Stop acquiring; returns within a bounded time."""
+
+    def get(self, timeout: float | None = None) -> Frame | None:
+        """The oldest buffered frame, waiting up to ``timeout`` s; None when none arrived."""
+
+    def stats(self) -> LinkStats:
+        """A snapshot of the link counters."""
