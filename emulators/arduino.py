@@ -52,7 +52,8 @@ class ArduinoEmulator:
             (the host is still configuring the port and flushes its input; the real device
             likewise only talks once the host's port is up).
         drain_timeout_s: at a disconnect, how long to wait for the host to read what was
-            already written before the port vanishes (bytes still unread then are logged lost).
+            already written before the port vanishes (bytes still unread then are logged
+            lost); also how long the end of the stream waits for the host to catch up.
         record_send_times: keep (seq, perf_counter_ns) of every write (benchmarks).
     """
 
@@ -143,7 +144,8 @@ class ArduinoEmulator:
         self._port.close()
 
     def wait_finished(self, timeout_s: float | None = None) -> bool:
-        """Block until every frame has been generated (the port stays up until stop)."""
+        """Block until every frame has been sent and an attached host has read them (or
+        ``drain_timeout_s`` passed); the port stays up until :meth:`stop`."""
         return self._finished.wait(timeout_s)
 
     @property
@@ -199,6 +201,8 @@ class ArduinoEmulator:
             self._go.wait()
             if not self._stop.is_set():
                 self._stream()
+            if self._port.connected and self._port.host_attached():
+                self._port.drain(self.drain_timeout_s)
         except BaseException as exc:
             self.error = exc
         finally:

@@ -19,9 +19,9 @@ def main() -> None:
 
 
 def _register() -> None:
-    from exohil.harness import cmd_convert, cmd_fixtures, cmd_simulate
+    from exohil.harness import cmd_convert, cmd_emulate, cmd_fixtures, cmd_simulate
 
-    for module in (cmd_convert, cmd_fixtures, cmd_simulate):
+    for module in (cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate):
         for command in module.COMMANDS:
             main.add_command(command)
 

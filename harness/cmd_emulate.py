@@ -1,0 +1,117 @@
+"""``exohil emulate``: a software Arduino streaming a recording over a virtual serial port."""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import click
+
+
+def _load_values(path: Path):
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.mcap_io import read_recording
+
+    try:
+        recording = read_recording(path)
+    except RecordingError as exc:
+        raise click.ClickException(str(exc)) from exc
+    if recording.sensor_units != "mm":
+        raise click.ClickException(f"{path}: sensor values are in {recording.sensor_units!r}; "
+                                   "the wire protocol carries mm")
+    if len(recording.sensors) == 0:
+        raise click.ClickException(f"{path}: the recording has no sensor frames")
+    return recording.sensors.values
+
+
+def _write_fault_log(path: Path, emulator) -> None:
+    with path.open("w", encoding="utf-8") as out:
+        for record in emulator.fault_log:
+            out.write(json.dumps({"seq": record.seq, "kind": record.kind,
+                                  "details": record.details}, default=str) + "\n")
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+@click.command("emulate")
+@click.argument("recording", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=250.0,
+              show_default=True, help="Frame rate, Hz.")
+@click.option("--loop", is_flag=True, help="Replay the recording cyclically.")
+@click.option("--faults", default=None, metavar="SPEC|FILE.toml",
+              help="Faults to inject, e.g. 'noise:sigma_mm=0.5;drop:rate=0.01,burst=3;"
+                   "corrupt:rate=0.001;truncate:rate=0.001;stall:every_s=5,duration_ms=40;"
+                   "disconnect:at_s=10,for_s=0.5' or a TOML file of [[fault]] tables "
+                   "(see docs/emulator.md).")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed for every random fault.")
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Stop after this many seconds of device time (default: end of the "
+                   "recording, or never with --loop).")
+@click.option("--fault-log", "fault_log", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Write every injected fault as JSON lines here on exit.")
+def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None, seed: int,
+                    duration: float | None, fault_log: Path | None) -> None:
+    """Stream RECORDING's sensor frames (wire protocol v1) from a software Arduino on a pty.
+
+    The first line of stdout is the device path to open (a stable link that survives
+    emulated disconnects); open it with any serial client, e.g. `exohil record --port PATH`.
+    Frames are paced on absolute deadlines; progress and a fault summary go to stderr.
+    Stop with Ctrl-C.
+
+    \b
+    Examples:
+      exohil emulate fixtures/paper_protocol.mcap --loop
+      exohil emulate rec.mcap --faults 'drop:rate=0.01,burst=3;stall:every_s=5,duration_ms=40'
+    """
+    from exohil.emulators.arduino import ArduinoEmulator
+    from exohil.emulators.fault_spec import fault_plan
+
+    values = _load_values(recording)
+    try:
+        plan = fault_plan(faults)
+    except (ValueError, OSError) as exc:
+        raise click.BadParameter(str(exc), param_hint="--faults") from exc
+    try:
+        emulator = ArduinoEmulator(values, rate_hz=rate, loop=loop, duration_s=duration,
+                                   faults=plan, seed=seed)
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from exc
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        emulator.start()
+    except RuntimeError as exc:
+        raise click.ClickException(str(exc)) from exc
+    try:
+        with emulator:
+            click.echo(emulator.port)
+            sys.stdout.flush()
+            if emulator.clipped_values:
+                click.echo(f"warning: {emulator.clipped_values} values outside 0..655.35 mm "
+                           "were clipped", err=True)
+            next_report = time.monotonic() + 5.0
+            while not emulator.wait_finished(0.2):
+                if time.monotonic() >= next_report:
+                    next_report += 5.0
+                    click.echo(f"{emulator.frames_generated} frames, "
+                               f"{emulator.frames_written} handed to the host", err=True)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if fault_log is not None:
+            _write_fault_log(fault_log, emulator)
+    if emulator.error is not None:
+        raise click.ClickException(f"emulator failed: {emulator.error}")
+    counts = Counter(record.kind for record in emulator.fault_log)
+    summary = ", ".join(f"{kind} {n}" for kind, n in sorted(counts.items())) or "none"
+    click.echo(f"done: {emulator.frames_generated} frames generated, "
+               f"{emulator.frames_written} handed to the host; faults: {summary}", err=True)
+
+
+COMMANDS = [emulate_command]
