@@ -61,7 +61,7 @@ def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None
     """Stream RECORDING's sensor frames (wire protocol v1) from a software Arduino on a pty.
 
     The first line of stdout is the device path to open (a stable link that survives
-    emulated disconnects); open it with any serial client, e.g. `exohil record --port PATH`.
+    emulated disconnects); open it with any serial client (pyserial, the harness)...
     Frames are paced on absolute deadlines; progress and a fault summary go to stderr.
     Stop with Ctrl-C.
 
@@ -89,21 +89,21 @@ def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None
     except RuntimeError as exc:
         raise click.ClickException(str(exc)) from exc
     try:
-        with emulator:
-            click.echo(emulator.port)
-            sys.stdout.flush()
-            if emulator.clipped_values:
-                click.echo(f"warning: {emulator.clipped_values} values outside 0..655.35 mm "
-                           "were clipped", err=True)
-            next_report = time.monotonic() + 5.0
-            while not emulator.wait_finished(0.2):
-                if time.monotonic() >= next_report:
-                    next_report += 5.0
-                    click.echo(f"{emulator.frames_generated} frames, "
-                               f"{emulator.frames_written} handed to the host", err=True)
+        click.echo(emulator.port)
+        sys.stdout.flush()
+        if emulator.clipped_values:
+            click.echo(f"warning: {emulator.clipped_values} values outside 0..655.35 mm "
+                       "were clipped", err=True)
+        next_report = time.monotonic() + 5.0
+        while not emulator.wait_finished(0.2):
+            if time.monotonic() >= next_report:
+                next_report += 5.0
+                click.echo(f"{emulator.frames_generated} frames, "
+                           f"{emulator.frames_written} handed to the host", err=True)
     except KeyboardInterrupt:
         pass
     finally:
+        emulator.stop()
         if fault_log is not None:
             _write_fault_log(fault_log, emulator)
     if emulator.error is not None:
