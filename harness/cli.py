@@ -19,9 +19,19 @@ def main() -> None:
 
 
 def _register() -> None:
-    from exohil.harness import cmd_convert, cmd_emulate, cmd_fixtures, cmd_simulate
+    from exohil.harness import (
+        cmd_convert,
+        cmd_emulate,
+        cmd_fixtures,
+        cmd_import,
+        cmd_plot,
+        cmd_record,
+        cmd_simulate,
+    )
 
-    for module in (cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate):
+    for module in (
+        cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import, cmd_plot
+    ):
         for command in module.COMMANDS:
             main.add_command(command)
 

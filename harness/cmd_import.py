@@ -1,0 +1,222 @@
+"""``exohil import csv|mot``: bring other tools' data into recording format v1.
+
+Every imported recording carries provenance metadata: ``source`` (file name),
+``source_sha256``, ``license`` (when known), ``generator`` and ``command``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import shlex
+from dataclasses import dataclass
+from pathlib import Path
+
+import click
+
+
+@dataclass(frozen=True)
+class CsvPreset:
+    """Column mapping of a known CSV layout."""
+
+    rate_hz: float
+    sensor_cols: str
+    angle_cols: str
+    sensor_names: tuple[str, ...]
+    angle_names: tuple[str, ...]
+    joint: str
+    sensor_units: str
+    license: str
+
+
+PRESETS = {
+    # shared/realdata/graphene-knee (see its SOURCE.md): no header, BOM, 100 Hz;
+    # col 0 knee flexion (deg, optical mocap), cols 1-5 textile sensors (normalised ΔR/R0).
+    "graphene-knee": CsvPreset(
+        rate_hz=100.0,
+        sensor_cols="1-5",
+        angle_cols="0",
+        sensor_names=("s1", "s2", "s3", "s4", "s5"),
+        angle_names=("knee_flexion",),
+        joint="knee",
+        sensor_units="dR/R0",
+        license="MIT, e-Body-Lab/graphene-based-knitted-sensing-sleeve",
+    ),
+}
+
+
+@click.group("import")
+def import_group() -> None:
+    """Convert other tools' files into recordings (format v1 MCAP)."""
+
+
+def _names(text: str | None) -> tuple[str, ...] | None:
+    return tuple(name.strip() for name in text.split(",")) if text else None
+
+
+def _provenance(path: Path, license_note: str | None) -> dict[str, str]:
+    metadata = {
+        "source": path.name,
+        "source_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+        "command": _command_line(),
+    }
+    if license_note:
+        metadata["license"] = license_note
+    return metadata
+
+
+def _command_line() -> str:
+    """The invoking command as text, rebuilt from click's parsed parameters (deterministic)."""
+    context = click.get_current_context()
+    words = context.command_path.split()
+    for name, value in context.params.items():
+        if value is None or value is False:
+            continue
+        option = "--" + name.replace("_", "-")
+        if name in ("input_file",):
+            words.append(shlex.quote(Path(value).name))
+        elif value is True:
+            words.append(option)
+        else:
+            shown = Path(value).name if isinstance(value, Path) else str(value)
+            words.extend([option, shlex.quote(shown)])
+    return " ".join(words)
+
+
+@import_group.command("csv")
+@click.argument("input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Output recording (.mcap).")
+@click.option("--preset", type=click.Choice(sorted(PRESETS)),
+              help="Fill the mapping for a known layout (graphene-knee: shared/realdata).")
+@click.option("--rate", type=float, help="Row rate, Hz (rows are equally spaced).")
+@click.option("--sensor-cols", help="0-based sensor columns: '1-5', '1,3,6-8'.")
+@click.option("--angle-cols", help="0-based angle columns (degrees), e.g. '0'.")
+@click.option("--sensor-names", help="Comma-separated sensor names (default: header or cN).")
+@click.option("--angle-names", help="Comma-separated angle names (default: header or angleN).")
+@click.option("--joint", help="Mocap joint (topic /mocap/<joint>); default 'joint'.")
+@click.option("--sensor-units", help="Unit of the sensor values; default 'mm'.")
+@click.option("--skip-rows", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Lines to drop before the header/data.")
+@click.option("--delimiter", default=",", show_default=True, help="Field separator.")
+@click.option("--license", "license_note", help="License note stored in the metadata.")
+def import_csv(
+    input_file: Path,
+    out: Path,
+    preset: str | None,
+    rate: float | None,
+    sensor_cols: str | None,
+    angle_cols: str | None,
+    sensor_names: str | None,
+    angle_names: str | None,
+    joint: str | None,
+    sensor_units: str | None,
+    skip_rows: int,
+    delimiter: str,
+    license_note: str | None,
+) -> None:
+    """Import a numeric CSV (one row per sample at --rate Hz) as a recording: --sensor-cols
+    become /suit/sensors (seq = row, t = row/rate), --angle-cols become /mocap/<joint> angles
+    in degrees. A UTF-8 BOM and a header row are detected. Example:
+
+        exohil import csv S1_2_HC45.csv --preset graphene-knee --out hc45.mcap
+    """
+    from exohil.formats.column_table import (
+        TableError,
+        parse_columns,
+        read_table,
+        recording_from_table,
+    )
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.mcap_io import write_recording
+
+    chosen = PRESETS[preset] if preset else None
+    rate = rate if rate is not None else (chosen.rate_hz if chosen else None)
+    sensor_cols = sensor_cols or (chosen.sensor_cols if chosen else None)
+    angle_cols = angle_cols if angle_cols is not None else (chosen.angle_cols if chosen else "")
+    if rate is None or not rate > 0:
+        raise click.BadParameter("give a positive --rate (Hz) or a --preset", param_hint="--rate")
+    if not sensor_cols:
+        raise click.BadParameter("give --sensor-cols or a --preset", param_hint="--sensor-cols")
+    try:
+        sensor_idx = parse_columns(sensor_cols)
+        angle_idx = parse_columns(angle_cols) if angle_cols else []
+    except TableError as exc:
+        raise click.BadParameter(str(exc)) from exc
+    if set(sensor_idx) & set(angle_idx):
+        raise click.BadParameter("a column is both a sensor and an angle column")
+    try:
+        table = read_table(
+            input_file, sensor_idx + angle_idx, delimiter=delimiter, skip_rows=skip_rows
+        )
+    except TableError as exc:
+        raise click.ClickException(str(exc)) from exc
+    header = table.header or []
+    names_s = _names(sensor_names) or (chosen.sensor_names if chosen else None)
+    names_s = names_s or tuple(header[: len(sensor_idx)]) or tuple(f"c{c}" for c in sensor_idx)
+    names_a = _names(angle_names) or (chosen.angle_names if chosen else None)
+    names_a = names_a or tuple(header[len(sensor_idx) :]) or tuple(f"angle{c}" for c in angle_idx)
+    if len(names_s) != len(sensor_idx) or len(names_a) != len(angle_idx):
+        raise click.BadParameter(
+            f"{len(names_s)} sensor / {len(names_a)} angle names for "
+            f"{len(sensor_idx)} / {len(angle_idx)} columns"
+        )
+    metadata = _provenance(input_file, license_note or (chosen.license if chosen else None))
+    metadata["generator"] = "exohil import csv"
+    rec = recording_from_table(
+        table.data,
+        rate_hz=rate,
+        sensor_names=names_s,
+        angle_names=names_a,
+        joint=joint or (chosen.joint if chosen else "joint"),
+        sensor_units=sensor_units or (chosen.sensor_units if chosen else "mm"),
+        metadata=metadata,
+    )
+    try:
+        write_recording(out, rec)
+    except RecordingError as exc:
+        raise click.ClickException(str(exc)) from exc
+    click.echo(
+        f"wrote {out}: {len(rec.sensors)} rows, sensors {','.join(names_s)}, "
+        f"angles {','.join(names_a) or '-'} at {rate:g} Hz",
+        err=True,
+    )
+
+
+@import_group.command("mot")
+@click.argument("input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Output recording (.mcap).")
+@click.option("--license", "license_note", help="License note stored in the metadata.")
+def import_mot(input_file: Path, out: Path, license_note: str | None) -> None:
+    """Import an OpenSim .mot (e.g. inverse kinematics) as a mocap-only recording:
+    /mocap/shoulder with plane_elv → elv_angle, shoulder_elv → shoulder_elv,
+    axial_rot → shoulder_rot (degrees), and no sensors. Example:
+
+        exohil import mot ABD01.mot --out abd01.mcap --license "CC BY 4.0, rmr-solver"
+    """
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.mcap_io import write_recording
+    from exohil.formats.mot_import import shoulder_recording_from_mot
+    from exohil.formats.opensim_mot import MotError, read_mot
+
+    try:
+        mot = read_mot(input_file)
+    except MotError as exc:
+        raise click.ClickException(str(exc)) from exc
+    metadata = _provenance(input_file, license_note)
+    metadata["generator"] = "exohil import mot"
+    try:
+        rec = shoulder_recording_from_mot(mot, metadata)
+    except RecordingError as exc:
+        raise click.ClickException(f"{input_file}: {exc}") from exc
+    try:
+        write_recording(out, rec)
+    except RecordingError as exc:
+        raise click.ClickException(str(exc)) from exc
+    click.echo(
+        f"wrote {out}: {len(rec.mocap['shoulder'])} shoulder samples at {rec.mocap_rate_hz:g} Hz",
+        err=True,
+    )
+
+
+COMMANDS: list[click.Command] = [import_group]

@@ -1,0 +1,77 @@
+"""``exohil plot``: hysteresis loops and time series of a recording, as PNG."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("plot")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--kind", type=click.Choice(["hysteresis", "timeseries"]), required=True,
+              help="hysteresis: one sensor against a mocap angle, coloured by direction of "
+              "motion; timeseries: sensors and angles against time.")
+@click.option("--sensor", "sensors", multiple=True,
+              help="Sensor name (hysteresis: default SF or the first; timeseries: repeat to "
+              "choose, default all).")
+@click.option("--joint", default="shoulder", show_default=True, help="Mocap joint (hysteresis).")
+@click.option("--angle", default="shoulder_elv", show_default=True,
+              help="Mocap angle on the x axis (hysteresis).")
+@click.option("--segment", help="Keep only the spans of this labelled segment.")
+@click.option("--t0", type=float, help="Start of the time window, s.")
+@click.option("--t1", type=float, help="End of the time window, s.")
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Output PNG file.")
+def plot_command(
+    file: Path,
+    kind: str,
+    sensors: tuple[str, ...],
+    joint: str,
+    angle: str,
+    segment: str | None,
+    t0: float | None,
+    t1: float | None,
+    out: Path,
+) -> None:
+    """Plot a recording FILE to a PNG. Examples:
+
+        exohil plot rec.mcap --kind hysteresis --sensor SF --out sf.png
+
+        exohil plot rec.mcap --kind timeseries --t0 10 --t1 30 --out ts.png
+    """
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.mcap_io import read_recording
+    from exohil.harness.recording_plots import plot_hysteresis, plot_timeseries, time_window
+
+    if t0 is not None and t1 is not None and t1 <= t0:
+        raise click.BadParameter("--t1 must be after --t0", param_hint="--t1")
+    try:
+        rec = read_recording(file)
+        window = time_window(rec, segment, t0, t1)
+        if kind == "hysteresis":
+            if len(sensors) > 1:
+                raise click.BadParameter("hysteresis takes one --sensor", param_hint="--sensor")
+            sensor = sensors[0] if sensors else _default_sensor(rec.sensor_names)
+            figure = plot_hysteresis(
+                rec, sensor, joint=joint, angle=angle, window=window,
+                title=f"{file.name}: {sensor} vs {angle}" + (f" ({segment})" if segment else ""),
+            )
+        else:
+            figure = plot_timeseries(rec, sensors, window=window, title=file.name)
+    except RecordingError as exc:
+        raise click.ClickException(str(exc)) from exc
+    try:
+        figure.savefig(out, format="png")
+    except OSError as exc:
+        raise click.ClickException(f"{out}: cannot write: {exc.strerror or exc}") from exc
+    click.echo(f"wrote {out}", err=True)
+
+
+def _default_sensor(names: tuple[str, ...]) -> str:
+    if not names:
+        raise click.ClickException("recording has no sensors (mocap-only); nothing to plot")
+    return "SF" if "SF" in names else names[0]
+
+
+COMMANDS: list[click.Command] = [plot_command]

@@ -1,0 +1,139 @@
+"""``exohil record info``: what is inside a recording (format v1 MCAP) file."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import click
+
+
+@click.group("record")
+def record_group() -> None:
+    """Inspect recordings (recording format v1, MCAP; see docs/recording-format.md)."""
+
+
+@record_group.command("info")
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
+def info_command(file: Path, as_json: bool) -> None:
+    """Summarise FILE: duration, channels (topic, schema, messages, mean rate), sequence gaps,
+    sensors, mocap joints, metadata, segments and reader notes (e.g. ignored channels)."""
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.mcap_io import scan_recording
+
+    try:
+        scan = scan_recording(file)
+    except RecordingError as exc:
+        raise click.ClickException(str(exc)) from exc
+    summary = recording_summary(file, scan)
+    if as_json:
+        click.echo(json.dumps(summary, indent=2, allow_nan=False))
+    else:
+        click.echo(_as_text(summary))
+
+
+def recording_summary(file: Path, scan: Any) -> dict[str, Any]:
+    """A JSON-ready summary of a :class:`~exohil.formats.mcap_io.RecordingScan`.
+
+    Times are seconds, rates Hz; NaN (undefined) becomes None.
+    """
+    from exohil.formats.sequence import sequence_gaps
+
+    rec = scan.recording
+    times = [rec.sensors.t] + [stream.t for stream in rec.mocap.values()]
+    times = [t for t in times if len(t)]
+    start = min(float(t.min()) for t in times) if times else math.nan
+    end = max(float(t.max()) for t in times) if times else math.nan
+    gaps = sequence_gaps(rec.sensors.seq)
+    return {
+        "file": str(file),
+        "size_bytes": file.stat().st_size,
+        "duration_s": _finite(end - start),
+        "start_s": _finite(start),
+        "end_s": _finite(end),
+        "channels": [
+            {
+                "topic": c.topic,
+                "schema": c.schema_name,
+                "messages": c.message_count,
+                "mean_rate_hz": _finite(c.mean_rate_hz),
+                "used": c.used,
+            }
+            for c in scan.channels
+        ],
+        "sensors": {
+            "names": list(rec.sensor_names),
+            "units": rec.sensor_units,
+            "frames": len(rec.sensors),
+            "nominal_rate_hz": rec.sensor_rate_hz,
+        },
+        "sequence_gaps": {
+            "gaps": gaps.gaps,
+            "frames_missing": gaps.missing,
+            "largest_gap": gaps.largest,
+        },
+        "mocap": {
+            joint: {"angles": list(stream.names), "samples": len(stream)}
+            for joint, stream in rec.mocap.items()
+        },
+        "mocap_nominal_rate_hz": rec.mocap_rate_hz,
+        "segments": [{"name": s.name, "t0": s.t0, "t1": s.t1} for s in rec.segments],
+        "metadata": dict(sorted(rec.metadata.items())),
+        "notes": list(scan.notes),
+    }
+
+
+def _finite(value: float) -> float | None:
+    return round(value, 6) if math.isfinite(value) else None
+
+
+def _as_text(summary: dict[str, Any]) -> str:
+    lines = [f"file      {summary['file']} ({summary['size_bytes']:,} bytes)"]
+    duration = summary["duration_s"]
+    span = (
+        f"{duration:.3f} s ({summary['start_s']:.3f} → {summary['end_s']:.3f} s)"
+        if duration is not None
+        else "empty"
+    )
+    lines.append(f"duration  {span}")
+    lines.append("channels")
+    width = max([len(c["topic"]) for c in summary["channels"]] + [5])
+    for c in summary["channels"]:
+        rate = f"{c['mean_rate_hz']:9.3f} Hz" if c["mean_rate_hz"] is not None else "        - Hz"
+        ignored = "" if c["used"] else "  (ignored)"
+        lines.append(
+            f"  {c['topic']:<{width}}  {c['messages']:>8} msgs  {rate}  {c['schema']}{ignored}"
+        )
+    sensors = summary["sensors"]
+    names = ",".join(sensors["names"]) or "(none: mocap-only recording)"
+    lines.append(
+        f"sensors   {names} [{sensors['units']}], {sensors['frames']} frames, "
+        f"nominal {sensors['nominal_rate_hz']:g} Hz"
+    )
+    gaps = summary["sequence_gaps"]
+    lines.append(
+        f"seq gaps  {gaps['gaps']} gaps, {gaps['frames_missing']} frames missing, "
+        f"largest gap {gaps['largest_gap']} frames"
+    )
+    for joint, stream in summary["mocap"].items():
+        lines.append(
+            f"mocap     {joint}: {', '.join(stream['angles'])} [deg], {stream['samples']} samples,"
+            f" nominal {summary['mocap_nominal_rate_hz']:g} Hz"
+        )
+    lines.append("metadata")
+    for key, value in summary["metadata"].items():
+        shown = value if len(value) <= 100 else value[:97] + "..."
+        lines.append(f"  {key} = {shown}")
+    if summary["segments"]:
+        lines.append(f"segments  {len(summary['segments'])}")
+        for s in summary["segments"]:
+            lines.append(f"  {s['name']:<24} {s['t0']:10.3f} → {s['t1']:10.3f} s")
+    for note in summary["notes"]:
+        lines.append(f"note      {note}")
+    return "\n".join(lines)
+
+
+COMMANDS: list[click.Command] = [record_group]
