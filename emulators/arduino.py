@@ -98,6 +98,7 @@ class ArduinoEmulator:
         self.send_times: list[tuple[int, int]] | None = [] if record_send_times else None
         self.frames_generated = 0
         self.frames_written = 0
+        self.bytes_written = 0
         self.error: BaseException | None = None
         self._attached_at: float | None = None
         self._ready = threading.Event()
@@ -156,6 +157,12 @@ class ArduinoEmulator:
     def fault_log(self) -> list[FaultRecord]:
         """A copy of the fault log so far (complete once finished)."""
         return list(self._log)
+
+    @property
+    def wire_values_mm(self) -> np.ndarray:
+        """(M, S) values as frame ``k`` carries them (row ``k % M``): after value-level
+        effects and quantisation to 0.01 mm, in mm."""
+        return self._raw * MM_PER_LSB
 
     @property
     def clipped_values(self) -> int:
@@ -311,6 +318,7 @@ class ArduinoEmulator:
             self._log_fault(seq, "not_read", reason="buffer full")
             return
         self.frames_written += 1
+        self.bytes_written += len(data)
         self._recent.append((seq, len(data)))
         if self.send_times is not None:
             self.send_times.append((seq, time.perf_counter_ns()))
