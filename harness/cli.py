@@ -27,10 +27,12 @@ def _register() -> None:
         cmd_plot,
         cmd_record,
         cmd_simulate,
+        cmd_train,
     )
 
     for module in (
-        cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import, cmd_plot
+        cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import, cmd_plot,
+        cmd_train,
     ):
         for command in module.COMMANDS:
             main.add_command(command)

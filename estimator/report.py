@@ -1,0 +1,62 @@
+"""Markdown tables of a model comparison in the layout of Varghese et al., Table I
+(one row per method, one RMSE column per estimated angle, degrees), plus a detail table.
+
+:func:`write_section` replaces (or appends) a named section of a Markdown file between
+``<!-- table:NAME -->`` and ``<!-- /table:NAME -->`` markers, so several generated tables and
+hand-written text can live in one ``docs/results.md``.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from exohil.estimator.workflow import ModelResult
+
+METHOD_NAMES = {
+    "ann": "ANN (memoryless MLP, Varghese 2019 baseline)",
+    "cnn": "CNN (1-D temporal conv, after Ogata 2019)",
+    "classical": "Classical (PI play operators + creep + quadratic, ridge)",
+    "lnnet": "LNNet (late fusion LSTM)",
+    "ennet": "ENNet (early fusion LSTM)",
+}
+
+
+def comparison_markdown(
+    results: list[ModelResult], angles: tuple[str, ...], *, title: str, command: str,
+    split: str, data: str,
+) -> str:
+    """The Table-I-style RMSE table, a detail table (MAE, max, training) and provenance."""
+    head = "| Method | " + " | ".join(f"{a} RMSE (°)" for a in angles) + " |"
+    lines = [f"### {title}", "", f"Data: {data}", "", f"Split: {split}", "", head,
+             "|---|" + "---:|" * len(angles)]
+    for r in results:
+        cells = " | ".join(f"{r.test['rmse'][a]:.2f}" for a in angles)
+        lines.append(f"| {METHOD_NAMES.get(r.kind, r.kind)} | {cells} |")
+    lines += ["", "| Method | " + " | ".join(f"{a} MAE / max (°)" for a in angles)
+              + " | window | epochs (best) | stopped by | train s |",
+              "|---|" + "---:|" * (len(angles) + 4)]
+    for r in results:
+        info = r.estimator.info
+        cells = " | ".join(f"{r.test['mae'][a]:.2f} / {r.test['max'][a]:.1f}" for a in angles)
+        window = "—" if r.kind in ("ann", "classical") else (
+            f"{r.estimator.config.window}×{r.estimator.config.dilation}")
+        epochs = f"{info.get('epochs', '—')} ({info.get('best_epoch', '—')})"
+        lines.append(f"| {r.kind} | {cells} | {window} | {epochs} | "
+                     f"{info.get('stopped_by', 'closed form')} | {info.get('train_seconds')} |")
+    lines += ["", f"Test frames: {results[0].test['frames'] if results else 0}. Made by:", "",
+              "```", command, "```"]
+    return "\n".join(lines) + "\n"
+
+
+def write_section(path: Path, name: str, text: str) -> None:
+    """Put ``text`` between the section markers of ``name`` in ``path`` (created if absent)."""
+    start, end = f"<!-- table:{name} -->", f"<!-- /table:{name} -->"
+    block = f"{start}\n{text}{end}"
+    old = path.read_text(encoding="utf-8") if path.exists() else ""
+    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.DOTALL)
+    if pattern.search(old):
+        new = pattern.sub(lambda _m: block, old)
+    else:
+        new = (old.rstrip("\n") + "\n\n" if old else "") + block + "\n"
+    path.write_text(new, encoding="utf-8")

@@ -1,0 +1,102 @@
+"""A trained estimator: network or classical model plus everything needed to apply it.
+
+Pipeline for one block of sensor frames (recording units, e.g. mm):
+1. optional per-recording offset removal (causal initial rest value, done when the blocks are
+   made — :func:`exohil.estimator.dataset.recording_blocks` with ``offset_frames``);
+2. per-sensor normalisation z = (x − x_mean) / x_std (training statistics);
+3. the model on edge-padded causal windows (or the classical operators on the block);
+4. de-normalisation of the outputs: angle = ŷ · y_std + y_mean, degrees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from exohil.estimator.classical import ClassicalModel
+from exohil.estimator.dataset import Block, TargetSpec
+from exohil.estimator.models import ModelConfig
+from exohil.estimator.windows import block_windows
+
+#: Frames per forward pass when predicting a long block.
+PREDICT_BATCH = 4096
+
+
+@dataclass
+class Normalisation:
+    """Per-sensor and per-angle mean/std from the training data (recording units / degrees)."""
+
+    x_mean: np.ndarray
+    x_std: np.ndarray
+    y_mean: np.ndarray
+    y_std: np.ndarray
+
+    @classmethod
+    def fit(cls, blocks: list[Block]) -> Normalisation:
+        x = np.concatenate([b.x for b in blocks])
+        y = np.concatenate([b.y for b in blocks])
+        return cls(x.mean(0), _safe_std(x), y.mean(0), _safe_std(y))
+
+    def x(self, x: np.ndarray) -> np.ndarray:
+        return (x - self.x_mean) / self.x_std
+
+    def y_inverse(self, y: np.ndarray) -> np.ndarray:
+        return y * self.y_std + self.y_mean
+
+
+@dataclass
+class TrainedEstimator:
+    """Everything a checkpoint holds.
+
+    Attributes:
+        config: architecture (``kind`` "classical" for the classical model).
+        sensor_names: expected sensor columns, in order.
+        target: joint and angle fields estimated.
+        norm: normalisation statistics.
+        offset_frames: 0 = raw sensors; k > 0 = subtract the causal mean of the first k frames.
+        sensor_rate_hz: nominal rate of the training data (frames per second).
+        network: the torch module (neural kinds) — None for classical.
+        classical: the fitted classical model — None for neural kinds.
+        info: training provenance and metrics (JSON-serialisable).
+    """
+
+    config: ModelConfig
+    sensor_names: tuple[str, ...]
+    target: TargetSpec
+    norm: Normalisation
+    offset_frames: int = 0
+    sensor_rate_hz: float = 250.0
+    network: object | None = None
+    classical: ClassicalModel | None = None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def kind(self) -> str:
+        return self.config.kind
+
+    def predict_block(self, block: Block) -> np.ndarray:
+        """(N, A) angle estimates in degrees for every frame of one block."""
+        z = self.norm.x(block.x)
+        if self.classical is not None:
+            return self.norm.y_inverse(self.classical.predict(z))
+        import torch
+
+        net = self.network
+        assert isinstance(net, torch.nn.Module)
+        net.eval()
+        wins = block_windows(z.astype(np.float32), self.config.window, self.config.dilation)
+        out = np.empty((len(block), self.config.n_angles), dtype=np.float64)
+        with torch.inference_mode():
+            for s in range(0, len(block), PREDICT_BATCH):
+                out[s : s + PREDICT_BATCH] = net(torch.from_numpy(wins[s : s + PREDICT_BATCH]))
+        return self.norm.y_inverse(out)
+
+    def predict(self, blocks: list[Block]) -> list[np.ndarray]:
+        """Estimates (degrees) for each block."""
+        return [self.predict_block(b) for b in blocks]
+
+
+def _safe_std(a: np.ndarray) -> np.ndarray:
+    std = a.std(0)
+    return np.where(std > 1e-9, std, 1.0)

@@ -1,0 +1,204 @@
+"""Training: Adam (lr 1e-3, β 0.9/0.999), batch 500, MSE on normalised angles, early stopping.
+
+As in Varghese et al. except the stopping rule: instead of a fixed 10,000 epochs, training stops
+when the validation MSE has not improved for ``patience`` epochs, after ``max_epochs``, or when
+the ``time_budget_s`` runs out; the weights of the best validation epoch are kept. Training
+windows are shuffled among themselves only (the split is made of contiguous time blocks).
+
+Determinism: for a fixed seed, a fixed epoch count and CPU, results are reproducible (torch's
+deterministic algorithms are switched on). A wall-clock time budget can stop two runs at
+different epochs; pass ``max_epochs`` (and a generous budget) for bit-reproducible runs.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from exohil.estimator.classical import ClassicalModel
+from exohil.estimator.dataset import TargetSpec
+from exohil.estimator.evaluation import evaluate
+from exohil.estimator.models import MODEL_KINDS, ModelConfig, build_model
+from exohil.estimator.splits import Split
+from exohil.estimator.trained import Normalisation, TrainedEstimator
+from exohil.estimator.windows import FrameTable
+
+ALL_KINDS = (*MODEL_KINDS, "classical")
+
+
+@dataclass
+class TrainConfig:
+    """Hyper-parameters (paper defaults where the paper gives them)."""
+
+    kind: str = "ennet"
+    window: int = 10
+    dilation: int = 1
+    hidden: int = 64
+    batch_size: int = 500
+    lr: float = 1e-3
+    max_epochs: int = 10_000
+    patience: int = 25
+    time_budget_s: float = 600.0
+    seed: int = 0
+    threads: int = 0  # 0 → min(2, cpu count)
+
+
+def train(
+    split: Split,
+    sensor_names: tuple[str, ...],
+    target: TargetSpec,
+    cfg: TrainConfig,
+    *,
+    offset_frames: int = 0,
+    sensor_rate_hz: float = 250.0,
+    sources: list[dict] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> TrainedEstimator:
+    """Fit one estimator on ``split.train`` with early stopping on ``split.val``.
+
+    ``sources`` (e.g. ``[{"path": ..., "sha256": ...}]``) is stored in the checkpoint info.
+    ``progress`` receives one-line status strings (the CLI draws them on stderr).
+    """
+    if cfg.kind not in ALL_KINDS:
+        raise ValueError(f"unknown model kind {cfg.kind!r}; choose from {ALL_KINDS}")
+    if not split.train:
+        raise ValueError("no training frames")
+    norm = Normalisation.fit(split.train)
+    model_cfg = ModelConfig(cfg.kind, len(sensor_names), len(target.angles), cfg.window,
+                            cfg.dilation, cfg.hidden)
+    est = TrainedEstimator(model_cfg, tuple(sensor_names), target, norm, offset_frames,
+                           sensor_rate_hz)
+    start = time.monotonic()
+    if cfg.kind == "classical":
+        fit_info = _fit_classical(est, split)
+    else:
+        fit_info = _fit_network(est, split, cfg, progress)
+    est.info = {
+        "sources": sources or [],
+        "split": split.description,
+        "seed": cfg.seed,
+        "train_config": {k: getattr(cfg, k) for k in cfg.__dataclass_fields__},
+        "train_frames": int(sum(len(b) for b in split.train)),
+        "val_frames": int(sum(len(b) for b in split.val)),
+        "train_seconds": round(time.monotonic() - start, 1),
+        **fit_info,
+    }
+    if split.val:
+        est.info["metrics"] = {"validation": evaluate(est, split.val)}
+    return est
+
+
+def _fit_classical(est: TrainedEstimator, split: Split) -> dict:
+    model = ClassicalModel.create(est.sensor_rate_hz)
+    fit = model.fit(
+        [est.norm.x(b.x) for b in split.train], [_norm_y(est, b.y) for b in split.train],
+        [est.norm.x(b.x) for b in split.val], [_norm_y(est, b.y) for b in split.val],
+    )
+    est.classical = model
+    return {"ridge": fit["ridge"], "best_val_mse": fit["val_mse"]}
+
+
+def _norm_y(est: TrainedEstimator, y: np.ndarray) -> np.ndarray:
+    return (y - est.norm.y_mean) / est.norm.y_std
+
+
+def _fit_network(
+    est: TrainedEstimator, split: Split, cfg: TrainConfig,
+    progress: Callable[[str], None] | None,
+) -> dict:
+    import torch
+
+    torch.set_num_threads(cfg.threads or min(2, os.cpu_count() or 1))
+    torch.use_deterministic_algorithms(True)
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    net = build_model(est.config)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, betas=(0.9, 0.999))
+    loss_fn = torch.nn.MSELoss()
+
+    def table(blocks):  # normalised frames of a split part
+        t = FrameTable.from_blocks(blocks)
+        t.x = est.norm.x(t.x).astype(np.float32)
+        t.y = ((t.y - est.norm.y_mean) / est.norm.y_std).astype(np.float32)
+        return t
+
+    tr = table(split.train)
+    va = table(split.val) if split.val else tr
+    win, dil = est.config.window, est.config.dilation
+    va_frames = np.arange(len(va))
+    va_x = torch.from_numpy(va.windows(va_frames, win, dil))
+    va_y = torch.from_numpy(va.y)
+
+    def val_mse() -> float:
+        net.eval()
+        with torch.inference_mode():
+            pred = torch.cat([net(va_x[s : s + 8192]) for s in range(0, len(va), 8192)])
+        net.train()
+        return float(loss_fn(pred, va_y))
+
+    start = time.monotonic()
+    best, best_state, best_epoch, epoch, last_print = float("inf"), None, 0, 0, 0.0
+    train_loss = float("nan")
+    stop = "max_epochs"
+    net.train()
+    for epoch in range(1, cfg.max_epochs + 1):
+        order = rng.permutation(len(tr))
+        total, count = 0.0, 0
+        for s in range(0, len(order), cfg.batch_size):
+            frames = order[s : s + cfg.batch_size]
+            xb = torch.from_numpy(tr.windows(frames, win, dil))
+            yb = torch.from_numpy(tr.y[frames])
+            opt.zero_grad(set_to_none=True)
+            loss = loss_fn(net(xb), yb)
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * len(frames)
+            count += len(frames)
+            elapsed = time.monotonic() - start
+            if progress and elapsed - last_print > 0.5:
+                last_print = elapsed
+                progress(_status(cfg.kind, epoch, total / count, best, elapsed, cfg.time_budget_s))
+            if elapsed > cfg.time_budget_s:
+                break
+        train_loss = total / max(count, 1)
+        v = val_mse()
+        if v < best:
+            best, best_epoch, best_state = v, epoch, copy.deepcopy(net.state_dict())
+        if time.monotonic() - start > cfg.time_budget_s:
+            stop = "time_budget"
+            break
+        if epoch - best_epoch >= cfg.patience:
+            stop = "early_stopping"
+            break
+    if best_state is not None:
+        net.load_state_dict(best_state)
+    net.eval()
+    est.network = net
+    if progress:
+        progress(_status(cfg.kind, epoch, train_loss, best, time.monotonic() - start,
+                         cfg.time_budget_s) + f" — stopped: {stop}")
+    return {"epochs": epoch, "best_epoch": best_epoch, "best_val_mse": best,
+            "stopped_by": stop, "final_train_mse": train_loss}
+
+
+def _status(kind: str, epoch: int, loss: float, best: float, elapsed: float,
+            budget: float) -> str:
+    left = max(0.0, budget - elapsed)
+    return (f"[{kind}] epoch {epoch} train mse {loss:.4f} best val {best:.4f} "
+            f"elapsed {elapsed:5.0f}s, ≤{left:4.0f}s left")
+
+
+def progress_printer(stream=sys.stderr) -> Callable[[str], None]:
+    """A ``progress`` callback that redraws one status line on ``stream``."""
+
+    def show(line: str) -> None:
+        stream.write("\r\x1b[2K" + line if stream.isatty() else line + "\n")
+        stream.flush()
+
+    return show

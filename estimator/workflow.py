@@ -1,0 +1,122 @@
+"""Recording files → splits → trained and scored estimators (what the CLI commands run).
+
+Splits (documented in docs/estimator.md):
+- within recordings (``test_fraction > 0``, no separate test files): every recording is cut at
+  its movement-segment boundaries; each piece gives its first part to training (the last
+  ``val_fraction`` of that part to validation) and its last ``test_fraction`` to test;
+- across recordings (test files given): training/validation come from the training files
+  (validation = the last ``val_fraction`` of each segment piece), test = the test files whole.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from exohil.estimator.dataset import (
+    Block,
+    DatasetError,
+    TargetSpec,
+    check_sensors,
+    recording_blocks,
+    resolve_target,
+)
+from exohil.estimator.evaluation import evaluate
+from exohil.estimator.splits import Split, cut_at_segments, time_block_split, trial_split
+from exohil.estimator.trained import TrainedEstimator
+from exohil.estimator.training import TrainConfig, train
+from exohil.formats.recording import Recording
+
+#: Default temporal-encoder width per model kind (LSTM hidden size; CNN channels).
+DEFAULT_HIDDEN = {"ennet": 64, "lnnet": 32, "cnn": 32, "ann": 64, "classical": 0}
+
+
+@dataclass
+class LoadedData:
+    """Recordings read from files, with their common sensor names, target and rate."""
+
+    paths: list[Path]
+    recordings: list[Recording]
+    sensor_names: tuple[str, ...]
+    target: TargetSpec
+    rate_hz: float
+    sources: list[dict] = field(default_factory=list)
+
+    def blocks(self, offset_frames: int, indices: list[int] | None = None) -> list[Block]:
+        """Segment-cut blocks of the chosen recordings (all by default)."""
+        chosen = range(len(self.recordings)) if indices is None else indices
+        out: list[Block] = []
+        for i in chosen:
+            out += recording_blocks(self.recordings[i], self.target,
+                                    offset_frames=offset_frames, source=self.paths[i].name)
+        return cut_at_segments(out)
+
+
+def sha256_file(path: Path) -> str:
+    """Hex sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def load_recordings(
+    paths: list[Path], joint: str | None = None, angles: tuple[str, ...] | None = None,
+    expected_sensors: tuple[str, ...] | None = None,
+) -> LoadedData:
+    """Read recordings and check they share sensors (and the expected ones, if given).
+
+    Raises RecordingError (unreadable file) or DatasetError (mismatch), both one-line.
+    """
+    from exohil.formats.mcap_io import read_recording
+
+    recs = [read_recording(p) for p in paths]
+    sensors = expected_sensors or recs[0].sensor_names
+    for p, r in zip(paths, recs, strict=True):
+        check_sensors(r, tuple(sensors), str(p))
+    target = resolve_target(recs[0], joint, angles)
+    for p, r in zip(paths[1:], recs[1:], strict=True):
+        stream = r.mocap.get(target.joint)
+        if stream is None or any(a not in stream.names for a in target.angles):
+            raise DatasetError(f"{p}: has no {target.joint} angles {list(target.angles)}")
+    return LoadedData(list(paths), recs, tuple(sensors), target, float(recs[0].sensor_rate_hz),
+                      [{"file": p.name, "sha256": sha256_file(p)} for p in paths])
+
+
+def make_split(
+    data: LoadedData, offset_frames: int, *, test_paths_data: LoadedData | None = None,
+    test_fraction: float = 0.0, val_fraction: float = 0.15,
+) -> Split:
+    """The within-recording or across-recording split described in the module docstring."""
+    blocks = data.blocks(offset_frames)
+    if test_paths_data is not None:
+        return trial_split(blocks, test_paths_data.blocks(offset_frames), val_fraction)
+    return time_block_split(blocks, test_fraction, val_fraction)
+
+
+@dataclass
+class ModelResult:
+    """One trained model of a comparison and its test metrics."""
+
+    kind: str
+    estimator: TrainedEstimator
+    test: dict
+
+
+def compare_models(
+    split: Split, data: LoadedData, kinds: list[str], base: TrainConfig, offset_frames: int,
+    progress: Callable[[str], None] | None = None,
+) -> list[ModelResult]:
+    """Train every model kind on the same split and score each on its test part."""
+    results: list[ModelResult] = []
+    for kind in kinds:
+        cfg = TrainConfig(**{**base.__dict__, "kind": kind, "hidden": DEFAULT_HIDDEN[kind]})
+        est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
+                    sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress)
+        test = evaluate(est, split.test)
+        est.info.setdefault("metrics", {})["test"] = test
+        results.append(ModelResult(kind, est, test))
+    return results

@@ -1,0 +1,245 @@
+"""``exohil train``, ``exohil evaluate`` and ``exohil table``: the estimators from the command
+line (logic in :mod:`exohil.estimator`; see docs/estimator.md)."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+from pathlib import Path
+
+import click
+
+MODEL_CHOICES = ("ennet", "lnnet", "ann", "cnn", "classical")
+
+_recordings = click.argument(
+    "recordings", nargs=-1, required=True,
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+)
+
+
+def _angles(text: str | None) -> tuple[str, ...] | None:
+    return tuple(a.strip() for a in text.split(",") if a.strip()) if text else None
+
+
+def _common_training_options(fn):
+    options = [
+        click.option("--seed", type=int, default=0, show_default=True,
+                     help="Seed of initialisation and shuffling."),
+        click.option("--time-budget", type=click.FloatRange(min=1), default=600.0,
+                     show_default=True, help="Wall-clock limit per model, seconds."),
+        click.option("--max-epochs", type=click.IntRange(min=1), default=10_000,
+                     show_default=True, help="Epoch limit (use for bit-reproducible runs)."),
+        click.option("--patience", type=click.IntRange(min=1), default=25, show_default=True,
+                     help="Early stopping: epochs without validation improvement."),
+        click.option("--window", type=click.IntRange(min=1), default=10, show_default=True,
+                     help="Frames per window (n)."),
+        click.option("--dilation", type=click.IntRange(min=1), default=1, show_default=True,
+                     help="Frame step inside the window (window spans (n-1)·dilation+1 frames)."),
+        click.option("--joint", help="Mocap joint to estimate (default: shoulder, or the "
+                     "recording's only joint)."),
+        click.option("--angles", help="Comma-separated angle fields (default: elv_angle,"
+                     "shoulder_elv for the shoulder; all fields otherwise)."),
+        click.option("--offset-frames", type=click.IntRange(min=0), default=0,
+                     show_default=True, help="Subtract each recording's initial rest value "
+                     "(causal mean of its first N frames) from the sensors; 0 = off."),
+        click.option("--val-fraction", type=click.FloatRange(0.01, 0.9), default=0.15,
+                     show_default=True, help="End of each training piece used for validation."),
+    ]
+    for option in reversed(options):
+        fn = option(fn)
+    return fn
+
+
+def _load(paths, joint=None, angles=None, expected=None):
+    from exohil.estimator.dataset import DatasetError
+    from exohil.formats.errors import RecordingError
+
+    try:
+        return _workflow().load_recordings(list(paths), joint, _angles(angles), expected)
+    except (RecordingError, DatasetError) as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+def _workflow():
+    from exohil.estimator import workflow
+
+    return workflow
+
+
+def _base_config(seed, time_budget, max_epochs, patience, window, dilation):
+    from exohil.estimator.training import TrainConfig
+
+    return TrainConfig(window=window, dilation=dilation, seed=seed, time_budget_s=time_budget,
+                       max_epochs=max_epochs, patience=patience)
+
+
+def _command_line() -> str:
+    return "exohil " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+
+
+@click.command("train")
+@click.option("--model", "kind", type=click.Choice(MODEL_CHOICES), default="ennet",
+              show_default=True, help="Estimator to train.")
+@_recordings
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Checkpoint file to write (.npz).")
+@click.option("--hidden", type=click.IntRange(min=1), help="LSTM hidden size (per sensor for "
+              "LNNet) or CNN channels; default ennet 64, lnnet 32, cnn 32.")
+@click.option("--test-fraction", type=click.FloatRange(0.0, 0.9), default=0.0,
+              show_default=True, help="Hold out the end of every movement piece as a test set "
+              "and store its metrics in the checkpoint (0 = train on everything).")
+@_common_training_options
+def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budget, max_epochs,
+                  patience, window, dilation, joint, angles, offset_frames, val_fraction):
+    """Train an estimator on RECORDING files (MCAP, format v1) and write a checkpoint.
+
+    Adam (lr 1e-3, β 0.9/0.999), batch 500, MSE, early stopping on validation = the last
+    --val-fraction of each movement segment of each recording (contiguous time blocks; no window
+    crosses a boundary). Progress goes to stderr. Example:
+
+        exohil train --model ennet fixtures/paper_protocol.mcap --out ennet.npz
+    """
+    from exohil.estimator.checkpoint import save_checkpoint
+    from exohil.estimator.evaluation import evaluate
+    from exohil.estimator.training import progress_printer, train
+
+    wf = _workflow()
+    data = _load(recordings, joint, angles)
+    split = wf.make_split(data, offset_frames, test_fraction=test_fraction,
+                          val_fraction=val_fraction)
+    if not split.train:
+        raise click.ClickException("no labelled sensor frames to train on")
+    cfg = _base_config(seed, time_budget, max_epochs, patience, window, dilation)
+    cfg.kind, cfg.hidden = kind, hidden or wf.DEFAULT_HIDDEN[kind]
+    est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
+                sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress_printer())
+    if split.test:
+        est.info.setdefault("metrics", {})["test"] = evaluate(est, split.test)
+    est.info["command"] = _command_line()
+    save_checkpoint(out, est)
+    metrics = est.info.get("metrics", {})
+    part = "test" if "test" in metrics else "validation"
+    rmse = metrics.get(part, {}).get("rmse", {})
+    shown = ", ".join(f"{a} {v:.2f}°" for a, v in rmse.items())
+    click.echo(f"wrote {out} ({kind}); {part} RMSE: {shown}")
+
+
+@click.command("evaluate")
+@click.argument("checkpoint", type=click.Path(dir_okay=False, path_type=Path))
+@_recordings
+@click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write the metrics as JSON to this file.")
+@click.option("--test-fraction", type=click.FloatRange(0.0, 0.9), default=0.0,
+              show_default=True, help="Score only the last fraction of each movement piece "
+              "(the part `train --test-fraction` held out); 0 = whole recordings.")
+def evaluate_command(checkpoint, recordings, json_out, test_fraction):
+    """Score CHECKPOINT on RECORDING files: per-angle RMSE, MAE and max |error| (degrees),
+    overall and per movement segment. Example:
+
+        exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
+    """
+    from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
+    from exohil.estimator.evaluation import evaluate
+    from exohil.estimator.splits import tail_cut
+
+    try:
+        est = load_checkpoint(checkpoint)
+    except CheckpointError as exc:
+        raise click.ClickException(str(exc)) from None
+    data = _load(recordings, est.target.joint, ",".join(est.target.angles))
+    try:
+        for path, rec in zip(data.paths, data.recordings, strict=True):
+            ensure_fits(est, rec, str(path))
+    except CheckpointError as exc:
+        raise click.ClickException(str(exc)) from None
+    blocks = data.blocks(est.offset_frames)
+    if test_fraction > 0:
+        blocks = [tail_cut(b, test_fraction)[1] for b in blocks]
+    blocks = [b for b in blocks if len(b)]
+    if not blocks:
+        raise click.ClickException("no labelled sensor frames to evaluate")
+    result = evaluate(est, blocks)
+    result["checkpoint"] = str(checkpoint)
+    result["model"] = est.kind
+    result["recordings"] = data.sources
+    for stat in ("rmse", "mae", "max"):
+        click.echo(f"{stat:>4}: " + ", ".join(f"{a} {v:.2f}°" for a, v in result[stat].items()))
+    for name, seg in result["per_segment"].items():
+        click.echo(f"  {name}: RMSE " + ", ".join(f"{a} {v:.2f}°" for a, v in seg["rmse"].items()))
+    if json_out:
+        json_out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+
+
+@click.command("table")
+@click.option("--train", "train_paths", multiple=True, required=True,
+              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Training recording (repeat the option for several).")
+@click.option("--test", "test_paths", multiple=True,
+              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Test recording(s) (across-trial split); without them the end of each "
+              "training movement piece is the test set (--test-fraction).")
+@click.option("--test-fraction", type=click.FloatRange(0.05, 0.9), default=0.3,
+              show_default=True, help="Within-recording split: test = last fraction.")
+@click.option("--models", default=",".join(("ann", "classical", "cnn", "lnnet", "ennet")),
+              show_default=True, help="Comma-separated model kinds, in table order.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Markdown file to put the table into (e.g. docs/results.md).")
+@click.option("--section", default="comparison", show_default=True,
+              help="Name of the table section inside --out (replaced when present).")
+@click.option("--title", default="Model comparison", show_default=True, help="Table heading.")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write all metrics as JSON.")
+@click.option("--save-dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Also save every trained model's checkpoint here.")
+@_common_training_options
+def table_command(train_paths, test_paths, test_fraction, models, out, section, title,
+                  json_out, save_dir, seed, time_budget, max_epochs, patience, window,
+                  dilation, joint, angles, offset_frames, val_fraction):
+    """Train every model on the same split and print the RMSE table (paper's Table I layout).
+
+    Within recordings (default): each movement piece → first 70% train (its last 15% =
+    validation), last 30% test. Across recordings: --test files. Example:
+
+        exohil table --train fixtures/paper_protocol.mcap --out docs/results.md --section paper
+    """
+    from exohil.estimator.checkpoint import save_checkpoint
+    from exohil.estimator.report import comparison_markdown, write_section
+    from exohil.estimator.training import progress_printer
+
+    kinds = [k.strip() for k in models.split(",") if k.strip()]
+    bad = [k for k in kinds if k not in MODEL_CHOICES]
+    if bad or not kinds:
+        raise click.BadParameter(f"unknown model(s) {bad}; choose from {MODEL_CHOICES}",
+                                 param_hint="--models")
+    wf = _workflow()
+    data = _load(train_paths, joint, angles)
+    test_data = _load(test_paths, data.target.joint, ",".join(data.target.angles),
+                      data.sensor_names) if test_paths else None
+    split = wf.make_split(data, offset_frames, test_paths_data=test_data,
+                          test_fraction=test_fraction, val_fraction=val_fraction)
+    if not split.train or not split.test:
+        raise click.ClickException("the split has no training or no test frames")
+    base = _base_config(seed, time_budget, max_epochs, patience, window, dilation)
+    results = wf.compare_models(split, data, kinds, base, offset_frames, progress_printer())
+    names = ", ".join(p.name for p in train_paths)
+    described = f"train {names}" + (
+        f"; test {', '.join(p.name for p in test_paths)}" if test_paths else "")
+    if offset_frames:
+        described += f"; offset removal: initial {offset_frames} frames"
+    text = comparison_markdown(results, data.target.angles, title=title,
+                               command=_command_line(), split=split.description, data=described)
+    click.echo(text)
+    if out:
+        write_section(out, section, text)
+    if save_dir:
+        save_dir.mkdir(parents=True, exist_ok=True)
+        for r in results:
+            r.estimator.info["command"] = _command_line()
+            save_checkpoint(save_dir / f"{r.kind}.npz", r.estimator)
+    if json_out:
+        payload = {r.kind: {"test": r.test, "info": r.estimator.info} for r in results}
+        json_out.write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
+
+
+COMMANDS: list[click.Command] = [train_command, evaluate_command, table_command]
