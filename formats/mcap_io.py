@@ -618,14 +618,16 @@ def _decode_angles(
 
 
 def _schema_angle_names(schema: Schema | None) -> tuple[str, ...]:
-    """Angle names declared by a jsonschema (used only when a channel has no messages)."""
+    """Angle names declared by a jsonschema, in order (``required`` keeps the order that
+    sorted ``properties`` lose); used only when a channel has no messages."""
     if schema is None or schema.encoding != SCHEMA_ENCODING:
         return ()
     try:
-        properties = json.loads(schema.data).get("properties", {})
+        declared = json.loads(schema.data)
+        names = declared.get("required") or list(declared.get("properties", {}))
     except (ValueError, AttributeError):
         return ()
-    return tuple(name for name in properties if name != "t")
+    return tuple(name for name in names if isinstance(name, str) and name != "t")
 
 
 def _json_object(path: Path, topic: str, index: int, data: bytes) -> dict[str, Any]:

@@ -32,9 +32,13 @@ def write_raw_recording(
     seq = seq[(seq % dropped_every) != dropped_every - 1]
     sensor_t = seq * 0.004
     mocap_t = np.arange(int(round(duration_s * 120.0))) / 120.0
+    sensor_values = np.round(300.0 + 10 * np.sin(sensor_t[:, None] + np.arange(4)), 3).tolist()
+    elv_angle = np.round(30 * np.sin(mocap_t), 3).tolist()
+    shoulder_elv = np.round(45 + 40 * np.sin(0.5 * mocap_t), 3).tolist()
+    sensor_t_list, mocap_t_list, seq_list = sensor_t.tolist(), mocap_t.tolist(), seq.tolist()
     events = sorted(
-        [(int(round(t * 1e9)), 0, k) for k, t in enumerate(sensor_t)]
-        + [(int(round(t * 1e9)), 1, k) for k, t in enumerate(mocap_t)]
+        [(round(t * 1e9), 0, k) for k, t in enumerate(sensor_t_list)]
+        + [(round(t * 1e9), 1, k) for k, t in enumerate(mocap_t_list)]
     )
     with open(path, "wb") as stream:
         writer = Writer(
@@ -77,16 +81,14 @@ def write_raw_recording(
         writer.add_metadata("other.lab", {"room": "B12"})
         for stamp, kind, k in events:
             if kind == 0:
-                t = float(sensor_t[k])
-                values = [round(300.0 + 10 * np.sin(t + j), 3) for j in range(4)]
-                body = {"t": round(t, 6), "seq": int(seq[k]), "values": values}
+                t = round(sensor_t_list[k], 6)
+                body = {"t": t, "seq": seq_list[k], "values": sensor_values[k]}
                 writer.add_message(sensor_channel, stamp, json.dumps(body).encode(), stamp)
             else:
-                t = float(mocap_t[k])
                 body = {
-                    "t": round(t, 6),
-                    "elv_angle": round(30 * np.sin(t), 3),
-                    "shoulder_elv": round(45 + 40 * np.sin(0.5 * t), 3),
+                    "t": round(mocap_t_list[k], 6),
+                    "elv_angle": elv_angle[k],
+                    "shoulder_elv": shoulder_elv[k],
                     "shoulder_rot": 0.0,
                 }
                 writer.add_message(mocap_channel, stamp, json.dumps(body).encode(), stamp)
