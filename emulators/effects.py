@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
-from scipy.signal import lfilter
+from scipy.signal import lfilter, lfilter_zi
 
 PerSensor = float | list[float]
 
@@ -258,9 +258,10 @@ class Lag:
         period = _sample_period_s(signal.t)
         out = x.copy()
         for j in range(s):
-            if tau[j] > 0:
+            if tau[j] > 0:  # exact for an input held between samples (step-invariant)
                 pole = math.exp(-period / tau[j])
-                out[:, j], _ = lfilter([1.0 - pole], [1.0, -pole], x[:, j], zi=[pole * x[0, j]])
+                b, a = [0.0, 1.0 - pole], [1.0, -pole]
+                out[:, j], _ = lfilter(b, a, x[:, j], zi=lfilter_zi(b, a) * x[0, j])
             if delay[j] > 0:
                 out[:, j] = np.interp(signal.t - delay[j], signal.t, out[:, j])
         return Signal(t=signal.t + float(self.clock_offset_s), values=out, keep=signal.keep)

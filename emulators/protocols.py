@@ -98,6 +98,12 @@ class _Path:
         self.durations.append(duration_s)
         self.poses.append((theta, phi))
 
+    def move_at(self, theta: float, phi: float, speed_deg_s: float) -> None:
+        """Move at a mean angular speed (deg/s) over the larger of the two angle changes."""
+        last_theta, last_phi = self.poses[-1]
+        distance = max(abs(theta - last_theta), abs(phi - last_phi))
+        self.move(theta, phi, _move_time(distance, speed_deg_s))
+
     def hold(self, duration_s: float) -> None:
         self.move(*self.poses[-1], duration_s)
 
@@ -124,10 +130,10 @@ def _move_time(distance_deg: float, speed_deg_s: float) -> float:
 def _flexion_extension(path: _Path, rng: np.random.Generator, span_s: float) -> None:
     for rep in range(4):
         speed = rng.uniform(35.0, 90.0)
-        path.move(90.0, 0.0, 0.5)  # change plane while the arm hangs
+        path.move(90.0, 0.0, 1.0)  # change plane while the arm hangs
         path.elevate(90.0, (90.0, 60.0, 80.0, 45.0)[rep] * rng.uniform(0.95, 1.0), rng,
                      hold_s=rng.uniform(0.3, 2.0), speed_deg_s=speed)
-        path.move(-90.0, 0.0, 0.5)
+        path.move(-90.0, 0.0, 1.0)
         path.elevate(-90.0, (60.0, 40.0, 50.0, 30.0)[rep] * rng.uniform(0.9, 1.0), rng,
                      hold_s=rng.uniform(0.3, 1.5), speed_deg_s=speed)
 
@@ -154,27 +160,24 @@ def _elevation_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> No
     for phi in (20.0, 40.0, 60.0, 75.0, 90.0):
         speed = rng.uniform(35.0, 80.0)
         path.move(0.0, 0.0, 0.5)
-        path.move(0.0, phi, _move_time(phi, 45.0))
+        path.move_at(0.0, phi, 45.0)
         for _ in range(2):
-            path.move(-40.0, phi, _move_time(40.0, speed))
+            path.move_at(-40.0, phi, speed)
             path.hold(rng.uniform(0.2, 1.5))
-            path.move(90.0, phi, _move_time(130.0, speed))
+            path.move_at(90.0, phi, speed)
             path.hold(rng.uniform(0.2, 1.5))
-        path.move(0.0, phi, _move_time(90.0, speed))
-        path.move(0.0, 0.0, _move_time(phi, 45.0))
+        path.move_at(0.0, phi, speed)
+        path.move_at(0.0, 0.0, 45.0)
         path.hold(rng.uniform(0.3, 1.0))
 
 
 def _random_movements(path: _Path, rng: np.random.Generator, span_s: float) -> None:
     first = len(path.durations)
     while sum(path.durations[first:]) < span_s - 3.0:
-        theta, phi = rng.uniform(-40.0, 90.0), rng.uniform(0.0, 90.0)
-        last_theta, last_phi = path.poses[-1]
-        distance = float(np.hypot(theta - last_theta, phi - last_phi))
-        path.move(theta, phi, _move_time(distance, rng.uniform(30.0, 110.0)))
+        path.move_at(rng.uniform(-40.0, 90.0), rng.uniform(0.0, 90.0), rng.uniform(30.0, 100.0))
         if rng.random() < 0.35:
             path.hold(rng.uniform(0.3, 4.0))
-    path.move(path.poses[-1][0], 0.0, _move_time(path.poses[-1][1], 60.0))
+    path.move_at(path.poses[-1][0], 0.0, 60.0)
 
 
 _PAPER_BUILDERS = {

@@ -1,0 +1,150 @@
+"""Movement protocols: Table III frame counts, ranges, smoothness, seeding; real motion."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exohil.emulators.protocols import (
+    MOCAP_RATE_HZ,
+    PAPER_MOVEMENT_FRAMES,
+    Trajectory,
+    minimum_jerk,
+    mot_trajectory,
+    paper_protocol,
+)
+
+SHOULDER_IK = Path(__file__).resolve().parents[1].parent / "shared" / "realdata" / "shoulder-ik"
+
+
+@pytest.fixture(scope="module")
+def protocol() -> Trajectory:
+    return paper_protocol(7)
+
+
+@pytest.fixture(scope="module")
+def mocap(protocol):
+    t = protocol.frame_times(MOCAP_RATE_HZ)
+    return t, protocol.sample(t)
+
+
+def frames_in(segment, rate=MOCAP_RATE_HZ) -> slice:
+    return slice(int(round(segment.t0 * rate)), int(round(segment.t1 * rate)))
+
+
+def test_table_iii_frame_counts_at_120_hz(protocol, mocap):
+    t, _ = mocap
+    assert len(t) == 29551 == sum(PAPER_MOVEMENT_FRAMES.values())
+    assert [s.name for s in protocol.segments] == list(PAPER_MOVEMENT_FRAMES)
+    for segment in protocol.segments:
+        in_segment = np.count_nonzero((t >= segment.t0 - 1e-9) & (t < segment.t1 - 1e-9))
+        assert in_segment == PAPER_MOVEMENT_FRAMES[segment.name]
+        sl = frames_in(segment)
+        assert sl.stop - sl.start == PAPER_MOVEMENT_FRAMES[segment.name]
+    assert protocol.duration_s == pytest.approx(29551 / 120.0)
+    assert len(protocol.frame_times(250.0)) == round(29551 / 120.0 * 250.0)
+
+
+def test_angle_ranges_per_movement(protocol, mocap):
+    _, deg = mocap
+    theta, phi, psi = deg.T
+    assert phi.min() >= 0.0 and phi.max() <= 90.0 + 1e-9
+    assert np.all(psi == 0.0)
+    ranges = {
+        "flexion_extension": (-90.0, 90.0),
+        "abduction_adduction": (0.0, 0.0),
+        "azimuth_fixed_elevation_varied": (-40.0, 90.0),
+        "elevation_fixed_azimuth_varied": (-40.0, 90.0),
+        "random": (-40.0, 90.0),
+    }
+    for segment in protocol.segments:
+        sl = frames_in(segment)
+        raised = phi[sl] > 1.0  # θ is meaningless while the arm hangs
+        lo, hi = ranges[segment.name]
+        assert theta[sl][raised].min() >= lo - 1e-9 and theta[sl][raised].max() <= hi + 1e-9
+        assert phi[sl].max() > 60.0
+    fe = frames_in(protocol.segments[0])
+    assert set(np.round(theta[fe][phi[fe] > 1.0])) == {-90.0, 90.0}
+    az = frames_in(protocol.segments[2])
+    assert len(set(np.round(theta[az][phi[az] > 1.0]))) == 5
+    el = frames_in(protocol.segments[3])
+    moving_theta = np.abs(np.gradient(theta[el])) > 1e-6
+    assert len(set(np.round(phi[el][moving_theta & (phi[el] > 1.0)]))) == 5
+
+
+def humerus_direction(deg: np.ndarray) -> np.ndarray:
+    theta, phi = np.deg2rad(deg[:, 0]), np.deg2rad(deg[:, 1])
+    return np.column_stack([np.sin(phi) * np.sin(theta), -np.cos(phi),
+                            np.sin(phi) * np.cos(theta)])
+
+
+def test_motion_is_smooth_and_human_paced(protocol):
+    rate = 250.0
+    deg = protocol.sample(protocol.frame_times(rate))
+    d = humerus_direction(deg)
+    step = np.arccos(np.clip(np.sum(d[1:] * d[:-1], axis=1), -1.0, 1.0))
+    speed = np.rad2deg(step) * rate  # deg/s of the arm itself
+    assert speed.max() < 300.0
+    assert speed.max() > 60.0
+    accel = np.abs(np.diff(deg[:, 1], 2)) * rate**2
+    assert accel.max() < 3000.0  # deg/s², no jumps in elevation velocity
+    label_speed = np.abs(np.diff(deg[:, 0])) * rate  # θ may turn while the arm hangs
+    assert label_speed.max() < 500.0
+
+
+def test_protocol_has_holds_and_reversals_at_several_amplitudes(protocol, mocap):
+    _, deg = mocap
+    phi = deg[:, 1]
+    still = np.abs(np.diff(phi)) * MOCAP_RATE_HZ < 1.0
+    raised_and_still = still & (phi[1:] > 30.0)
+    runs, longest, current = [], 0, 0
+    for flag in raised_and_still:
+        current = current + 1 if flag else 0
+        longest = max(longest, current)
+        if current == 1:
+            runs.append(1)
+    assert longest / MOCAP_RATE_HZ > 2.0  # at least one hold of 2+ s under elevation
+    peaks = (phi[1:-1] > phi[:-2]) & (phi[1:-1] >= phi[2:]) & (phi[1:-1] > 10.0)
+    amplitudes = np.round(phi[1:-1][peaks], -1)
+    assert len(set(amplitudes)) >= 4
+    troughs = (phi[1:-1] < phi[:-2]) & (phi[1:-1] <= phi[2:]) & (phi[1:-1] > 5.0)
+    assert troughs.sum() >= 3  # partial reversals (minor loops) while elevated
+
+
+def test_protocol_is_seeded(protocol):
+    again = paper_protocol(7)
+    np.testing.assert_array_equal(again.knot_deg, protocol.knot_deg)
+    np.testing.assert_array_equal(again.knot_t, protocol.knot_t)
+    assert not np.array_equal(paper_protocol(8).knot_deg, protocol.knot_deg)
+
+
+def test_minimum_jerk_profile():
+    tau = np.linspace(0, 1, 101)
+    s = minimum_jerk(tau)
+    assert s[0] == 0.0 and s[-1] == 1.0 and np.all(np.diff(s) >= 0)
+    assert s[50] == pytest.approx(0.5)
+
+
+@pytest.mark.skipif(not SHOULDER_IK.is_dir(), reason="shoulder-ik real data not present")
+def test_mot_trajectory_follows_the_trials():
+    from exohil.formats.opensim_mot import read_mot
+
+    files = [SHOULDER_IK / "ABD01.mot", SHOULDER_IK / "FLX01.mot"]
+    traj = mot_trajectory(files, bridge_s=1.0)
+    assert [s.name for s in traj.segments] == ["ABD01", "FLX01"]
+    for path, segment in zip(files, traj.segments, strict=True):
+        mot = read_mot(path)
+        t = segment.t0 + mot.time - mot.time[0]
+        deg = traj.sample(t)
+        np.testing.assert_allclose(deg[:, 0], mot.columns["plane_elv"], atol=1e-9)
+        np.testing.assert_allclose(deg[:, 1], mot.columns["shoulder_elv"], atol=1e-9)
+        assert deg[0, 2] == pytest.approx(0.0, abs=1e-9)
+        assert segment.t1 - segment.t0 == pytest.approx(mot.time[-1] - mot.time[0])
+    assert traj.segments[1].t0 - traj.segments[0].t1 == pytest.approx(1.0)
+    bridge = traj.sample(np.linspace(traj.segments[0].t1, traj.segments[1].t0, 50))
+    assert np.isfinite(bridge).all() and np.abs(np.diff(bridge, axis=0)).max() < 5.0
+
+
+def test_mot_trajectory_needs_a_file():
+    with pytest.raises(ValueError, match="at least one"):
+        mot_trajectory([])

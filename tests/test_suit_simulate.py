@@ -1,0 +1,205 @@
+"""simulate(), suit profile loading, and the `exohil simulate` / `exohil fixtures` commands."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from exohil.emulators.effects import EffectChain
+from exohil.emulators.protocols import MOCAP_RATE_HZ, mot_trajectory, paper_protocol
+from exohil.emulators.simulate import geometric_signal, simulate
+from exohil.emulators.suit_profile import (
+    DEFAULT_PROFILE_PATH,
+    ProfileError,
+    load_default_profile,
+    load_profile,
+)
+from exohil.formats.mcap_io import read_recording, write_recording
+from exohil.harness.cli import main
+
+SHOULDER_IK = Path(__file__).resolve().parents[1].parent / "shared" / "realdata" / "shoulder-ik"
+needs_shoulder_ik = pytest.mark.skipif(not SHOULDER_IK.is_dir(),
+                                       reason="shoulder-ik real data not present")
+
+
+@pytest.fixture(scope="module")
+def profile():
+    return load_default_profile()
+
+
+@pytest.fixture(scope="module")
+def protocol():
+    return paper_protocol(3)
+
+
+@pytest.fixture(scope="module")
+def recording(protocol, profile):
+    return simulate(protocol, profile, seed=3)
+
+
+def test_ideal_simulation_equals_the_geometry(protocol, profile):
+    rec = simulate(protocol, profile, seed=1, effects=EffectChain([]))
+    ideal = geometric_signal(protocol, profile)
+    np.testing.assert_array_equal(rec.sensors.values, ideal.values)
+    np.testing.assert_array_equal(rec.sensors.seq, np.arange(len(ideal.t)))
+    np.testing.assert_allclose(np.diff(rec.sensors.t), 1 / 250.0)
+
+
+def test_recording_layout_and_provenance(recording, profile, protocol):
+    assert recording.sensor_names == ("F", "SF", "SR", "R")
+    assert recording.sensor_units == "mm" and recording.sensor_rate_hz == 250.0
+    mocap = recording.mocap["shoulder"]
+    assert len(mocap) == 29551
+    np.testing.assert_allclose(np.diff(mocap.t), 1 / MOCAP_RATE_HZ)
+    assert mocap.names == ("elv_angle", "shoulder_elv", "shoulder_rot")
+    assert [s.name for s in recording.segments] == [s.name for s in protocol.segments]
+    meta = recording.metadata
+    assert meta["seed"] == "3" and meta["suit_profile"] == "default"
+    assert meta["suit_profile_sha256"] == profile.sha256()
+    assert EffectChain.from_dicts(__import__("json").loads(meta["effect_chain"])).to_json() == \
+        profile.effects.to_json()
+    assert meta["trajectory"] == "paper_protocol seed=3"
+
+
+def test_dropped_frames_leave_sequence_gaps(recording):
+    seq = recording.sensors.seq
+    gaps = np.diff(seq)
+    assert gaps.min() == 1 and gaps.max() > 1
+    assert len(seq) < 61565 and seq[-1] <= 61564
+    assert np.all(np.diff(recording.sensors.t) > 0)
+
+
+def test_every_effect_changes_the_readings(protocol, profile):
+    ideal = simulate(protocol, profile, seed=3, effects=EffectChain([])).sensors.values
+    full = simulate(protocol, profile, seed=3)
+    kept = full.sensors.seq
+    assert np.abs(full.sensors.values - ideal[kept]).mean() > 0.1
+    for kind in ("hysteresis", "creep", "saturation", "lag", "drift", "noise", "quantization"):
+        without = simulate(protocol, profile, seed=3, effects=profile.effects.without(kind))
+        assert not np.array_equal(without.sensors.values, full.sensors.values), kind
+
+
+def test_simulation_is_deterministic_per_seed(protocol, profile, recording):
+    again = simulate(protocol, profile, seed=3)
+    np.testing.assert_array_equal(again.sensors.values, recording.sensors.values)
+    other = simulate(protocol, profile, seed=4)
+    assert not np.array_equal(other.sensors.seq, recording.sensors.seq)
+
+
+def test_recording_round_trips_through_mcap(recording, tmp_path):
+    path = tmp_path / "sim.mcap"
+    write_recording(path, recording)
+    back = read_recording(path)
+    np.testing.assert_array_equal(back.sensors.seq, recording.sensors.seq)
+    np.testing.assert_allclose(back.sensors.values, recording.sensors.values, atol=1e-4)
+    assert [(s.name, s.t0, s.t1) for s in back.segments] == \
+        [(s.name, s.t0, s.t1) for s in recording.segments]
+    assert back.metadata["effect_chain"] == recording.metadata["effect_chain"]
+
+
+# --- profiles ---------------------------------------------------------------------------
+
+def write_profile(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "p.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def default_text() -> str:
+    return DEFAULT_PROFILE_PATH.read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda s: s.replace('schema = "exohil-suit-profile"', 'schema = "other"'), "'schema'"),
+    (lambda s: s.replace("version = 1", "version = 2"), "unsupported profile version"),
+    (lambda s: s.replace("radius_mm = 55.0", "radius_mm = -1.0"), "radius_mm"),
+    (lambda s: s.replace('name = "SF"', 'name = "F"'), "unique"),
+    (lambda s: s.replace("[-100.0, -150.0, -60.0]", "[-100.0, -150.0]"), "thorax_points_mm"),
+    (lambda s: s.replace("[80.0, 40.0, -40.0]", "[10.0, 10.0, 0.0]"), "outside the shoulder cap"),
+    (lambda s: s.replace("sigma_mm = 0.15", "sigma = 0.15"), "unknown parameter"),
+    (lambda s: s.replace('kind = "creep"', 'kind = "glue"'), "unknown effect kind"),
+    (lambda s: s.replace("lower_mm = [458.0, 526.0, 490.0, 448.0]", "lower_mm = [1.0, 2.0]"),
+     "list of 4 values"),
+    (lambda s: s + "\n[[tendon]]\nname = 'X'\n", "missing key 'thorax_points_mm'"),
+    (lambda s: s + "\nthis is not toml", "not a readable TOML"),
+])
+def test_bad_profiles_give_one_clear_error(tmp_path, edit, message):
+    path = write_profile(tmp_path, edit(default_text()))
+    with pytest.raises(ProfileError, match=message) as info:
+        load_profile(path)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_missing_profile_file(tmp_path):
+    with pytest.raises(ProfileError, match="no such suit profile"):
+        load_profile(tmp_path / "absent.toml")
+
+
+def test_profile_hash_ignores_formatting_but_not_content(tmp_path, profile):
+    reformatted = write_profile(tmp_path, "# a comment\n" + default_text())
+    assert load_profile(reformatted).sha256() == profile.sha256()
+    changed = write_profile(tmp_path, default_text().replace("sigma_mm = 0.15", "sigma_mm = 0.2"))
+    assert load_profile(changed).sha256() != profile.sha256()
+
+
+def test_profile_with_any_number_of_tendons(tmp_path):
+    text = default_text()
+    start = text.index('[[tendon]]\nname = "SF"')
+    end = text.index("# Effect chain")
+    two = text[:start] + text[end:]
+    two = two.replace("lower_mm = [458.0, 526.0, 490.0, 448.0]", "lower_mm = 458.0")
+    two = two.replace("width_mm = [4.0, 3.0, 3.0, 4.0]", "width_mm = 3.0")
+    profile = load_profile(write_profile(tmp_path, two))
+    assert profile.sensor_names == ("F",)
+    rec = simulate(paper_protocol(1), profile, seed=1)
+    assert rec.sensors.values.shape[1] == 1
+
+
+# --- CLI -------------------------------------------------------------------------------
+
+@needs_shoulder_ik
+def test_simulate_command_writes_a_readable_recording(tmp_path):
+    out = tmp_path / "real.mcap"
+    result = CliRunner().invoke(main, ["simulate", "--protocol", f"mot:{SHOULDER_IK / 'ABD02.mot'}",
+                                       "--seed", "2", "--without", "dropout", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    rec = read_recording(out)
+    assert rec.segments[0].name == "ABD02"
+    np.testing.assert_array_equal(np.diff(rec.sensors.seq), 1)  # dropout removed
+    expected = simulate(mot_trajectory([SHOULDER_IK / "ABD02.mot"]), load_default_profile(), 2,
+                        effects=load_default_profile().effects.without("dropout"))
+    np.testing.assert_allclose(rec.sensors.values, expected.sensors.values, atol=1e-4)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--protocol", "walk"], "use 'paper' or 'mot:FILE"),
+    (["--protocol", "mot:/nonexistent.mot"], "no such .mot file"),
+    (["--without", "glue"], "unknown effect kind"),
+    (["--profile", "/nonexistent.toml"], "no such suit profile"),
+])
+def test_simulate_command_bad_input_is_one_clear_error(tmp_path, args, message):
+    result = CliRunner().invoke(main, ["simulate", *args, "--out", str(tmp_path / "x.mcap")])
+    assert result.exit_code != 0
+    assert message in result.output
+    assert "Traceback" not in result.output
+
+
+@needs_shoulder_ik
+@pytest.mark.slow
+def test_committed_fixtures_rebuild_bit_identically():
+    result = CliRunner().invoke(main, ["fixtures", "build", "--check"])
+    assert result.exit_code == 0, result.output
+    assert "all 2 fixtures match" in result.output
+
+
+@needs_shoulder_ik
+def test_fixture_check_fails_on_a_wrong_hash(tmp_path):
+    fixtures = Path(__file__).resolve().parents[1] / "fixtures"
+    (tmp_path / "SHA256SUMS").write_text(
+        (fixtures / "SHA256SUMS").read_text().replace("a", "b", 1), encoding="utf-8")
+    for name in ("paper_protocol.mcap", "real_motion_abd_flx.mcap"):
+        (tmp_path / name).write_bytes((fixtures / name).read_bytes())
+    result = CliRunner().invoke(main, ["fixtures", "build", "--check", "--dir", str(tmp_path)])
+    assert result.exit_code == 1
+    assert "MISMATCH" in result.output
