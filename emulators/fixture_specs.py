@@ -22,7 +22,9 @@ PAPER_SEED = 20201
 REAL_MOTION_SEED = 20202
 #: shoulder-ik trials (OpenSim IK, 100 Hz, CC BY 4.0) concatenated for the real-motion fixture.
 REAL_MOTION_TRIALS = ("ABD01.mot", "FLX01.mot", "ABD21.mot", "FLX21.mot")
-SHOULDER_IK_LICENSE = "LICENSE_shoulder-ik_data"
+#: files copied verbatim from the shoulder-ik folder next to the fixtures derived from it
+SHOULDER_IK_NOTICES = {"LICENSE_data": "LICENSE_shoulder-ik_data",
+                       "SOURCE.md": "SOURCE_shoulder-ik.md"}
 SUMS_FILE = "SHA256SUMS"
 
 

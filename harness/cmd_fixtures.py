@@ -35,7 +35,7 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
     """
     from exohil.emulators.fixture_specs import (
         FIXTURES,
-        SHOULDER_IK_LICENSE,
+        SHOULDER_IK_NOTICES,
         SUMS_FILE,
         build_fixture,
         format_sums,
@@ -54,7 +54,8 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
             click.echo(f"building {spec.filename}: {spec.description}", err=True)
             hashes[spec.filename] = sha256_file(build_fixture(spec, out_dir, shoulder_ik_dir))
         if not check:
-            shutil.copyfile(shoulder_ik_dir / "LICENSE_data", fixtures_dir / SHOULDER_IK_LICENSE)
+            for source, target in SHOULDER_IK_NOTICES.items():
+                shutil.copyfile(shoulder_ik_dir / source, fixtures_dir / target)
             (fixtures_dir / SUMS_FILE).write_text(format_sums(hashes), encoding="utf-8")
             click.echo(f"wrote {len(hashes)} fixtures and {SUMS_FILE} to {fixtures_dir}", err=True)
             return

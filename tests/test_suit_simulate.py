@@ -119,7 +119,7 @@ def default_text() -> str:
     (lambda s: s.replace("[80.0, 40.0, -40.0]", "[10.0, 10.0, 0.0]"), "outside the shoulder cap"),
     (lambda s: s.replace("sigma_mm = 0.15", "sigma = 0.15"), "unknown parameter"),
     (lambda s: s.replace('kind = "creep"', 'kind = "glue"'), "unknown effect kind"),
-    (lambda s: s.replace("lower_mm = [458.0, 526.0, 490.0, 448.0]", "lower_mm = [1.0, 2.0]"),
+    (lambda s: s.replace("lower_mm = [455.0, 522.0, 478.0, 420.0]", "lower_mm = [1.0, 2.0]"),
      "list of 4 values"),
     (lambda s: s + "\n[[tendon]]\nname = 'X'\n", "missing key 'thorax_points_mm'"),
     (lambda s: s + "\nthis is not toml", "not a readable TOML"),
@@ -148,7 +148,7 @@ def test_profile_with_any_number_of_tendons(tmp_path):
     start = text.index('[[tendon]]\nname = "SF"')
     end = text.index("# Effect chain")
     two = text[:start] + text[end:]
-    two = two.replace("lower_mm = [458.0, 526.0, 490.0, 448.0]", "lower_mm = 458.0")
+    two = two.replace("lower_mm = [455.0, 522.0, 478.0, 420.0]", "lower_mm = 458.0")
     two = two.replace("width_mm = [4.0, 3.0, 3.0, 4.0]", "width_mm = 3.0")
     profile = load_profile(write_profile(tmp_path, two))
     assert profile.sensor_names == ("F",)
