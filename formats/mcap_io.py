@@ -18,13 +18,14 @@ from __future__ import annotations
 import io
 import json
 import math
+import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
 
 import numpy as np
-from mcap.exceptions import EndOfFile, McapError
+from mcap.exceptions import EndOfFile
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
@@ -97,6 +98,8 @@ class RecordingWriter:
         sensor_rate_hz, mocap_rate_hz: nominal rates written to the metadata.
         metadata: provenance and other str → str entries (reserved keys are computed here).
         compression: chunk compression, "lz4" (default), "zstd" or "none".
+        decimals: decimal places kept for sensor values and angles (default 4: 1e-4 mm / deg;
+            importers of finer data may keep more).
     """
 
     def __init__(
@@ -110,8 +113,10 @@ class RecordingWriter:
         mocap_rate_hz: float = DEFAULT_MOCAP_RATE_HZ,
         metadata: Mapping[str, str] | None = None,
         compression: Compression = "lz4",
+        decimals: int = VALUE_DECIMALS,
     ) -> None:
         self.path = Path(path)
+        self.decimals = decimals
         self.sensor_names = tuple(sensor_names)
         self.mocap_joints = {joint: tuple(names) for joint, names in (mocap_joints or {}).items()}
         _check_names(self.path, self.sensor_names, self.mocap_joints)
@@ -179,7 +184,7 @@ class RecordingWriter:
         if np.any(np.diff(previous) <= 0):
             raise RecordingError(f"{self.path}: sensor seq must increase strictly")
         times = _rounded_times(self.path, t, seq.size)
-        rows = _rounded_values(self.path, values, "sensor values")
+        rows = _rounded_values(self.path, values, self.decimals, "sensor values")
         for frame_seq, frame_t, frame_values in zip(seq.tolist(), times, rows, strict=True):
             payload = {"seq": frame_seq, "t": frame_t, "values": frame_values}
             self._emit(self._sensor_channel, frame_t, payload)
@@ -202,7 +207,7 @@ class RecordingWriter:
             raise RecordingError(
                 f"{self.path}: {joint} angles must be (M, {len(names)}), got {angles.shape}"
             )
-        rows = _rounded_values(self.path, angles, f"{joint} angles")
+        rows = _rounded_values(self.path, angles, self.decimals, f"{joint} angles")
         channel = self._mocap_channels[joint]
         for sample_t, sample in zip(times, rows, strict=True):
             payload = {"t": sample_t, **dict(zip(names, sample, strict=True))}
@@ -298,15 +303,24 @@ def _rounded_times(path: Path, t: np.ndarray, count: int) -> list[float]:
     return np.round(times, TIME_DECIMALS).tolist()
 
 
-def _rounded_values(path: Path, values: np.ndarray, what: str) -> list[list[float]]:
+def _rounded_values(
+    path: Path, values: np.ndarray, decimals: int, what: str
+) -> list[list[float]]:
     if not np.all(np.isfinite(values)):
         raise RecordingError(f"{path}: {what} must be finite (JSON has no NaN/inf)")
-    return np.round(values, VALUE_DECIMALS).tolist()
+    return np.round(values, decimals).tolist()
 
 
-def write_recording(path: str | Path, rec: Recording, *, compression: Compression = "lz4") -> None:
+def write_recording(
+    path: str | Path,
+    rec: Recording,
+    *,
+    compression: Compression = "lz4",
+    decimals: int = VALUE_DECIMALS,
+) -> None:
     """Write ``rec`` to ``path``, all streams interleaved in time order (ties: sensors first,
-    then mocap joints in dict order). Identical input gives identical bytes."""
+    then mocap joints in dict order). Identical input gives identical bytes. ``compression``
+    and ``decimals`` as for :class:`RecordingWriter`."""
     mocap_items = list(rec.mocap.items())
     with RecordingWriter(
         path,
@@ -317,6 +331,7 @@ def write_recording(path: str | Path, rec: Recording, *, compression: Compressio
         mocap_rate_hz=rec.mocap_rate_hz,
         metadata=rec.metadata,
         compression=compression,
+        decimals=decimals,
     ) as writer:
         for segment in rec.segments:
             writer.add_segment(segment)
@@ -506,11 +521,13 @@ def _read_records(path: Path, data: bytes) -> _RawFile:
                 raw.schemas.setdefault(record.id, record)
             elif isinstance(record, Metadata):
                 raw.metadata.append(record)
-    except EndOfFile as exc:
+    except (EndOfFile, struct.error) as exc:
+        # A short read: the file stops inside a record (or a length field is corrupt).
         raise RecordingError(f"{path}: truncated MCAP file (ends inside a record)") from exc
-    except (McapError, ValueError, RuntimeError, OSError, UnicodeDecodeError) as exc:
-        # Corrupt bytes surface as struct/CRC/decompression errors from several libraries.
-        raise RecordingError(f"{path}: corrupt MCAP data: {exc}") from exc
+    except Exception as exc:
+        # Corrupt bytes surface as CRC, decompression (lz4, zstandard), UTF-8 and struct errors
+        # from several libraries with no common base class; all mean the same to the caller.
+        raise RecordingError(f"{path}: corrupt MCAP data: {type(exc).__name__}: {exc}") from exc
     return raw
 
 

@@ -65,21 +65,23 @@ def _provenance(path: Path, license_note: str | None) -> dict[str, str]:
 
 
 def _command_line() -> str:
-    """The invoking command as text, rebuilt from click's parsed parameters (deterministic)."""
+    """The invoking command as text, rebuilt from click's parsed parameters: deterministic,
+    file paths reduced to their names, arguments first, unset options left out."""
     context = click.get_current_context()
-    words = context.command_path.split()
-    for name, value in context.params.items():
+    words = ["exohil", *context.command_path.split()[1:]]
+    options: list[str] = []
+    for param in context.command.params:
+        value = context.params.get(param.name or "")
         if value is None or value is False:
             continue
-        option = "--" + name.replace("_", "-")
-        if name in ("input_file",):
-            words.append(shlex.quote(Path(value).name))
+        shown = shlex.quote(value.name if isinstance(value, Path) else str(value))
+        if isinstance(param, click.Argument):
+            words.append(shown)
         elif value is True:
-            words.append(option)
+            options.append(param.opts[0])
         else:
-            shown = Path(value).name if isinstance(value, Path) else str(value)
-            words.extend([option, shlex.quote(shown)])
-    return " ".join(words)
+            options.extend([param.opts[0], shown])
+    return " ".join(words + options)
 
 
 @import_group.command("csv")
@@ -98,6 +100,8 @@ def _command_line() -> str:
 @click.option("--skip-rows", type=click.IntRange(min=0), default=0, show_default=True,
               help="Lines to drop before the header/data.")
 @click.option("--delimiter", default=",", show_default=True, help="Field separator.")
+@click.option("--decimals", type=click.IntRange(0, 9), default=6, show_default=True,
+              help="Decimal places kept for sensor values and angles.")
 @click.option("--license", "license_note", help="License note stored in the metadata.")
 def import_csv(
     input_file: Path,
@@ -112,6 +116,7 @@ def import_csv(
     sensor_units: str | None,
     skip_rows: int,
     delimiter: str,
+    decimals: int,
     license_note: str | None,
 ) -> None:
     """Import a numeric CSV (one row per sample at --rate Hz) as a recording: --sensor-cols
@@ -172,7 +177,7 @@ def import_csv(
         metadata=metadata,
     )
     try:
-        write_recording(out, rec)
+        write_recording(out, rec, decimals=decimals)
     except RecordingError as exc:
         raise click.ClickException(str(exc)) from exc
     click.echo(

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from exohil.formats.opensim_mot import MotError, read_mot
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"

@@ -1,0 +1,268 @@
+"""`exohil record info`, `import csv|mot` and `plot` through click's test runner."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+from mcap.writer import CompressionType
+from recording_raw_mcap import write_raw_recording
+
+from exohil.formats.mcap_io import read_recording, write_recording
+from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
+from exohil.harness.cli import main
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+GRAPHENE = SHARED / "realdata" / "graphene-knee" / "S1_2_HC45.csv"
+SHOULDER_MOT = SHARED / "realdata" / "shoulder-ik" / "FLX01.mot"
+FOREIGN = SHARED / "samples" / "foreign-recording-v1.mcap"
+
+
+def run(*args: str) -> Result:
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+def assert_one_line_error(result: Result) -> str:
+    assert result.exit_code != 0
+    assert "Traceback" not in result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("Error")]
+    assert len(errors) == 1, result.output
+    return errors[0]
+
+
+@pytest.fixture(scope="module")
+def other_lab_file(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, int]]:
+    path = tmp_path_factory.mktemp("other") / "other.mcap"
+    expected = write_raw_recording(path, compression=CompressionType.ZSTD, extra_channel=True)
+    return path, expected
+
+
+def test_record_info_json_reports_counts_gaps_and_rates(
+    other_lab_file: tuple[Path, dict[str, int]],
+) -> None:
+    path, expected = other_lab_file
+    result = run("record", "info", path, "--json")
+    assert result.exit_code == 0, result.output
+    info = json.loads(result.output)
+    channels = {c["topic"]: c for c in info["channels"]}
+    assert channels["/suit/sensors"]["messages"] == expected["sensor_frames"]
+    assert channels["/mocap/shoulder"]["messages"] == expected["mocap_samples"]
+    assert channels["/mocap/shoulder"]["mean_rate_hz"] == pytest.approx(120.0, rel=1e-4)
+    assert channels["/debug/text"]["used"] is False
+    assert info["sequence_gaps"] == {
+        "gaps": expected["gaps"],
+        "frames_missing": expected["missing"],
+        "largest_gap": 1,
+    }
+    assert info["duration_s"] == pytest.approx(240.0, abs=0.01)
+    assert info["sensors"]["names"] == ["F", "SF", "SR", "R"]
+    assert info["metadata"]["operator"] == "someone else"
+    assert any("/debug/text" in note for note in info["notes"])
+
+
+def test_record_info_text_lists_channels_and_gaps(
+    other_lab_file: tuple[Path, dict[str, int]],
+) -> None:
+    path, expected = other_lab_file
+    result = run("record", "info", path)
+    assert result.exit_code == 0
+    assert f"{expected['gaps']} gaps, {expected['missing']} frames missing" in result.output
+    assert "/mocap/shoulder" in result.output and "(ignored)" in result.output
+
+
+@pytest.mark.skipif(not FOREIGN.exists(), reason="shared/samples foreign recording absent")
+def test_record_info_reads_the_foreign_sample() -> None:
+    info = json.loads(run("record", "info", FOREIGN, "--json").output)
+    counts = {c["topic"]: c["messages"] for c in info["channels"]}
+    assert counts == {"/suit/sensors": 14962, "/mocap/shoulder": 7200}
+
+
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [(b"hello, not mcap", "not an MCAP file"), (b"\x89MCAP0\r\n\x01\x02", "truncated")],
+)
+def test_record_info_bad_file_is_one_line(tmp_path: Path, content: bytes, problem: str) -> None:
+    path = tmp_path / "bad.mcap"
+    path.write_bytes(content)
+    line = assert_one_line_error(run("record", "info", path))
+    assert problem in line and "bad.mcap" in line
+
+
+def _write_csv(tmp_path: Path, text: str, name: str = "table.csv") -> Path:
+    path = tmp_path / name
+    path.write_bytes(text.encode("utf-8-sig"))
+    return path
+
+
+def test_import_csv_with_bom_header_and_column_lists(tmp_path: Path) -> None:
+    rows = "".join(f"{k};{10 + k};{20 + k};{k * 0.5};x\n" for k in range(50))
+    source = _write_csv(tmp_path, "preamble line\nangle;a;b;knee;note\n" + rows)
+    out = tmp_path / "out.mcap"
+    result = run(
+        "import", "csv", source, "--out", out, "--rate", "50", "--sensor-cols", "1,2",
+        "--angle-cols", "0,3", "--joint", "knee", "--skip-rows", "1", "--delimiter", ";",
+        "--license", "CC0",
+    )
+    assert result.exit_code == 0, result.output
+    rec = read_recording(out)
+    assert rec.sensor_names == ("a", "b")
+    assert rec.mocap["knee"].names == ("angle", "knee")
+    np.testing.assert_allclose(rec.sensors.values[:, 1], 20 + np.arange(50))
+    np.testing.assert_allclose(rec.mocap["knee"].column("knee"), np.arange(50) * 0.5)
+    np.testing.assert_allclose(rec.sensors.t[-1], 49 / 50)
+    assert rec.sensor_rate_hz == rec.mocap_rate_hz == 50
+    assert rec.metadata["source_sha256"] == hashlib.sha256(source.read_bytes()).hexdigest()
+    assert rec.metadata["license"] == "CC0"
+    assert "import csv table.csv" in rec.metadata["command"]
+    assert "--sensor-cols 1,2" in rec.metadata["command"]
+
+
+@pytest.mark.parametrize(
+    ("args", "problem"),
+    [
+        (["--rate", "100", "--sensor-cols", "1-x"], "not N or N-M"),
+        (["--sensor-cols", "1"], "--rate"),
+        (["--rate", "100"], "--sensor-cols"),
+        (["--rate", "100", "--sensor-cols", "1", "--angle-cols", "1"], "both a sensor"),
+        (["--rate", "100", "--sensor-cols", "9"], "column 9 is needed"),
+        (["--rate", "100", "--sensor-cols", "1", "--sensor-names", "a,b"], "names for"),
+    ],
+)
+def test_import_csv_bad_input_is_one_line(tmp_path: Path, args: list[str], problem: str) -> None:
+    source = _write_csv(tmp_path, "1,2,3\n4,5,6\n")
+    result = run("import", "csv", source, "--out", tmp_path / "o.mcap", *args)
+    assert problem in assert_one_line_error(result)
+
+
+def test_import_csv_non_numeric_cell_is_one_line(tmp_path: Path) -> None:
+    source = _write_csv(tmp_path, "1,2\n3,oops\n")
+    result = run("import", "csv", source, "--out", tmp_path / "o.mcap", "--rate", "10",
+                 "--sensor-cols", "1")
+    assert "data row 2" in assert_one_line_error(result)
+
+
+@pytest.mark.skipif(not GRAPHENE.exists(), reason="shared/realdata/graphene-knee absent")
+def test_import_graphene_knee_preset(tmp_path: Path) -> None:
+    out = tmp_path / "hc45.mcap"
+    result = run("import", "csv", GRAPHENE, "--preset", "graphene-knee", "--out", out)
+    assert result.exit_code == 0, result.output
+    info = json.loads(run("record", "info", out, "--json").output)
+    assert len(info["sensors"]["names"]) == 5
+    assert info["sensors"]["nominal_rate_hz"] == 100.0
+    assert info["mocap"] == {"knee": {"angles": ["knee_flexion"], "samples": 20662}}
+    channels = {c["topic"]: c for c in info["channels"]}
+    assert channels["/suit/sensors"]["mean_rate_hz"] == pytest.approx(100.0)
+    assert info["metadata"]["license"] == "MIT, e-Body-Lab/graphene-based-knitted-sensing-sleeve"
+    assert info["metadata"]["source"] == "S1_2_HC45.csv"
+    assert info["metadata"]["source_sha256"] == hashlib.sha256(GRAPHENE.read_bytes()).hexdigest()
+    rec = read_recording(out)
+    first_row = GRAPHENE.read_text(encoding="utf-8-sig").splitlines()[0].split(",")
+    assert rec.mocap["knee"].angles[0, 0] == float(first_row[0])  # 6 decimals kept: lossless
+    assert rec.sensors.values[0].tolist() == [float(v) for v in first_row[1:6]]
+
+
+MOT_TEXT = (
+    "Coordinates\nversion=1\nnRows=3\nnColumns=4\ninDegrees=no\nendheader\n"
+    "time\tplane_elv\tshoulder_elv\taxial_rot\n"
+    "0.00\t0.1\t0.2\t0.3\n0.01\t0.1\t0.25\t0.3\n0.02\t0.1\t0.3\t0.3\n"
+)
+
+
+def test_import_mot_makes_a_mocap_only_recording(tmp_path: Path) -> None:
+    source = tmp_path / "trial.mot"
+    source.write_text(MOT_TEXT)
+    out = tmp_path / "trial.mcap"
+    assert run("import", "mot", source, "--out", out).exit_code == 0
+    rec = read_recording(out)
+    assert rec.sensor_names == () and len(rec.sensors) == 0
+    stream = rec.mocap["shoulder"]
+    assert stream.names == ("elv_angle", "shoulder_elv", "shoulder_rot")
+    expected = np.degrees([0.2, 0.25, 0.3])
+    np.testing.assert_allclose(stream.column("shoulder_elv"), expected, atol=1e-4)
+    assert rec.mocap_rate_hz == 100.0
+    info = json.loads(run("record", "info", out, "--json").output)
+    assert [c["topic"] for c in info["channels"]] == ["/mocap/shoulder"]
+
+
+def test_import_mot_without_shoulder_coordinates_is_one_line(tmp_path: Path) -> None:
+    source = tmp_path / "knee.mot"
+    source.write_text("endheader\ntime\tknee_angle\n0\t1\n")
+    line = assert_one_line_error(run("import", "mot", source, "--out", tmp_path / "k.mcap"))
+    assert "plane_elv" in line and "knee.mot" in line
+
+
+@pytest.mark.skipif(not SHOULDER_MOT.exists(), reason="shared/realdata/shoulder-ik absent")
+def test_import_real_shoulder_mot(tmp_path: Path) -> None:
+    out = tmp_path / "flx01.mcap"
+    assert run("import", "mot", SHOULDER_MOT, "--out", out, "--license", "CC BY 4.0").exit_code == 0
+    rec = read_recording(out)
+    elevation = rec.mocap["shoulder"].column("shoulder_elv")
+    assert rec.mocap_rate_hz == pytest.approx(100.0)
+    assert 60.0 < float(elevation.max()) < 120.0
+    assert rec.metadata["license"] == "CC BY 4.0"
+
+
+@pytest.fixture()
+def loop_recording(tmp_path: Path) -> Path:
+    """A shoulder loop whose sensor lags the elevation (hysteresis) with two segments."""
+    t = np.arange(0, 20, 0.004)
+    mocap_t = np.arange(0, 20, 1 / 120)
+    elevation = 45 - 40 * np.cos(2 * np.pi * mocap_t / 5)
+    lagged = 45 - 40 * np.cos(2 * np.pi * t / 5 - 0.3)
+    rec = Recording(
+        sensor_names=("F", "SF", "SR", "R"),
+        sensors=SensorStream(np.arange(t.size), t, 300 - np.outer(lagged, [0.5, 1.0, 0.2, 0.1])),
+        mocap={"shoulder": AngleStream(
+            mocap_t, ("elv_angle", "shoulder_elv"), np.column_stack([0 * mocap_t, elevation])
+        )},
+        segments=[Segment("raise", 0.0, 10.0), Segment("lower", 10.0, 20.0)],
+    )
+    path = tmp_path / "loop.mcap"
+    write_recording(path, rec)
+    return path
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--kind", "hysteresis"],
+        ["--kind", "hysteresis", "--sensor", "F", "--segment", "raise"],
+        ["--kind", "timeseries", "--t0", "2", "--t1", "8"],
+        ["--kind", "timeseries", "--sensor", "SF", "--sensor", "R"],
+    ],
+)
+def test_plot_writes_a_png(loop_recording: Path, tmp_path: Path, args: list[str]) -> None:
+    out = tmp_path / "plot.png"
+    result = run("plot", loop_recording, *args, "--out", out)
+    assert result.exit_code == 0, result.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert out.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    ("args", "problem"),
+    [
+        (["--kind", "hysteresis", "--sensor", "XX"], "no sensor 'XX'"),
+        (["--kind", "hysteresis", "--segment", "jump"], "no segment named 'jump'"),
+        (["--kind", "hysteresis", "--joint", "knee"], "no mocap joint 'knee'"),
+        (["--kind", "hysteresis", "--t0", "50", "--t1", "60"], "no sensor frames"),
+        (["--kind", "timeseries", "--t0", "5", "--t1", "1"], "--t1 must be after --t0"),
+    ],
+)
+def test_plot_bad_input_is_one_line(
+    loop_recording: Path, tmp_path: Path, args: list[str], problem: str
+) -> None:
+    result = run("plot", loop_recording, *args, "--out", tmp_path / "p.png")
+    assert problem in assert_one_line_error(result)
+
+
+@pytest.mark.parametrize(
+    "command", [["record", "info"], ["import", "csv"], ["import", "mot"], ["plot"]]
+)
+def test_every_command_has_help(command: list[str]) -> None:
+    result = run(*command, "--help")
+    assert result.exit_code == 0 and "Usage:" in result.output and len(result.output) > 200
