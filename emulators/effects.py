@@ -347,6 +347,8 @@ class Dropout:
 
     Losses come in bursts: a two-state (Gilbert) process whose long-run fraction of dropped
     frames is ``rate`` and whose burst lengths are geometric with mean ``mean_burst_frames``.
+    Runs of kept frames last at least one frame, so the achievable rate is at most
+    B / (B + 1) for mean burst length B (e.g. 0.5 for isolated drops).
     """
 
     name: ClassVar[str] = "dropout"

@@ -22,7 +22,7 @@ from scipy.interpolate import PchipInterpolator
 
 from exohil.formats.opensim_mot import read_mot
 from exohil.formats.recording import Segment
-from exohil.kinematics.shoulder import isb_to_ms
+from exohil.kinematics import isb_to_ms
 
 ANGLE_NAMES = ("elv_angle", "shoulder_elv", "shoulder_rot")
 MOCAP_RATE_HZ = 120.0

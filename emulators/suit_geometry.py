@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from exohil.kinematics.shoulder import ms_to_matrix
+from exohil.kinematics import ms_to_matrix
 
 
 def wrapped_length(p: np.ndarray, q: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from exohil.emulators.effects import (
@@ -77,7 +77,6 @@ def test_hysteresis_minor_loops_are_narrower_than_major_loops():
     assert np.max(np.abs(y - x)) < 2.0 - 0.1
 
 
-@settings(max_examples=200)
 @given(st.lists(st.floats(-50, 50), min_size=2, max_size=40),
        st.floats(0.0, 5.0), st.floats(0.5, 30.0))
 def test_hysteresis_stays_within_half_the_width_of_the_input(values, width, span):

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from exohil.emulators.suit_geometry import SuitGeometry, Tendon, wrapped_length
@@ -36,7 +36,6 @@ point = st.tuples(*[st.floats(-300, 300, allow_nan=False)] * 3).map(np.array).fi
     lambda v: np.linalg.norm(v) > 56.0)
 
 
-@settings(max_examples=300)
 @given(point, point)
 def test_wrap_is_never_shorter_than_straight_and_is_symmetric(p, q):
     straight = np.linalg.norm(p - q)
