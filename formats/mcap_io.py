@@ -702,8 +702,12 @@ def _segments(path: Path, metadata: dict[str, str]) -> list[Segment]:
         return []
     try:
         items = json.loads(text)
-        return [Segment(str(s["name"]), float(s["t0"]), float(s["t1"])) for s in items]
+        segments = [Segment(str(s["name"]), float(s["t0"]), float(s["t1"])) for s in items]
     except (ValueError, KeyError, TypeError) as exc:
         raise RecordingError(
             f"{path}: metadata 'segments' is not a JSON list of {{name, t0, t1}}: {exc}"
         ) from exc
+    for segment in segments:
+        if not (math.isfinite(segment.t0) and math.isfinite(segment.t1)):
+            raise RecordingError(f"{path}: segment {segment.name!r} has a non-finite time")
+    return segments

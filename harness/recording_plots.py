@@ -135,6 +135,9 @@ def plot_timeseries(
     for name in sensors or rec.sensor_names:
         column = _sensor_column(rec, name)
         top.plot(rec.sensors.t[keep], rec.sensors.values[keep, column], lw=0.8, label=name)
+    if not rec.sensor_names:
+        top.text(0.5, 0.5, "no sensors (mocap-only recording)", transform=top.transAxes,
+                 ha="center", va="center", color="grey")
     top.set_ylabel(f"sensor ({rec.sensor_units})")
     for joint, stream in rec.mocap.items():
         inside = window.mask(stream.t)
