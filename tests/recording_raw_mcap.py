@@ -99,3 +99,78 @@ def write_raw_recording(
         "gaps": int(np.sum(np.diff(seq) > 1)),
         "missing": int(np.sum(np.diff(seq) - 1)),
     }
+
+
+GOOD_METADATA = {"format": "exohil-recording", "version": "1", "sensors": "F,SF,SR,R"}
+
+
+def write_sensor_messages(
+    path: Path,
+    sensor_bodies: list[bytes],
+    metadata: dict[str, str] | None = None,
+    metadata_name: str = "exohil.recording",
+) -> Path:
+    """An unchunked file with the given raw ``/suit/sensors`` message bodies, 4 ms apart."""
+    with open(path, "wb") as stream:
+        writer = Writer(stream, compression=CompressionType.NONE, use_chunking=False)
+        writer.start()
+        schema = writer.register_schema("s", "jsonschema", b"{}")
+        channel = writer.register_channel("/suit/sensors", "json", schema)
+        writer.add_metadata(metadata_name, GOOD_METADATA if metadata is None else metadata)
+        for k, body in enumerate(sensor_bodies):
+            writer.add_message(channel, k * 4_000_000, body, k * 4_000_000)
+        writer.finish()
+    return path
+
+
+def frame(seq: int, values: list[object] | None = None) -> bytes:
+    """A raw sensor message body."""
+    return json.dumps({"seq": seq, "t": seq * 0.004, "values": values or [1, 2, 3, 4]}).encode()
+
+
+BAD_FILE_CASES = {
+    "not_mcap": "not an MCAP file",
+    "empty": "not an MCAP file",
+    "truncated": "truncated",
+    "wrong_format": "metadata format is 'rosbag'",
+    "wrong_version": "unsupported recording format version '2'",
+    "no_metadata": "no 'exohil.recording' metadata",
+    "bad_json": "invalid JSON",
+    "string_value": "'values' must be a list of numbers",
+    "missing_seq": "'seq' must be an integer",
+    "wrong_count": "has 3 values; metadata lists 4 sensors",
+    "non_monotonic": "non-monotonic seq",
+    "bad_segments": "'segments' is not a JSON list",
+    "bad_rate": "sensor_rate_hz='fast'",
+    "angle_unit": "angle unit 'rad' unsupported",
+}
+"""Bad-file case → the text its RecordingError must contain."""
+
+
+def write_bad_file(path: Path, case: str) -> Path:
+    """Write one of the ``BAD_FILE_CASES`` to ``path``."""
+    if case == "not_mcap":
+        path.write_text("seq,t,F\n0,0.0,1.0\n")
+    elif case == "empty":
+        path.write_bytes(b"")
+    elif case == "truncated":
+        write_raw_recording(path, duration_s=2.0)
+        path.write_bytes(path.read_bytes()[:5000])
+    else:
+        bodies = {
+            "bad_json": [frame(0), b"{seq: 1"],
+            "string_value": [frame(0), frame(1, [1, 2, "3", 4])],
+            "missing_seq": [b'{"t": 0.0, "values": [1, 2, 3, 4]}'],
+            "wrong_count": [frame(0), frame(1, [1, 2, 3])],
+            "non_monotonic": [frame(0), frame(5), frame(3)],
+        }.get(case, [frame(0)])
+        metadata = {
+            "wrong_format": {**GOOD_METADATA, "format": "rosbag"},
+            "wrong_version": {**GOOD_METADATA, "version": "2"},
+            "bad_segments": {**GOOD_METADATA, "segments": "[{name: x}]"},
+            "bad_rate": {**GOOD_METADATA, "sensor_rate_hz": "fast"},
+            "angle_unit": {**GOOD_METADATA, "units": "mm,rad"},
+        }.get(case)
+        name = "exohil.recordings" if case == "no_metadata" else "exohil.recording"
+        write_sensor_messages(path, bodies, metadata, metadata_name=name)
+    return path

@@ -11,12 +11,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
-from recording_raw_mcap import write_raw_recording
+from mcap.writer import CompressionType
+from recording_raw_mcap import (
+    BAD_FILE_CASES,
+    frame,
+    write_bad_file,
+    write_raw_recording,
+    write_sensor_messages,
+)
 
 from exohil.formats.errors import RecordingError
 from exohil.formats.mcap_io import RecordingWriter, read_recording, scan_recording, write_recording
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
+from exohil.formats.schemas import joint_angles_schema, sensor_frame_schema
 from exohil.formats.sequence import sequence_gaps
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
@@ -228,85 +235,14 @@ def test_foreign_sample_reads_as_it_is() -> None:
 # ----------------------------------------------------------------------------- bad files
 
 
-def _write_messages(
-    path: Path,
-    sensor_bodies: list[bytes],
-    metadata: dict[str, str] | None = None,
-    metadata_name: str = "exohil.recording",
-) -> Path:
-    with open(path, "wb") as stream:
-        writer = Writer(stream, compression=CompressionType.NONE)
-        writer.start()
-        schema = writer.register_schema("s", "jsonschema", b"{}")
-        channel = writer.register_channel("/suit/sensors", "json", schema)
-        writer.add_metadata(
-            metadata_name,
-            metadata
-            or {"format": "exohil-recording", "version": "1", "sensors": "F,SF,SR,R"},
-        )
-        for k, body in enumerate(sensor_bodies):
-            writer.add_message(channel, k * 4_000_000, body, k * 4_000_000)
-        writer.finish()
-    return path
-
-
-def _frame(seq: int, values: list[float] | None = None) -> bytes:
-    return json.dumps({"seq": seq, "t": seq * 0.004, "values": values or [1, 2, 3, 4]}).encode()
-
-
 def test_good_hand_written_file_reads(tmp_path: Path) -> None:
-    rec = read_recording(_write_messages(tmp_path / "ok.mcap", [_frame(0), _frame(2)]))
+    rec = read_recording(write_sensor_messages(tmp_path / "ok.mcap", [frame(0), frame(2)]))
     np.testing.assert_array_equal(rec.sensors.seq, [0, 2])
 
 
-@pytest.mark.parametrize(
-    ("case", "problem"),
-    [
-        ("not_mcap", "not an MCAP file"),
-        ("truncated", "truncated"),
-        ("empty", "not an MCAP file"),
-        ("wrong_format", "metadata format is 'rosbag'"),
-        ("wrong_version", "unsupported recording format version '2'"),
-        ("no_metadata", "no 'exohil.recording' metadata"),
-        ("bad_json", "invalid JSON"),
-        ("string_value", "'values' must be a list of numbers"),
-        ("missing_seq", "'seq' must be an integer"),
-        ("wrong_count", "has 3 values; metadata lists 4 sensors"),
-        ("non_monotonic", "non-monotonic seq"),
-        ("bad_segments", "'segments' is not a JSON list"),
-        ("bad_rate", "sensor_rate_hz='fast'"),
-    ],
-)
+@pytest.mark.parametrize(("case", "problem"), sorted(BAD_FILE_CASES.items()))
 def test_bad_files_raise_one_clear_error(tmp_path: Path, case: str, problem: str) -> None:
-    path = tmp_path / f"{case}.mcap"
-    good_meta = {"format": "exohil-recording", "version": "1", "sensors": "F,SF,SR,R"}
-    if case == "not_mcap":
-        path.write_text("seq,t,F\n0,0.0,1.0\n")
-    elif case == "empty":
-        path.write_bytes(b"")
-    elif case == "truncated":
-        write_recording(path, _demo_recording(2.0))
-        path.write_bytes(path.read_bytes()[:5000])
-    elif case == "wrong_format":
-        _write_messages(path, [_frame(0)], {**good_meta, "format": "rosbag"})
-    elif case == "wrong_version":
-        _write_messages(path, [_frame(0)], {**good_meta, "version": "2"})
-    elif case == "no_metadata":
-        _write_messages(path, [_frame(0)], metadata_name="exohil.recordings")
-    elif case == "bad_json":
-        _write_messages(path, [_frame(0), b"{seq: 1"])
-    elif case == "string_value":
-        _write_messages(path, [_frame(0), _frame(1, [1, 2, "3", 4])])
-    elif case == "missing_seq":
-        _write_messages(path, [b'{"t": 0.0, "values": [1, 2, 3, 4]}'])
-    elif case == "wrong_count":
-        _write_messages(path, [_frame(0), _frame(1, [1, 2, 3])])
-    elif case == "non_monotonic":
-        _write_messages(path, [_frame(0), _frame(5), _frame(3)])
-    elif case == "bad_segments":
-        _write_messages(path, [_frame(0)], {**good_meta, "segments": "[{name: x}]"})
-    elif case == "bad_rate":
-        _write_messages(path, [_frame(0)], {**good_meta, "sensor_rate_hz": "fast"})
+    path = write_bad_file(tmp_path / f"{case}.mcap", case)
     with pytest.raises(RecordingError, match=problem) as info:
         read_recording(path)
     message = str(info.value)
@@ -330,3 +266,38 @@ def test_writer_refuses_what_the_reader_would_reject(tmp_path: Path) -> None:
         with pytest.raises(RecordingError, match="not declared"):
             writer.add_mocap_sample("knee", 0.0, [1.0])
     assert len(read_recording(tmp_path / "w.mcap").sensors) == 1
+
+
+def test_schemas_are_valid_jsonschema_and_reject_wrong_frames() -> None:
+    sensor = sensor_frame_schema(4)
+    shoulder = joint_angles_schema("shoulder", SHOULDER_ANGLES)
+    for schema in (sensor, shoulder):
+        jsonschema.Draft202012Validator.check_schema(schema)
+    jsonschema.validate({"seq": 1, "t": 0.004, "values": [1, 2, 3, 4.5]}, sensor)
+    for bad in (
+        {"seq": 1, "t": 0.004, "values": [1, 2, 3]},
+        {"seq": 1.5, "t": 0.004, "values": [1, 2, 3, 4]},
+        {"t": 0.004, "values": [1, 2, 3, 4]},
+        {"seq": 1, "t": 0.004, "values": [1, 2, "3", 4]},
+    ):
+        with pytest.raises(jsonschema.ValidationError):
+            jsonschema.validate(bad, sensor)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({"t": 0.0, "elv_angle": 1.0, "shoulder_elv": 2.0}, shoulder)
+
+
+@pytest.mark.skipif(not FOREIGN.exists(), reason="shared/samples foreign recording absent")
+def test_foreign_messages_follow_the_canonical_schemas() -> None:
+    validators = {
+        "/suit/sensors": jsonschema.Draft202012Validator(sensor_frame_schema(4)),
+        "/mocap/shoulder": jsonschema.Draft202012Validator(
+            joint_angles_schema("shoulder", SHOULDER_ANGLES)
+        ),
+    }
+    checked = 0
+    with open(FOREIGN, "rb") as stream:
+        for _, channel, message in make_reader(stream).iter_messages():
+            if checked % 50 == 0:  # a 1-in-50 sample keeps this fast; all kinds are covered
+                validators[channel.topic].validate(json.loads(message.data))
+            checked += 1
+    assert checked == 14962 + 7200

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner, Result
 from mcap.writer import CompressionType
-from recording_raw_mcap import write_raw_recording
+from recording_raw_mcap import BAD_FILE_CASES, write_bad_file, write_raw_recording
 
 from exohil.formats.mcap_io import read_recording, write_recording
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
@@ -81,15 +81,12 @@ def test_record_info_reads_the_foreign_sample() -> None:
     assert counts == {"/suit/sensors": 14962, "/mocap/shoulder": 7200}
 
 
-@pytest.mark.parametrize(
-    ("content", "problem"),
-    [(b"hello, not mcap", "not an MCAP file"), (b"\x89MCAP0\r\n\x01\x02", "truncated")],
-)
-def test_record_info_bad_file_is_one_line(tmp_path: Path, content: bytes, problem: str) -> None:
-    path = tmp_path / "bad.mcap"
-    path.write_bytes(content)
-    line = assert_one_line_error(run("record", "info", path))
-    assert problem in line and "bad.mcap" in line
+@pytest.mark.parametrize(("case", "problem"), sorted(BAD_FILE_CASES.items()))
+def test_record_info_bad_file_is_one_line(tmp_path: Path, case: str, problem: str) -> None:
+    path = write_bad_file(tmp_path / f"{case}.mcap", case)
+    for extra in ([], ["--json"]):
+        line = assert_one_line_error(run("record", "info", path, *extra))
+        assert problem in line and f"{case}.mcap" in line
 
 
 def _write_csv(tmp_path: Path, text: str, name: str = "table.csv") -> Path:
