@@ -17,6 +17,7 @@ one fault never reseeds another.
 
 from __future__ import annotations
 
+import math
 import zlib
 from dataclasses import dataclass, field
 from typing import Any
@@ -165,21 +166,29 @@ class FrameFaultInjector:
             self._faults.append((fault, decide, detail))
         self._burst_left = [0] * len(self._faults)
 
+    def _first_frame_at(self, t_s: float) -> int:
+        """Index of the first frame sampled at or after ``t_s`` (robust to float rounding)."""
+        return math.ceil(t_s * self._rate_hz - 1e-6)
+
     def in_outage(self, k: int) -> Disconnect | None:
         """The disconnect whose outage covers frame ``k``, if any."""
-        t = k / self._rate_hz
         for fault, _, _ in self._faults:
-            if isinstance(fault, Disconnect) and fault.at_s <= t < fault.at_s + fault.for_s:
+            if (isinstance(fault, Disconnect)
+                    and self._first_frame_at(fault.at_s) <= k
+                    < self._first_frame_at(fault.at_s + fault.for_s)):
                 return fault
         return None
 
     def stall_window(self, k: int) -> tuple[int, Stall] | None:
         """(window index, stall) when frame ``k`` is held by a stall."""
-        t = k / self._rate_hz
         for fault, _, _ in self._faults:
-            if isinstance(fault, Stall):
-                index = int(t // fault.every_s)
-                if index >= 1 and t - index * fault.every_s < fault.duration_ms / 1000.0:
+            if not isinstance(fault, Stall):
+                continue
+            latest = int((k + 0.5) // (fault.every_s * self._rate_hz))
+            for index in (latest, latest - 1):
+                start_s = index * fault.every_s
+                if (index >= 1 and self._first_frame_at(start_s) <= k
+                        < self._first_frame_at(start_s + fault.duration_ms / 1000.0)):
                     return index, fault
         return None
 
