@@ -21,6 +21,7 @@ def main() -> None:
 def _register() -> None:
     from exohil.harness import (
         cmd_convert,
+        cmd_demo,
         cmd_emulate,
         cmd_fixtures,
         cmd_import,
@@ -31,8 +32,8 @@ def _register() -> None:
     )
 
     for module in (
-        cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import, cmd_plot,
-        cmd_train,
+        cmd_demo, cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import,
+        cmd_plot, cmd_train,
     ):
         for command in module.COMMANDS:
             main.add_command(command)
