@@ -210,8 +210,8 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
     kinds = [k.strip() for k in models.split(",") if k.strip()]
     bad = [k for k in kinds if k not in MODEL_CHOICES]
     if bad or not kinds:
-        raise click.BadParameter(f"unknown model(s) {bad}; choose from {MODEL_CHOICES}",
-                                 param_hint="--models")
+        raise click.ClickException(f"--models: unknown model(s) {bad}; choose from "
+                                   f"{', '.join(MODEL_CHOICES)}")
     wf = _workflow()
     data = _load(train_paths, joint, angles)
     test_data = _load(test_paths, data.target.joint, ",".join(data.target.angles),

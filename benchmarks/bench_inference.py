@@ -1,0 +1,90 @@
+"""Per-frame latency of the streaming estimator backends (``python -m benchmarks.bench_inference``).
+
+Builds ENNet (hidden 64, window 10, dense 512-256-128-64-32, 4 sensors → 2 angles; random
+weights: latency does not depend on their values) — or loads ``--checkpoint`` — then times
+``StreamingEstimator.push`` for each backend over many frames and prints p50/p99/max in µs and
+the machine. Warm-up frames are excluded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numpy as np
+
+
+def machine() -> str:
+    """Platform, CPU model and core count."""
+    model = platform.processor() or "unknown CPU"
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return (f"{platform.platform()}; {model}; {os.cpu_count()} cores; "
+            f"python {platform.python_version()}")
+
+
+def random_estimator(kind: str = "ennet", hidden: int = 64, window: int = 10):
+    """A TrainedEstimator with random weights (for timing only)."""
+    import torch
+
+    from exohil.estimator.dataset import TargetSpec
+    from exohil.estimator.models import ModelConfig, build_model
+    from exohil.estimator.trained import Normalisation, TrainedEstimator
+
+    torch.manual_seed(0)
+    cfg = ModelConfig(kind, 4, 2, window=window, hidden=hidden)
+    norm = Normalisation(np.full(4, 500.0), np.full(4, 20.0), np.zeros(2), np.full(2, 30.0))
+    return TrainedEstimator(cfg, ("F", "SF", "SR", "R"), TargetSpec("shoulder", ("a", "b")),
+                            norm, network=build_model(cfg).eval())
+
+
+def time_push(engine, frames: np.ndarray, warmup: int = 200) -> np.ndarray:
+    """Per-call latencies in µs (after ``warmup`` calls)."""
+    for row in frames[:warmup]:
+        engine.push(row)
+    out = np.empty(frames.shape[0] - warmup)
+    clock = time.perf_counter_ns
+    for i, row in enumerate(frames[warmup:]):
+        t0 = clock()
+        engine.push(row)
+        out[i] = (clock() - t0) / 1000.0
+    return out
+
+
+def main() -> None:
+    from exohil.estimator.checkpoint import load_checkpoint
+    from exohil.estimator.inference import BACKENDS, StreamingEstimator
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=20_000, help="timed frames per backend")
+    ap.add_argument("--checkpoint", help="time this checkpoint instead of a random ENNet")
+    args = ap.parse_args()
+    est = load_checkpoint(args.checkpoint) if args.checkpoint else random_estimator()
+    rng = np.random.default_rng(0)
+    frames = est.norm.x_mean + est.norm.x_std * rng.standard_normal((args.frames + 200,
+                                                                      est.config.n_sensors))
+    print(f"machine: {machine()}")
+    print(f"model: {est.kind} hidden {est.config.hidden} window {est.config.window} "
+          f"sensors {est.config.n_sensors} angles {est.config.n_angles}; {args.frames} frames")
+    print(f"{'backend':<12} {'p50 µs':>8} {'p99 µs':>8} {'max µs':>9}")
+    for backend in BACKENDS:
+        try:
+            engine = StreamingEstimator(est, backend)
+        except ValueError as exc:
+            print(f"{backend:<12} skipped: {exc}")
+            continue
+        lat = time_push(engine, frames)
+        p50, p99 = np.percentile(lat, [50, 99])
+        print(f"{backend:<12} {p50:8.1f} {p99:8.1f} {lat.max():9.1f}")
+
+
+if __name__ == "__main__":
+    main()

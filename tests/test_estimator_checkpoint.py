@@ -1,0 +1,99 @@
+"""Checkpoint round trip for every model kind, and one clear CheckpointError for bad files."""
+
+import numpy as np
+import pytest
+from estimator_synth import shoulder_recording
+
+from exohil.estimator.checkpoint import (
+    CheckpointError,
+    ensure_fits,
+    load_checkpoint,
+    save_checkpoint,
+)
+from exohil.estimator.dataset import default_target, recording_blocks
+from exohil.estimator.splits import time_block_split
+from exohil.estimator.training import TrainConfig, train
+
+KINDS = ["ennet", "lnnet", "ann", "cnn", "classical"]
+
+
+def _trained(kind: str, offset_frames: int = 0):
+    rec = shoulder_recording(seconds=4.0, seed=3)
+    target = default_target(rec)
+    split = time_block_split(recording_blocks(rec, target, offset_frames=offset_frames), 0.3)
+    cfg = TrainConfig(kind=kind, max_epochs=1, hidden=8, window=5, dilation=2)
+    return rec, split, train(split, rec.sensor_names, target, cfg, offset_frames=offset_frames,
+                             sources=[{"file": "x.mcap", "sha256": "0" * 64}])
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_round_trip_keeps_predictions_and_metadata(kind, tmp_path):
+    rec, split, est = _trained(kind, offset_frames=10)
+    path = tmp_path / "m.npz"
+    save_checkpoint(path, est)
+    back = load_checkpoint(path)
+    assert back.kind == kind
+    assert back.sensor_names == rec.sensor_names
+    assert back.target == est.target
+    assert back.offset_frames == 10
+    assert back.config == est.config
+    assert back.info["sources"][0]["sha256"] == "0" * 64
+    assert "validation" in back.info["metrics"]
+    for block in split.test:
+        np.testing.assert_array_equal(back.predict_block(block), est.predict_block(block))
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(CheckpointError, match="not found"):
+        load_checkpoint(tmp_path / "nope.npz")
+
+
+@pytest.mark.parametrize("payload", [b"", b"garbage" * 10, b"PK\x03\x04broken zip"])
+def test_corrupt_file(tmp_path, payload):
+    path = tmp_path / "bad.npz"
+    path.write_bytes(payload)
+    with pytest.raises(CheckpointError):
+        load_checkpoint(path)
+
+
+def test_truncated_checkpoint(tmp_path):
+    _, _, est = _trained("ennet")
+    path = tmp_path / "m.npz"
+    save_checkpoint(path, est)
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with pytest.raises(CheckpointError):
+        load_checkpoint(path)
+
+
+def test_npz_that_is_not_a_checkpoint(tmp_path):
+    path = tmp_path / "other.npz"
+    np.savez(path, a=np.zeros(3))
+    with pytest.raises(CheckpointError, match="metadata"):
+        load_checkpoint(path)
+
+
+def test_weights_that_do_not_fit_the_architecture(tmp_path):
+    _, _, est = _trained("ennet")
+    path = tmp_path / "m.npz"
+    save_checkpoint(path, est)
+    with np.load(path) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["net/head.0.weight"] = arrays["net/head.0.weight"][:, :3]
+    np.savez(path, **arrays)
+    with pytest.raises(CheckpointError, match="do not match"):
+        load_checkpoint(path)
+
+
+def test_wrong_sensor_count_for_a_recording():
+    _, _, est = _trained("ann")
+    other = shoulder_recording(seconds=2.0, n_sensors=5)
+    with pytest.raises(CheckpointError, match="expects 4 sensors"):
+        ensure_fits(est, other, "five.mcap")
+    ensure_fits(est, shoulder_recording(seconds=2.0))  # the right shape passes
+
+
+def test_training_is_deterministic_for_a_seed():
+    a, b = _trained("ennet")[2], _trained("ennet")[2]
+    for (name, pa), pb in zip(a.network.state_dict().items(), b.network.state_dict().values(),
+                              strict=True):
+        assert (pa == pb).all(), name

@@ -1,0 +1,91 @@
+"""exohil train / evaluate / table: happy path and one-line errors for bad inputs."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+from estimator_synth import shoulder_recording
+
+from exohil.formats.mcap_io import write_recording
+from exohil.harness.cli import main
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("rec")
+    good, five = d / "good.mcap", d / "five.mcap"
+    write_recording(good, shoulder_recording(seconds=3.0, seed=2))
+    write_recording(five, shoulder_recording(seconds=1.0, n_sensors=5))
+    ckpt = d / "ann.npz"
+    result = CliRunner().invoke(main, ["train", "--model", "ann", str(good), "--out", str(ckpt),
+                                       "--max-epochs", "2", "--test-fraction", "0.3"])
+    assert result.exit_code == 0, result.output
+    return {"good": good, "five": five, "ckpt": ckpt, "dir": d}
+
+
+def _one_line_error(result):
+    assert result.exit_code != 0
+    assert "Traceback" not in result.output
+    lines = [line for line in result.output.strip().splitlines() if line.strip()]
+    assert len(lines) == 1, result.output
+    assert lines[0].startswith("Error:")
+    return lines[0]
+
+
+def test_evaluate_writes_the_documented_json(files):
+    out = files["dir"] / "m.json"
+    result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(files["good"]),
+                                       "--json", str(out), "--test-fraction", "0.3"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    for stat in ("rmse", "mae", "max"):
+        assert set(data[stat]) == {"elv_angle", "shoulder_elv"}
+        assert all(v >= 0 for v in data[stat].values())
+    assert set(data["per_segment"]) == {"abduction", "flexion"}  # the end of each movement
+    assert data["model"] == "ann"
+
+
+def test_missing_checkpoint(files):
+    line = _one_line_error(CliRunner().invoke(
+        main, ["evaluate", str(files["dir"] / "none.npz"), str(files["good"])]))
+    assert "not found" in line
+
+
+def test_corrupt_checkpoint(files):
+    bad = files["dir"] / "bad.npz"
+    bad.write_bytes(b"\x00" * 100)
+    _one_line_error(CliRunner().invoke(main, ["evaluate", str(bad), str(files["good"])]))
+
+
+def test_recording_with_the_wrong_sensor_count(files):
+    line = _one_line_error(CliRunner().invoke(
+        main, ["evaluate", str(files["ckpt"]), str(files["five"])]))
+    assert "expects 4 sensors" in line
+
+
+def test_a_file_that_is_not_a_recording(files):
+    junk = files["dir"] / "junk.mcap"
+    junk.write_text("hello")
+    _one_line_error(CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(junk)]))
+    _one_line_error(CliRunner().invoke(main, ["train", str(junk), "--out",
+                                              str(files["dir"] / "x.npz")]))
+
+
+def test_table_writes_a_markdown_section(files):
+    md = files["dir"] / "results.md"
+    md.write_text("# Results\n\nhand-written text\n")
+    args = ["table", "--train", str(files["good"]), "--models", "classical,ann",
+            "--max-epochs", "1", "--out", str(md), "--section", "t1"]
+    for _ in range(2):  # a second run replaces the section instead of appending
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 0, result.output
+    text = md.read_text()
+    assert text.count("<!-- table:t1 -->") == 1
+    assert "hand-written text" in text
+    assert "| Classical" in text and "| ANN" in text
+
+
+def test_table_rejects_unknown_models(files):
+    line = _one_line_error(CliRunner().invoke(
+        main, ["table", "--train", str(files["good"]), "--models", "ennet,gpt"]))
+    assert "gpt" in line
