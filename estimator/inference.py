@@ -12,8 +12,9 @@ The engine reproduces :meth:`TrainedEstimator.predict_block` frame by frame:
   the oldest frame of every window.
 
 Backends:
-- ``numpy`` (default, fastest): hand-written float64 LSTM/MLP with preallocated buffers — no
-  allocation per frame in steady state. The input projection x·W_ih + b of each frame is
+- ``numpy`` (default, fastest): hand-written float32 LSTM/MLP with preallocated buffers — no
+  array allocation per frame in steady state; input normalisation, biases and output
+  de-normalisation are folded into the weights. The input projection x·W_ih + b of each frame is
   computed once, when the frame arrives, and kept in the ring with the frame. ENNet, LNNet
   (S independent LSTMs, batched), ANN and classical run here; CNN does not (use ``torch``).
 - ``torch``: the checkpoint's module in eager mode under ``inference_mode``, one thread.
@@ -45,21 +46,11 @@ class StreamingEstimator:
             raise ValueError("the classical model runs on the numpy backend only")
         self.est = est
         self.backend = backend
-        cfg = est.config
-        self.n_sensors, self.n_angles = cfg.n_sensors, cfg.n_angles
-        self.window = 1 if cfg.kind in ("ann", "classical") else cfg.window
-        self.dilation = cfg.dilation
-        self.span = (self.window - 1) * self.dilation + 1
-        self._x_mean = est.norm.x_mean.astype(np.float64)
-        self._x_std = est.norm.x_std.astype(np.float64)
-        self._y_mean = est.norm.y_mean.astype(np.float64)
-        self._y_std = est.norm.y_std.astype(np.float64)
         self._offset_frames = est.offset_frames
-        self._z = np.zeros(self.n_sensors)
-        self._base_sum = np.zeros(self.n_sensors)
-        self._base = np.zeros(self.n_sensors)
-        self._out = np.zeros(self.n_angles)
-        self._runner = _make_runner(est, backend, self.span)
+        self._x = np.zeros(est.config.n_sensors)
+        self._base_sum = np.zeros(est.config.n_sensors)
+        self._base = np.zeros(est.config.n_sensors)
+        self._runner = _make_runner(est, backend)
         self.reset()
 
     def reset(self) -> None:
@@ -71,28 +62,44 @@ class StreamingEstimator:
 
     def push(self, values: np.ndarray) -> np.ndarray:
         """One sensor frame (S,) in recording units → (A,) angle estimates, degrees."""
-        z = self._z
-        z[:] = values
+        x = values
         if self._offset_frames:
+            x = self._x
+            x[:] = values
             if self._count < self._offset_frames:
-                self._base_sum += z
+                self._base_sum += x
                 np.divide(self._base_sum, self._count + 1, out=self._base)
-            z -= self._base
-        z -= self._x_mean
-        z /= self._x_std
+            x -= self._base
         self._count += 1
-        y = self._runner.step(z, first=self._count == 1)
-        np.multiply(y, self._y_std, out=self._out)
-        self._out += self._y_mean
-        return self._out
+        return self._runner.step(x, first=self._count == 1)
+
+
+class _Normaliser:
+    """z = (x − mean)/std in, angle = y·std + mean out, into preallocated buffers."""
+
+    def __init__(self, est: TrainedEstimator) -> None:
+        self.x_mean, self.x_std = est.norm.x_mean, est.norm.x_std
+        self.y_mean, self.y_std = est.norm.y_mean, est.norm.y_std
+        self.z = np.zeros(est.config.n_sensors)
+        self.out = np.zeros(est.config.n_angles)
+
+    def inputs(self, x: np.ndarray) -> np.ndarray:
+        np.subtract(x, self.x_mean, out=self.z)
+        self.z /= self.x_std
+        return self.z
+
+    def outputs(self, y: np.ndarray) -> np.ndarray:
+        np.multiply(y, self.y_std, out=self.out)
+        self.out += self.y_mean
+        return self.out
 
 
 class _Ring:
     """Double-written ring of the newest ``span`` rows of width ``shape``."""
 
-    def __init__(self, span: int, shape: tuple[int, ...]) -> None:
+    def __init__(self, span: int, shape: tuple[int, ...], dtype: type = np.float64) -> None:
         self.span = span
-        self.buf = np.zeros((2 * span, *shape))
+        self.buf = np.zeros((2 * span, *shape), dtype=dtype)
         self.pos = 0
 
     def fill(self, row: np.ndarray) -> None:
@@ -108,201 +115,226 @@ class _Ring:
         return self.buf[p + 1 : p + 1 + self.span]
 
 
-class _DenseHead:
-    """ReLU stack + linear output from a state dict (weights transposed for row vectors)."""
+class _FoldedHead:
+    """Dense ReLU stack + linear output in float32 with the biases folded into the weights.
 
-    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
-        self.layers = [(np.ascontiguousarray(w.T, dtype=np.float64), b.astype(np.float64))
-                       for w, b in layers]
-        self.bufs = [np.zeros(b.shape[0]) for _, b in self.layers]
+    Every activation buffer carries a trailing constant 1, so a layer is one ``dot`` (bias =
+    the last weight row) plus one in-place ReLU. The output de-normalisation (·y_std + y_mean)
+    is folded into the last layer.
+    """
+
+    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], y_mean: np.ndarray,
+                 y_std: np.ndarray) -> None:
+        w_last, b_last = layers[-1]
+        layers = [*layers[:-1], (w_last * y_std[:, None], b_last * y_std + y_mean)]
+        self.weights = [np.ascontiguousarray(np.vstack([w.T, b[None, :]]), dtype=np.float32)
+                        for w, b in layers]
+        self.bufs = [np.ones(w.shape[1] + 1, dtype=np.float32) for w in self.weights]
+        self.views = [buf[:-1] for buf in self.bufs]
+        self.out = np.zeros(self.weights[-1].shape[1])
 
     def __call__(self, a: np.ndarray) -> np.ndarray:
-        last = len(self.layers) - 1
-        for k, ((w, b), buf) in enumerate(zip(self.layers, self.bufs, strict=True)):
-            np.dot(a, w, out=buf)
-            buf += b
+        """``a`` ends with the constant 1; returns the (A,) output (a reused buffer)."""
+        last = len(self.weights) - 1
+        for k, (w, view) in enumerate(zip(self.weights, self.views, strict=True)):
+            np.dot(a, w, out=view)
             if k != last:
-                np.maximum(buf, 0.0, out=buf)
-            a = buf
-        return a
+                np.maximum(view, 0.0, out=view)
+            a = self.bufs[k]
+        self.out[:] = self.views[-1]
+        return self.out
 
 
-def _head_layers(state: dict, prefix: str) -> list[tuple[np.ndarray, np.ndarray]]:
+def _state_numpy(est: TrainedEstimator) -> dict[str, np.ndarray]:
+    net = est.network
+    return {k: v.detach().cpu().numpy().astype(np.float64)
+            for k, v in net.state_dict().items()}  # type: ignore[union-attr]
+
+
+def _head_layers(state: dict, prefix: str = "head.") -> list[tuple[np.ndarray, np.ndarray]]:
     idx = sorted({int(k.split(".")[1]) for k in state if k.startswith(prefix)})
     return [(state[f"{prefix}{i}.weight"], state[f"{prefix}{i}.bias"]) for i in idx]
 
 
-class _NumpyLSTM:
-    """G independent LSTMs (hidden H) over the window, with per-frame input projections.
+class _NumpyRecurrentRunner:
+    """ENNet (G = 1 LSTM over all sensors) or LNNet (G = S one-input LSTMs) in float32.
 
-    Gate columns are reordered to [i, f, o, g] and the i/f/o columns halved, so one tanh over
-    all gates gives σ(x) = 0.5·tanh(x/2) + 0.5 for the first 3H and tanh for the last H.
+    Per group, one buffer holds [c | g̃ | f | i | o] (H each): the recurrent ``dot`` writes the
+    gate pre-activations [g̃, f, i, o] in place, one tanh and one sigmoid activate them, and
+    [f, i]·[c, g̃] is a single multiply — 8 NumPy calls per LSTM step. The input projection
+    x·W_ih + b (with the input normalisation folded in) is computed once per frame and kept in
+    the ring with the frame.
     """
 
-    def __init__(self, w_ih: np.ndarray, w_hh: np.ndarray, bias: np.ndarray, span: int,
-                 dilation: int) -> None:
-        # w_ih (G, In, 4H), w_hh (G, H, 4H), bias (G, 4H), PyTorch gate order [i, f, g, o]
+    def __init__(self, est: TrainedEstimator) -> None:
+        from scipy.special import expit
+
+        self.expit = expit
+        state = _state_numpy(est)
+        mean, std = est.norm.x_mean, est.norm.x_std
+        if est.kind == "ennet":
+            w_ih = state["lstm.weight_ih_l0"].T[None]  # (1, S, 4H)
+            w_hh = state["lstm.weight_hh_l0"].T[None]  # (1, H, 4H)
+            bias = (state["lstm.bias_ih_l0"] + state["lstm.bias_hh_l0"])[None]
+            # z = (x − mean)/std folded: x·(W/std) + (b − (mean/std)·W)
+            bias = bias - (mean / std) @ w_ih[0]
+            w_ih = w_ih / std[None, :, None]
+        else:  # lnnet: GroupedLSTM, sensor s drives group s only
+            w_ih = state["lstm.weight_ih"][:, None, :]  # (S, 1, 4H)
+            w_hh = state["lstm.weight_hh"].transpose(0, 2, 1)  # (S, H, 4H)
+            bias = state["lstm.bias"] - (mean / std)[:, None] * w_ih[:, 0, :]
+            w_ih = w_ih / std[:, None, None]
         hidden = w_hh.shape[1]
-        order = np.r_[0 : 2 * hidden, 3 * hidden : 4 * hidden, 2 * hidden : 3 * hidden]
-        scale = np.ones(4 * hidden)
-        scale[: 3 * hidden] = 0.5
-        self.w_ih = np.ascontiguousarray(w_ih[:, :, order] * scale, dtype=np.float64)
-        self.w_hh = np.ascontiguousarray(w_hh[:, :, order] * scale, dtype=np.float64)
-        self.bias = bias[:, order] * scale
+        order = np.r_[2 * hidden : 3 * hidden, hidden : 2 * hidden, 0:hidden,
+                      3 * hidden : 4 * hidden]  # PyTorch [i, f, g, o] → [g, f, i, o]
         self.groups, self.hidden = w_hh.shape[0], hidden
-        self.dilation = dilation
-        self.ring = _Ring(span, (self.groups, 4 * hidden))
-        self.xp = np.zeros((self.groups, 4 * hidden))
-        self.gates = np.zeros((self.groups, 4 * hidden))
-        self.h = np.zeros((self.groups, hidden))
-        self.c = np.zeros((self.groups, hidden))
-        self.tmp = np.zeros((self.groups, hidden))
-        self.h_flat = self.h.reshape(-1)
         self.grouped = self.groups > 1
-        self.h3 = self.h[:, None, :]
-        self.g3 = self.gates[:, None, :]
+        f32 = np.float32
+        self.w_ih = np.ascontiguousarray(w_ih[:, :, order], dtype=f32)
+        self.w_ih_sensorwise = np.ascontiguousarray(self.w_ih[:, 0, :])
+        self.w_hh = np.ascontiguousarray(w_hh[:, :, order], dtype=f32)
+        self.bias = np.ascontiguousarray(bias[:, order], dtype=f32)
+        self.dilation = est.config.dilation
+        span = (est.config.window - 1) * self.dilation + 1
+        self.ring = _Ring(span, (self.groups, 4 * hidden), np.float32)
+        h = hidden
+        self.buf = np.zeros((self.groups, 5 * h), dtype=f32)
+        self.gates = self.buf[:, h:]
+        self.gg, self.fio = self.buf[:, h : 2 * h], self.buf[:, 2 * h :]
+        self.c, self.cg, self.fi = self.buf[:, :h], self.buf[:, : 2 * h], self.buf[:, 2 * h : 4 * h]
+        self.i, self.o = self.buf[:, 3 * h : 4 * h], self.buf[:, 4 * h :]
+        self.prod = np.zeros((self.groups, 2 * h), dtype=f32)
+        self.tmp = np.zeros((self.groups, h), dtype=f32)
+        # hidden states of all groups, flat, followed by the constant 1 the head's bias needs
+        self.h_aug = np.ones(self.groups * h + 1, dtype=f32)
+        self.h = self.h_aug[:-1].reshape(self.groups, h)
+        self.h3, self.g3 = self.h[:, None, :], self.gates[:, None, :]
+        self.xp = np.zeros((self.groups, 4 * h), dtype=f32)
+        self.x32 = np.zeros(est.config.n_sensors, dtype=f32)
+        self.head = _FoldedHead(_head_layers(state), est.norm.y_mean, est.norm.y_std)
 
     def reset(self) -> None:
         self.ring.fill(0.0)
 
-    def project(self, z: np.ndarray) -> None:
-        """xp = z·W_ih + b for one frame; z (S,) is split across groups when G > 1."""
+    def _project(self, x: np.ndarray) -> None:
+        self.x32[:] = x
         if self.grouped:
-            np.multiply(z[:, None], self.w_ih[:, 0, :], out=self.xp)
+            np.multiply(self.x32[:, None], self.w_ih_sensorwise, out=self.xp)
         else:
-            np.dot(z, self.w_ih[0], out=self.xp[0])
+            np.dot(self.x32, self.w_ih[0], out=self.xp[0])
         self.xp += self.bias
 
-    def run(self, z: np.ndarray, first: bool) -> np.ndarray:
-        """Add frame z to the window and return the last hidden state (G·H,)."""
-        self.project(z)
+    def step(self, x: np.ndarray, first: bool) -> np.ndarray:
+        self._project(x)
         if first:
             self.ring.fill(self.xp)
         window = self.ring.add(self.xp)[:: self.dilation]
-        h3, hd = 3 * self.hidden, self.hidden
-        g, c, h, tmp = self.gates, self.c, self.h, self.tmp
+        hd = self.hidden
+        prod, tmp, expit = self.prod, self.tmp, self.expit
         for step in range(window.shape[0]):
-            if step == 0:
-                g[:] = window[0]
-            elif self.grouped:
-                np.matmul(self.h3, self.w_hh, out=self.g3)
-                g += window[step]
+            if step == 0:  # h = c = 0
+                self.gates[:] = window[0]
             else:
-                np.dot(h[0], self.w_hh[0], out=g[0])
-                g += window[step]
-            np.tanh(g, out=g)
-            sig = g[:, :h3]
-            sig *= 0.5
-            sig += 0.5
+                if self.grouped:
+                    np.matmul(self.h3, self.w_hh, out=self.g3)
+                else:
+                    np.dot(self.h[0], self.w_hh[0], out=self.gates[0])
+                self.gates += window[step]
+            np.tanh(self.gg, out=self.gg)
+            expit(self.fio, out=self.fio)
             if step == 0:
-                np.multiply(g[:, :hd], g[:, h3:], out=c)
+                np.multiply(self.i, self.gg, out=self.c)
             else:
-                c *= g[:, hd : 2 * hd]
-                np.multiply(g[:, :hd], g[:, h3:], out=tmp)
-                c += tmp
-            np.tanh(c, out=tmp)
-            np.multiply(g[:, 2 * hd : h3], tmp, out=h)
-        return self.h_flat
-
-
-class _NumpyRecurrentRunner:
-    """ENNet (G = 1) or LNNet (G = S) on the numpy LSTM + dense head."""
-
-    def __init__(self, est: TrainedEstimator, span: int) -> None:
-        state = {k: v.detach().cpu().numpy().astype(np.float64)
-                 for k, v in est.network.state_dict().items()}  # type: ignore[union-attr]
-        if est.kind == "ennet":
-            w_ih = state["lstm.weight_ih_l0"].T[None]
-            w_hh = state["lstm.weight_hh_l0"].T[None]
-            bias = (state["lstm.bias_ih_l0"] + state["lstm.bias_hh_l0"])[None]
-        else:  # lnnet: GroupedLSTM parameters
-            w_ih = state["lstm.weight_ih"][:, None, :]
-            w_hh = state["lstm.weight_hh"].transpose(0, 2, 1)
-            bias = state["lstm.bias"]
-        self.lstm = _NumpyLSTM(w_ih, w_hh, bias, span, est.config.dilation)
-        self.head = _DenseHead(_head_layers(state, "head."))
-
-    def reset(self) -> None:
-        self.lstm.reset()
-
-    def step(self, z: np.ndarray, first: bool) -> np.ndarray:
-        return self.head(self.lstm.run(z, first))
+                np.multiply(self.fi, self.cg, out=prod)  # [f·c, i·g̃]
+                np.add(prod[:, :hd], prod[:, hd:], out=self.c)
+            np.tanh(self.c, out=tmp)
+            np.multiply(self.o, tmp, out=self.h)
+        return self.head(self.h_aug)
 
 
 class _NumpyANNRunner:
-    """ANN: dense head on the newest frame."""
+    """ANN: the folded dense head on the newest normalised frame."""
 
     def __init__(self, est: TrainedEstimator) -> None:
-        state = {k: v.detach().cpu().numpy() for k, v in est.network.state_dict().items()}  # type: ignore[union-attr]
-        self.head = _DenseHead(_head_layers(state, "head."))
+        self.norm = _Normaliser(est)
+        self.z_aug = np.ones(est.config.n_sensors + 1, dtype=np.float32)
+        self.head = _FoldedHead(_head_layers(_state_numpy(est)), est.norm.y_mean,
+                                est.norm.y_std)
 
     def reset(self) -> None:
         """Memoryless: nothing to forget."""
 
-    def step(self, z: np.ndarray, first: bool) -> np.ndarray:
-        return self.head(z)
+    def step(self, x: np.ndarray, first: bool) -> np.ndarray:
+        self.z_aug[:-1] = self.norm.inputs(x)
+        return self.head(self.z_aug)
 
 
 class _ClassicalRunner:
-    """Classical model: play/creep operator states advance one frame per push."""
+    """Classical model: play/creep operator states advance one frame per push (this runner
+    allocates its small feature vector per frame)."""
 
     def __init__(self, est: TrainedEstimator) -> None:
         assert est.classical is not None
         self.model = est.classical
+        self.norm = _Normaliser(est)
         self.state = self.model.start(np.zeros(est.config.n_sensors))
 
     def reset(self) -> None:
         self.state = self.model.start(np.zeros(self.state.play.shape[0]))
 
-    def step(self, z: np.ndarray, first: bool) -> np.ndarray:
+    def step(self, x: np.ndarray, first: bool) -> np.ndarray:
+        z = self.norm.inputs(x)
         if first:
             self.state = self.model.start(z)
-        return self.model.step_features(z, self.state) @ self.model.weights
+        return self.norm.outputs(self.model.step_features(z, self.state) @ self.model.weights)
 
 
 class _TorchRunner:
     """The torch module (eager or traced) on the window, one thread, inference mode."""
 
-    def __init__(self, est: TrainedEstimator, span: int, script: bool) -> None:
+    def __init__(self, est: TrainedEstimator, script: bool) -> None:
         import torch
 
         torch.set_num_threads(1)
         self.torch = torch
-        self.dilation = est.config.dilation
-        self.ring = _Ring(span, (est.config.n_sensors,))
+        self.norm = _Normaliser(est)
+        cfg = est.config
+        self.dilation = cfg.dilation if est.kind != "ann" else 1
+        span = 1 if est.kind == "ann" else (cfg.window - 1) * cfg.dilation + 1
+        self.ring = _Ring(span, (cfg.n_sensors,), np.float32)
         net = est.network
         assert isinstance(net, torch.nn.Module)
         net.eval()
-        example = torch.zeros(1, est.config.window, est.config.n_sensors)
         if script:
             with torch.inference_mode(), warnings.catch_warnings():
                 # the LSTM's own input-shape checks become constants: the shape is fixed here
                 warnings.simplefilter("ignore", torch.jit.TracerWarning)
-                net = torch.jit.trace(net, example)
+                # TorchScript is deprecated in torch 2.x but still works; it is benchmarked here
+                warnings.simplefilter("ignore", DeprecationWarning)
+                net = torch.jit.trace(net, torch.zeros(1, cfg.window, cfg.n_sensors))
         self.net = net
-        self.xbuf = torch.zeros(1, est.config.window, est.config.n_sensors)
+        self.xbuf = torch.zeros(1, cfg.window, cfg.n_sensors)
         self.xview = self.xbuf.numpy()
-        self.out = np.zeros(est.config.n_angles)
 
     def reset(self) -> None:
         self.ring.fill(0.0)
 
-    def step(self, z: np.ndarray, first: bool) -> np.ndarray:
+    def step(self, x: np.ndarray, first: bool) -> np.ndarray:
+        z = self.norm.inputs(x)
         if first:
             self.ring.fill(z)
         win = self.ring.add(z)[:: self.dilation]
         self.xview[0, -win.shape[0] :] = win
         with self.torch.inference_mode():
             y = self.net(self.xbuf)
-        self.out[:] = y.numpy()[0]
-        return self.out
+        return self.norm.outputs(y.numpy()[0])
 
 
-def _make_runner(est: TrainedEstimator, backend: str, span: int):
+def _make_runner(est: TrainedEstimator, backend: str):
     if backend == "numpy":
         if est.kind == "classical":
             return _ClassicalRunner(est)
         if est.kind == "ann":
             return _NumpyANNRunner(est)
-        return _NumpyRecurrentRunner(est, span)
-    return _TorchRunner(est, span, script=backend == "torchscript")
+        return _NumpyRecurrentRunner(est)
+    return _TorchRunner(est, script=backend == "torchscript")

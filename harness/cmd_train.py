@@ -133,7 +133,10 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
 @click.option("--test-fraction", type=click.FloatRange(0.0, 0.9), default=0.0,
               show_default=True, help="Score only the last fraction of each movement piece "
               "(the part `train --test-fraction` held out); 0 = whole recordings.")
-def evaluate_command(checkpoint, recordings, json_out, test_fraction):
+@click.option("--min", "min_angle", multiple=True, metavar="ANGLE=DEG",
+              help="Score only frames whose true ANGLE ≥ DEG (repeatable), e.g. "
+              "shoulder_elv=20 where the plane of elevation is observable.")
+def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle):
     """Score CHECKPOINT on RECORDING files: per-angle RMSE, MAE and max |error| (degrees),
     overall and per movement segment. Example:
 
@@ -159,7 +162,11 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction):
     blocks = [b for b in blocks if len(b)]
     if not blocks:
         raise click.ClickException("no labelled sensor frames to evaluate")
-    result = evaluate(est, blocks)
+    limits = _angle_limits(min_angle, est.target.angles)
+    try:
+        result = evaluate(est, blocks, limits)
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from None
     result["checkpoint"] = str(checkpoint)
     result["model"] = est.kind
     result["recordings"] = data.sources
@@ -169,6 +176,21 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction):
         click.echo(f"  {name}: RMSE " + ", ".join(f"{a} {v:.2f}°" for a, v in seg["rmse"].items()))
     if json_out:
         json_out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+
+
+def _angle_limits(items: tuple[str, ...], angles: tuple[str, ...]) -> dict[str, float]:
+    limits: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep or name not in angles:
+                raise ValueError
+            limits[name] = float(value)
+        except ValueError:
+            raise click.ClickException(
+                f"--min {item!r}: expected ANGLE=DEG with ANGLE one of {', '.join(angles)}"
+            ) from None
+    return limits
 
 
 @click.command("table")

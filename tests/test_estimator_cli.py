@@ -89,3 +89,18 @@ def test_table_rejects_unknown_models(files):
     line = _one_line_error(CliRunner().invoke(
         main, ["table", "--train", str(files["good"]), "--models", "ennet,gpt"]))
     assert "gpt" in line
+
+
+def test_evaluate_min_angle_filter(files):
+    out = files["dir"] / "m_min.json"
+    result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(files["good"]),
+                                       "--min", "shoulder_elv=60", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["min_angle"] == {"shoulder_elv": 60.0}
+    everything = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(files["good"])])
+    assert everything.exit_code == 0
+    assert 0 < data["frames"] < 750  # 3 s at 250 Hz, and φ spans 15..85° in the fixture
+    line = _one_line_error(CliRunner().invoke(
+        main, ["evaluate", str(files["ckpt"]), str(files["good"]), "--min", "phi>3"]))
+    assert "ANGLE=DEG" in line
