@@ -194,11 +194,17 @@ def _status(kind: str, epoch: int, loss: float, best: float, elapsed: float,
             f"elapsed {elapsed:5.0f}s, ≤{left:4.0f}s left")
 
 
-def progress_printer(stream=sys.stderr) -> Callable[[str], None]:
-    """A ``progress`` callback that redraws one status line on ``stream``."""
+def progress_printer(stream=sys.stderr, log_every_s: float = 10.0) -> Callable[[str], None]:
+    """A ``progress`` callback: redraws one status line on a terminal; on a pipe or log file
+    writes a line at most every ``log_every_s`` seconds (and every final "stopped" line)."""
+    last = [-float("inf")]
 
     def show(line: str) -> None:
-        stream.write("\r\x1b[2K" + line if stream.isatty() else line + "\n")
+        if stream.isatty():
+            stream.write("\r\x1b[2K" + line + ("\n" if "stopped" in line else ""))
+        elif "stopped" in line or time.monotonic() - last[0] >= log_every_s:
+            last[0] = time.monotonic()
+            stream.write(line + "\n")
         stream.flush()
 
     return show

@@ -1,0 +1,39 @@
+"""The committed reference models (fixtures/models/) still reach their stored accuracy on the
+held-out end of every movement of the default-protocol fixture.
+
+Tolerance: +0.05° on each stored test RMSE. Evaluation is deterministic; the margin only
+absorbs float32 summation-order differences between CPUs/BLAS builds (observed: 0.000°).
+"""
+
+from pathlib import Path
+
+import pytest
+
+from exohil.estimator.checkpoint import load_checkpoint
+from exohil.estimator.evaluation import evaluate
+from exohil.estimator.workflow import load_recordings, make_split, sha256_file
+
+ROOT = Path(__file__).resolve().parent.parent
+FIXTURE = ROOT / "fixtures" / "paper_protocol.mcap"
+MODELS = ROOT / "fixtures" / "models"
+TOLERANCE_DEG = 0.05
+
+
+@pytest.fixture(scope="module")
+def test_blocks():
+    data = load_recordings([FIXTURE])
+    return make_split(data, 0, test_fraction=0.3).test
+
+
+@pytest.mark.parametrize("kind", ["ennet", "ann"])
+def test_reference_model_accuracy(kind, test_blocks):
+    est = load_checkpoint(MODELS / f"{kind}.npz")
+    trained_on = {s["file"]: s["sha256"] for s in est.info["sources"]}
+    assert trained_on.get(FIXTURE.name) == sha256_file(FIXTURE), (
+        "fixtures/paper_protocol.mcap changed since the reference models were trained: "
+        "retrain them with the command in fixtures/models/README.md"
+    )
+    stored = est.info["metrics"]["test"]["rmse"]
+    measured = evaluate(est, test_blocks)["rmse"]
+    for angle, value in stored.items():
+        assert measured[angle] <= value + TOLERANCE_DEG, (angle, measured[angle], value)
