@@ -48,9 +48,10 @@ class ArduinoEmulator:
         t_us0: device timestamp of the first frame, µs (wire value is mod 2**32).
         autostart: start streaming as soon as the port exists; otherwise wait for
             :meth:`begin` (tests use it to start once their reader is attached).
-        attach_grace_s: after a host opens the port, frames of this long are not handed over
-            (the host is still configuring the port and flushes its input; the real device
-            likewise only talks once the host's port is up).
+        attach_grace_s: after a host opens the port, frames are not handed over until it has
+            flushed its input queue (pyserial does at the end of ``open()``; anything written
+            before that flush is discarded by the host), or for clients that never flush, until
+            this many seconds have passed. Such frames are logged ``not_read``.
         drain_timeout_s: at a disconnect, how long to wait for the host to read what was
             already written before the port vanishes (bytes still unread then are logged
             lost); also how long the end of the stream waits for the host to catch up.
@@ -69,8 +70,8 @@ class ArduinoEmulator:
         seq0: int = 0,
         t_us0: int = 0,
         autostart: bool = True,
-        attach_grace_s: float = 0.05,
-        drain_timeout_s: float = 0.5,
+        attach_grace_s: float = 0.5,
+        drain_timeout_s: float = 1.0,
         record_send_times: bool = False,
     ) -> None:
         values = np.asarray(values_mm, dtype=np.float64)
@@ -101,6 +102,7 @@ class ArduinoEmulator:
         self.bytes_written = 0
         self.error: BaseException | None = None
         self._attached_at: float | None = None
+        self._host_ready = False
         self._ready = threading.Event()
         self._go = threading.Event()
         self._stop = threading.Event()
@@ -224,7 +226,8 @@ class ArduinoEmulator:
             self._log_fault(self.seq0, "effect", name=effect.name, params=vars(effect).copy())
         held: list[tuple[int, bytes]] = []
         stall_window: int | None = None
-        self._attached_at = -math.inf if self._port.host_attached() else None
+        self._host_ready = self._port.host_attached()  # attached before streaming: settled
+        self._attached_at = -math.inf if self._host_ready else None
         period = 1.0 / self.rate_hz
         t0 = time.perf_counter()
         k = 0
@@ -248,6 +251,7 @@ class ArduinoEmulator:
             if not self._port.connected:
                 self._port.connect()
                 self._attached_at = None
+                self._host_ready = False
             row = k % self._raw.shape[0]
             if dropped is not None or not self._keep[row]:
                 details = dropped if dropped is not None else {"effect": "dropout"}
@@ -306,14 +310,18 @@ class ArduinoEmulator:
                 if lost is not None:
                     self._log_fault(lost, "not_read", reason="host closed the port")
             self._attached_at = None
+            self._host_ready = False
             self._log_fault(seq, "not_read", reason="no host")
             return
         now = time.perf_counter()
         if self._attached_at is None:
             self._attached_at = now
-        if now < self._attached_at + self.attach_grace_s:
-            self._log_fault(seq, "not_read", reason="host attaching")
-            return
+        flushed = self._port.host_flushed()
+        if not self._host_ready:
+            self._host_ready = flushed or now >= self._attached_at + self.attach_grace_s
+            if not self._host_ready:
+                self._log_fault(seq, "not_read", reason="host attaching")
+                return
         if not self._port.send(data, seq):
             self._log_fault(seq, "not_read", reason="buffer full")
             return

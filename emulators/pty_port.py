@@ -6,6 +6,9 @@ The host opens ``path``, a stable symlink to the current pty slave (like udev's
 * host presence: while no process has the slave open, ``poll()`` on the master reports
   POLLHUP, so the emulator knows when nobody is listening (and does not write: a device's
   frames are lost when no host reads them, they do not pile up for a later reader);
+* host readiness: the master is in packet mode (TIOCPKT), so when the host flushes its input
+  queue (pyserial does so at the end of ``open()``) the master reads a TIOCPKT_FLUSHREAD
+  status byte; frames written before that flush would be discarded by the host;
 * never blocking: the master is non-blocking; a write that does not fit keeps its tail in a
   small pending buffer that is flushed first next time, and while it is not flushed new frames
   are refused (the caller logs them as "not read");
@@ -56,6 +59,7 @@ class VirtualSerialPort:
         self._slave_name = os.ttyname(slave)
         os.close(slave)  # only the host holds the slave: POLLHUP on the master means "no host"
         os.set_blocking(master, False)
+        fcntl.ioctl(master, termios.TIOCPKT, struct.pack("i", 1))
         self._master = master
         self._poll = select.poll()
         self._poll.register(master, select.POLLHUP)
@@ -70,8 +74,27 @@ class VirtualSerialPort:
             return False
         return not any(ev & select.POLLHUP for _, ev in self._poll.poll(0))
 
+    def host_flushed(self) -> bool:
+        """Consume what the host sent (packet mode); True when it flushed its input queue
+        since the last call. Bytes the host wrote to the device are discarded."""
+        flushed = False
+        for _ in range(64):
+            try:
+                packet = os.read(self._master, 4096) if self._master is not None else b""
+            except (BlockingIOError, OSError):  # EAGAIN: nothing; EIO: no host
+                break
+            if not packet:
+                break
+            flushed = flushed or bool(packet[0] & termios.TIOCPKT_FLUSHREAD)
+        return flushed
+
     def unread_bytes(self) -> int:
-        """Bytes written that the host has not read yet (slave input queue), 0 without a host."""
+        """Bytes written that the host has not read yet, 0 without a host.
+
+        Polling the slave first makes the kernel move bytes still waiting in the tty flip
+        buffer into the line discipline (n_tty_poll flushes the buffer work), so FIONREAD
+        counts them too (up to the line discipline's 4 KiB; more than that is "not drained"
+        anyway)."""
         if self._master is None or not self.host_attached():
             return 0
         try:
@@ -79,14 +102,15 @@ class VirtualSerialPort:
         except OSError:
             return 0
         try:
+            select.select([fd], [], [], 0)
             buf = fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0")
             return int(struct.unpack("I", buf)[0])
         finally:
             os.close(fd)
 
-    def drain(self, timeout_s: float, settle_s: float = 0.002) -> bool:
-        """Wait until the host has read everything written (stable for ``settle_s``), at most
-        ``timeout_s``; True when drained."""
+    def drain(self, timeout_s: float, settle_s: float = 0.005) -> bool:
+        """Wait until the host has read everything written (no unread byte for ``settle_s``),
+        at most ``timeout_s``; True when drained."""
         self.flush_pending()
         deadline = time.perf_counter() + timeout_s
         empty_since: float | None = None

@@ -61,7 +61,7 @@ def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None
     """Stream RECORDING's sensor frames (wire protocol v1) from a software Arduino on a pty.
 
     The first line of stdout is the device path to open (a stable link that survives
-    emulated disconnects); open it with any serial client (pyserial, the harness)...
+    emulated disconnects); open it with any serial client (pyserial, the harness).
     Frames are paced on absolute deadlines; progress and a fault summary go to stderr.
     Stop with Ctrl-C.
 
