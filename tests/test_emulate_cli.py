@@ -1,0 +1,166 @@
+"""``exohil emulate`` end to end, read by an INDEPENDENT decoder written from
+docs/wire-protocol.md (its own COBS and CRC; nothing from exohil.formats.wire)."""
+
+from __future__ import annotations
+
+import os
+import select
+import struct
+import subprocess
+import sys
+import termios
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from exohil.formats.mcap_io import read_recording, write_recording
+from exohil.formats.recording import Recording, SensorStream
+from exohil.harness.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+FOREIGN = REPO.parent / "shared" / "samples" / "foreign-recording-v1.mcap"
+
+
+# ---- the independent reader (from the documentation only) ----------------------------------
+
+
+def _crc_table() -> list[int]:
+    table = []
+    for byte in range(256):
+        crc = byte << 8
+        for _ in range(8):
+            crc = (crc << 1) ^ 0x1021 if crc & 0x8000 else crc << 1
+        table.append(crc & 0xFFFF)
+    return table
+
+
+CRC_TABLE = _crc_table()
+
+
+def doc_crc(data: bytes) -> int:
+    crc = 0xFFFF
+    for byte in data:
+        crc = ((crc << 8) & 0xFFFF) ^ CRC_TABLE[(crc >> 8) ^ byte]
+    return crc
+
+
+def doc_unstuff(packet: bytes) -> bytes | None:
+    out, i = bytearray(), 0
+    while i < len(packet):
+        code = packet[i]
+        if code == 0 or i + code > len(packet):
+            return None
+        out += packet[i + 1:i + code]
+        i += code
+        if code < 0xFF and i < len(packet):
+            out.append(0)
+    return bytes(out)
+
+
+def doc_parse(packet: bytes) -> tuple[int, int, list[int]] | None:
+    """(seq, t_us, values in 0.01 mm) or None when the packet is not a valid frame."""
+    body = doc_unstuff(packet)
+    if body is None or len(body) < 12 or body[0] != 0x11:
+        return None
+    count = body[7]
+    if len(body) != 10 + 2 * count or doc_crc(body[:-2]) != int.from_bytes(body[-2:], "little"):
+        return None
+    seq, t_us = struct.unpack_from("<HI", body, 1)
+    return seq, t_us, list(struct.unpack_from(f"<{count}H", body, 8))
+
+
+def test_independent_reader_agrees_with_the_documented_check_value() -> None:
+    assert doc_crc(b"123456789") == 0x29B1
+    assert doc_parse(bytes.fromhex("02 11 01 01 01 01 01 0a 04 10 27 da 61 49 75 5f ea 02 4a")) \
+        == (0, 0, [10000, 25050, 30025, 59999])
+
+
+# ---- streaming ------------------------------------------------------------------------------
+
+
+def _synthetic_recording(path: Path) -> Path:
+    n = 3000
+    k = np.arange(n)
+    values = 300.0 + 150.0 * np.sin(2 * np.pi * k[:, None] / 500.0 + np.arange(4)[None, :])
+    rec = Recording(("F", "SF", "SR", "R"), SensorStream(k, k / 250.0, values))
+    write_recording(path, rec)
+    return path
+
+
+@pytest.fixture(params=["synthetic", "foreign"])
+def recording_path(request, tmp_path: Path) -> Path:
+    if request.param == "foreign":
+        if not FOREIGN.is_file():
+            pytest.skip("shared/samples/foreign-recording-v1.mcap is absent")
+        return FOREIGN
+    return _synthetic_recording(tmp_path / "synthetic.mcap")
+
+
+def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Path) -> None:
+    rate, duration = 2000, 2.0
+    generated = int(rate * duration)
+    proc = subprocess.Popen(
+        [str(Path(sys.executable).parent / "exohil"), "emulate", str(recording_path),
+         "--rate", str(rate), "--duration", str(duration), "--loop"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        port = proc.stdout.readline().strip()
+        assert port, proc.stderr.read()
+        fd = os.open(port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        termios.tcflush(fd, termios.TCIFLUSH)  # like pyserial's open(): "ready, from now on"
+        stream = bytearray()
+        while True:  # until the emulator exits and its port vanishes (EIO)
+            select.select([fd], [], [], 5.0)
+            try:
+                chunk = os.read(fd, 65536)
+            except BlockingIOError:
+                assert proc.poll() is None, "emulator exited but the port did not vanish"
+                continue
+            except OSError:
+                break
+            if not chunk:
+                break
+            stream += chunk
+        os.close(fd)
+        assert proc.wait(timeout=30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    packets = bytes(stream).split(b"\x00")[:-1]
+    frames = [f for f in map(doc_parse, packets) if f is not None]
+    assert frames, "no valid frame"
+    seqs = [seq for seq, _, _ in frames]
+    assert seqs == sorted(seqs) and seqs[-1] == generated - 1
+    span = generated - seqs[0]  # every frame sent after the reader was ready
+    assert len(frames) >= 0.999 * span, f"decoded {len(frames)} of {span}"
+    assert len(frames) == len(packets)  # no invalid packet at all without faults
+    expected = np.rint(read_recording(recording_path).sensors.values / 0.01).astype(int)
+    for seq, t_us, values in frames:
+        assert t_us == seq * 500  # 2 kHz device clock, µs
+        assert values == expected[seq % len(expected)].tolist()
+
+
+# ---- bad input -------------------------------------------------------------------------------
+
+
+def test_emulate_rejects_bad_input_with_one_line(tmp_path: Path) -> None:
+    runner = CliRunner()
+    good = _synthetic_recording(tmp_path / "ok.mcap")
+    not_mcap = tmp_path / "junk.mcap"
+    not_mcap.write_bytes(b"not an mcap file")
+    cases = [
+        ["emulate", str(tmp_path / "missing.mcap")],
+        ["emulate", str(not_mcap)],
+        ["emulate", str(good), "--faults", "warp:speed=9"],
+        ["emulate", str(good), "--faults", "drop:rate=7"],
+        ["emulate", str(good), "--rate", "0"],
+    ]
+    for args in cases:
+        result = runner.invoke(main, args)
+        assert result.exit_code != 0, args
+        assert result.exception is None or isinstance(result.exception, SystemExit), args
+        lines = [line for line in result.output.splitlines() if line.startswith("Error")]
+        assert len(lines) == 1, (args, result.output)
