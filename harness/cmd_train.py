@@ -98,6 +98,7 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     --val-fraction of each movement segment of each recording (contiguous time blocks; no window
     crosses a boundary). Progress goes to stderr. Example:
 
+    \b
         exohil train --model ennet fixtures/paper_protocol.mcap --out ennet.npz
     """
     from exohil.estimator.checkpoint import save_checkpoint
@@ -140,6 +141,7 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     """Score CHECKPOINT on RECORDING files: per-angle RMSE, MAE and max |error| (degrees),
     overall and per movement segment. Example:
 
+    \b
         exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
     """
     from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
@@ -223,6 +225,7 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
     Within recordings (default): each movement piece → first 70% train (its last 15% =
     validation), last 30% test. Across recordings: --test files. Example:
 
+    \b
         exohil table --train fixtures/paper_protocol.mcap --out docs/results.md --section paper
     """
     from exohil.estimator.checkpoint import save_checkpoint
