@@ -1,3 +1,3 @@
-"""exohil: hardware-in-the-loop harness and conformance suite for a soft shoulder sensing exosuit."""
+"""exohil: hardware-in-the-loop harness and conformance suite for a soft shoulder exosuit."""
 
 __version__ = "0.1.0"
