@@ -84,14 +84,13 @@ def demo(recording: Path, model: Path, seconds: float, faults: str | None, seed:
         sinks.append(lambda frame, angles: sink.accept(frame.device_time_s,
                                                        angles[angle_index[0]],
                                                        angles[angle_index[1]]))
-    writer = None
+    recorder = None
     if record_path is not None:
-        from exohil.formats.mcap_io import RecordingWriter
+        from exohil.harness.recorder import RecorderSink
 
-        writer = RecordingWriter(record_path, rec.sensor_names, sensor_units=rec.sensor_units,
-                                 metadata={"generator": "exohil demo", "source": str(recording)})
-        sinks.append(lambda frame, angles: writer.add_sensor_frame(
-            frame.seq, frame.device_time_s, frame.values_mm))
+        recorder = RecorderSink(record_path, rec.sensor_names, sensor_units=rec.sensor_units,
+                                metadata={"generator": "exohil demo", "source": str(recording)})
+        sinks.append(recorder)
 
     click.echo(f"exohil demo: {recording.name} → pty → acquisition → {est.kind} "
                f"({backend}) → NAO, {seconds:g} s", err=True)
@@ -105,8 +104,8 @@ def demo(recording: Path, model: Path, seconds: float, faults: str | None, seed:
     except ValueError as err:
         raise click.ClickException(str(err)) from None
     finally:
-        if writer is not None:
-            writer.close()
+        if recorder is not None:
+            recorder.close()
     if run.frames == 0:
         raise click.ClickException("no frame arrived from the emulated device")
 

@@ -82,3 +82,16 @@ def test_percentiles_in_microseconds():
     p = percentiles_us(ns)
     assert p["max_us"] == 100.0 and p["p50_us"] == 50.5
     assert np.isnan(percentiles_us(np.array([], dtype=np.int64))["p50_us"])
+
+
+def test_recorder_sink_writes_every_frame_it_was_given(tmp_path):
+    from exohil.formats.mcap_io import read_recording
+    from exohil.harness.recorder import RecorderSink
+
+    path = tmp_path / "session.mcap"
+    with RecorderSink(path, ("F", "SF", "SR", "R"), metadata={"generator": "test"}) as recorder:
+        run = Pipeline(FakeSource(frames(300)), SumEstimator(), [recorder]).run(max_frames=300)
+    rec = read_recording(path)
+    assert run.frames == 300 and recorder.frames_written == 300
+    assert np.array_equal(rec.sensors.seq, np.arange(300))
+    assert np.allclose(rec.sensors.values[:, 0], np.arange(300))
