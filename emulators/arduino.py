@@ -24,7 +24,7 @@ import numpy as np
 from exohil.emulators.effects import Signal
 from exohil.emulators.fault_spec import FaultPlan, fault_plan
 from exohil.emulators.faults import FaultRecord, FrameFaultInjector
-from exohil.emulators.pacing import sleep_until
+from exohil.emulators.pacing import SPIN_S, request_realtime, sleep_until
 from exohil.emulators.pty_port import VirtualSerialPort
 from exohil.formats.recording import Recording
 from exohil.formats.wire import MM_PER_LSB, SEQ_MODULUS, TIME_MODULUS_US, WireFrame, encode_frame
@@ -56,6 +56,9 @@ class ArduinoEmulator:
             already written before the port vanishes (bytes still unread then are logged
             lost); also how long the end of the stream waits for the host to catch up.
         record_send_times: keep (seq, perf_counter_ns) of every write (benchmarks).
+        spin_s: pacing spins on the clock for the last ``spin_s`` seconds before each deadline.
+        realtime: run the emulator thread under SCHED_FIFO (needs CAP_SYS_NICE; when refused,
+            :attr:`realtime_error` says why and the thread keeps its normal policy).
     """
 
     def __init__(
@@ -73,6 +76,8 @@ class ArduinoEmulator:
         attach_grace_s: float = 0.5,
         drain_timeout_s: float = 1.0,
         record_send_times: bool = False,
+        spin_s: float = SPIN_S,
+        realtime: bool = False,
     ) -> None:
         values = np.asarray(values_mm, dtype=np.float64)
         if values.ndim != 2 or values.shape[0] == 0 or not 1 <= values.shape[1] <= 16:
@@ -101,6 +106,9 @@ class ArduinoEmulator:
         self.frames_written = 0
         self.bytes_written = 0
         self.error: BaseException | None = None
+        self.realtime = realtime
+        self.spin_s = spin_s
+        self.realtime_error: str | None = None
         self._attached_at: float | None = None
         self._host_ready = False
         self._ready = threading.Event()
@@ -199,6 +207,8 @@ class ArduinoEmulator:
         self._log.append(FaultRecord(seq=seq, kind=kind, details=details))
 
     def _run(self) -> None:
+        if self.realtime:
+            self.realtime_error = request_realtime()
         try:
             self._port.connect()
         except BaseException as exc:  # reported by start()
@@ -234,7 +244,7 @@ class ArduinoEmulator:
         while self.n_frames is None or k < self.n_frames:
             if self._stop.is_set():
                 return
-            sleep_until(t0 + k * period)
+            sleep_until(t0 + k * period, self.spin_s)
             seq = self.seq0 + k
             self.frames_generated = k + 1
             outage = injector.in_outage(k)

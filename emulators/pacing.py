@@ -8,15 +8,33 @@ late frame does not shift the ones after it, so the mean rate does not drift.
 
 from __future__ import annotations
 
+import os
 import time
 
 SPIN_S = 0.0003
 
 
-def sleep_until(deadline_s: float) -> None:
-    """Return at (or just after) ``deadline_s`` on the ``time.perf_counter()`` clock."""
+def sleep_until(deadline_s: float, spin_s: float = SPIN_S) -> None:
+    """Return at (or just after) ``deadline_s`` on the ``time.perf_counter()`` clock, spinning
+    for the last ``spin_s`` seconds (a longer spin absorbs later wake-ups, at a CPU cost)."""
     remaining = deadline_s - time.perf_counter()
-    if remaining > SPIN_S:
-        time.sleep(remaining - SPIN_S)
+    if remaining > spin_s:
+        time.sleep(remaining - spin_s)
     while time.perf_counter() < deadline_s:
         time.sleep(0)
+
+
+REALTIME_PRIORITY = 10
+
+
+def request_realtime(priority: int = REALTIME_PRIORITY) -> str | None:
+    """Put the calling thread under SCHED_FIFO at ``priority`` (Linux; needs CAP_SYS_NICE).
+
+    Returns None on success, else why not (the thread keeps its normal policy). Opt-in only:
+    a SCHED_FIFO thread outranks every normal task on a shared machine.
+    """
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (AttributeError, OSError) as exc:
+        return f"SCHED_FIFO unavailable: {exc}"
+    return None

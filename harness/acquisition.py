@@ -26,6 +26,7 @@ from collections.abc import Callable
 
 import serial
 
+from exohil.emulators.pacing import request_realtime
 from exohil.harness.frame_buffer import FrameBuffer
 from exohil.harness.frame_source import Frame, LinkStats
 from exohil.harness.link_decoder import StreamDecoder
@@ -48,6 +49,8 @@ class SerialFrameSource:
         read_timeout_s: longest single blocking read, s (bounds stop latency).
         backoff_initial_s / backoff_max_s: reconnect delay, doubling up to the cap, s.
         opener: how to open ``url`` (tests inject fakes); default :func:`open_serial_url`.
+        realtime: run the reader thread under SCHED_FIFO (needs CAP_SYS_NICE; when refused,
+            :attr:`realtime_error` says why).
     """
 
     def __init__(
@@ -60,6 +63,7 @@ class SerialFrameSource:
         backoff_initial_s: float = 0.01,
         backoff_max_s: float = 0.5,
         opener: Opener = open_serial_url,
+        realtime: bool = False,
     ) -> None:
         self.url = url
         self._read_timeout_s = read_timeout_s
@@ -74,6 +78,8 @@ class SerialFrameSource:
         self._connected = threading.Event()
         self._thread: threading.Thread | None = None
         self.last_error: str | None = None
+        self.realtime = realtime
+        self.realtime_error: str | None = None
 
     # ---- FrameSource -----------------------------------------------------------------
     def start(self) -> None:
@@ -117,6 +123,8 @@ class SerialFrameSource:
 
     # ---- reader thread -----------------------------------------------------------------
     def _run(self) -> None:
+        if self.realtime:
+            self.realtime_error = request_realtime()
         backoff = self._backoff_initial_s
         opened_before = False
         while not self._stop.is_set():

@@ -54,10 +54,18 @@ def _raise_interrupt(signum: int, frame: object) -> None:
 @click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Stop after this many seconds of device time (default: end of the "
                    "recording, or never with --loop).")
+@click.option("--spin-ms", "spin_ms", type=click.FloatRange(min=0, max=100), default=0.3,
+              show_default=True,
+              help="Spin on the clock for this long before each deadline (absorbs late "
+                   "wake-ups on a loaded machine, costs CPU).")
+@click.option("--realtime", is_flag=True,
+              help="Pace under SCHED_FIFO (Linux, needs CAP_SYS_NICE): tighter timing on a "
+                   "loaded machine; falls back with a warning when refused.")
 @click.option("--fault-log", "fault_log", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Write every injected fault as JSON lines here on exit.")
 def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None, seed: int,
-                    duration: float | None, fault_log: Path | None) -> None:
+                    duration: float | None, spin_ms: float, realtime: bool,
+                    fault_log: Path | None) -> None:
     """Stream RECORDING's sensor frames (wire protocol v1) from a software Arduino on a pty.
 
     The first line of stdout is the device path to open (a stable link that survives
@@ -80,7 +88,8 @@ def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None
         raise click.BadParameter(str(exc), param_hint="--faults") from exc
     try:
         emulator = ArduinoEmulator(values, rate_hz=rate, loop=loop, duration_s=duration,
-                                   faults=plan, seed=seed)
+                                   faults=plan, seed=seed, spin_s=spin_ms / 1000.0,
+                                   realtime=realtime)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
     signal.signal(signal.SIGTERM, _raise_interrupt)
@@ -91,6 +100,8 @@ def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None
     try:
         click.echo(emulator.port)
         sys.stdout.flush()
+        if emulator.realtime_error:
+            click.echo(f"warning: {emulator.realtime_error}; pacing without it", err=True)
         if emulator.clipped_values:
             click.echo(f"warning: {emulator.clipped_values} values outside 0..655.35 mm "
                        "were clipped", err=True)
