@@ -169,3 +169,18 @@ def test_stop_while_the_port_vanished() -> None:
         assert not source.connected
         source.stop(timeout_s=2.0)
         assert not source.alive
+
+
+def test_host_may_close_and_reopen_while_the_emulator_streams() -> None:
+    values = np.full((100, 4), 250.0)
+    with ArduinoEmulator(values, rate_hz=1000.0, loop=True) as emulator:
+        last_seqs = []
+        for _ in range(2):
+            with SerialFrameSource(emulator.port) as source:
+                frame = source.get(timeout=WAIT_S)
+                assert frame is not None
+                last_seqs.append(emulator.frames_generated)
+        assert last_seqs[1] > last_seqs[0]
+        assert emulator.error is None and not emulator.finished
+        reasons = {r.details.get("reason") for r in emulator.fault_log if r.kind == "not_read"}
+        assert reasons <= {"no host", "host attaching", "host closed the port"}

@@ -8,6 +8,8 @@ the host has read everything; the reader waits for the last frame it must receiv
 
 from __future__ import annotations
 
+import os
+import termios
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,8 +20,10 @@ from hypothesis import strategies as st
 from exohil.emulators.arduino import ArduinoEmulator
 from exohil.emulators.fault_spec import load_fault_file, parse_fault_spec, plan_from_dicts
 from exohil.emulators.faults import LOSING_KINDS, Corrupt, Disconnect, Drop, FaultRecord, Stall
+from exohil.formats.wire import SEQ_MODULUS
 from exohil.harness.acquisition import SerialFrameSource
 from exohil.harness.frame_source import Frame, LinkStats
+from exohil.harness.link_decoder import StreamDecoder
 
 RATE_HZ = 2000.0
 WAIT_S = 30.0  # fail-safe bound on event waits only; never a pacing assumption
@@ -241,3 +245,37 @@ def test_fault_log_is_seeded_and_adding_a_fault_does_not_reseed_others() -> None
                                  seed=9)
     drops = [r.seq for r in base if r.kind == "drop"]
     assert drops and drops == [r.seq for r in with_truncate if r.kind == "drop"]
+
+
+def test_a_host_that_does_not_read_fills_the_buffer_and_frames_are_logged_not_read() -> None:
+    """The pty fills up (~20 KiB); the emulator neither blocks nor dies, it logs the frames it
+    could not hand over, and everything it did hand over reaches the host intact later."""
+    n = 3000
+    emulator = ArduinoEmulator(_values(n), rate_hz=20000.0, autostart=False, drain_timeout_s=0.05)
+    with emulator:
+        fd = os.open(emulator.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            termios.tcflush(fd, termios.TCIFLUSH)  # "ready", then read nothing while streaming
+            emulator.begin()
+            assert emulator.wait_finished(WAIT_S)
+            log = emulator.fault_log
+            full = [r.seq for r in log if r.kind == "not_read"]
+            assert full and all(r.details["reason"] == "buffer full"
+                                for r in log if r.kind == "not_read")
+            expected = [s for s in range(n) if s not in set(full)]
+            stats = LinkStats()
+            decoder = StreamDecoder(stats)
+            got: list[int] = []
+            for _ in range(100_000):  # bounded; ends once the last written frame is decoded
+                if got and got[-1] == expected[-1]:
+                    break
+                try:
+                    chunk = os.read(fd, 65536)
+                except BlockingIOError:
+                    os.sched_yield()
+                    continue
+                got += [f.seq % SEQ_MODULUS for f in decoder.feed(chunk, host_ns=0)]
+        finally:
+            os.close(fd)
+    assert got == expected
+    assert stats.crc_errors == 0 and stats.decode_errors == 0
