@@ -11,7 +11,7 @@ times are seconds on the sensor clock.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -56,7 +56,6 @@ class Block:
     t: np.ndarray
     segment: np.ndarray
     source: str = ""
-    extra: dict[str, str] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -69,7 +68,6 @@ class Block:
             self.t[start:stop],
             self.segment[start:stop],
             self.source,
-            dict(self.extra),
         )
 
 
