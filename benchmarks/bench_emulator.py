@@ -72,12 +72,14 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=250.0, help="frame rate (Hz)")
     parser.add_argument("--spin-ms", type=float, default=0.3,
                         help="emulator's spin before each deadline (ms)")
+    parser.add_argument("--read-timeout-ms", type=float, default=1.0,
+                        help="reader's longest blocking read (ms); each return re-polls the tty")
     parser.add_argument("--realtime", action="store_true",
                         help="emulator and reader threads under SCHED_FIFO (CAP_SYS_NICE)")
     args = parser.parse_args()
     print(f"machine: {machine()}")
-    print(f"options: rate {args.rate:g} Hz, spin {args.spin_ms:g} ms, "
-          f"SCHED_FIFO {'requested' if args.realtime else 'no'}")
+    print(f"options: rate {args.rate:g} Hz, spin {args.spin_ms:g} ms, read timeout "
+          f"{args.read_timeout_ms:g} ms, SCHED_FIFO {'requested' if args.realtime else 'no'}")
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
     parent, child = mp.get_context("spawn").Pipe()
@@ -87,7 +89,8 @@ def main() -> None:
     process.start()
     port = parent.recv()
     received: list[tuple[int, int]] = []
-    with SerialFrameSource(port, buffer_frames=1 << 16, realtime=args.realtime) as source:
+    with SerialFrameSource(port, buffer_frames=1 << 16, realtime=args.realtime,
+                           read_timeout_s=args.read_timeout_ms / 1000.0) as source:
         if not source.wait_connected(30):
             raise SystemExit(f"could not open {port}: {source.last_error}")
         parent.send("go")

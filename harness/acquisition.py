@@ -4,7 +4,7 @@
 any pyserial URL (``serial.serial_for_url``: a pty path such as the emulator's, ``/dev/ttyACM0``,
 ``loop://``, ``socket://host:port``). The reader thread
 
-* reads what is available in chunks (``read(max(1, in_waiting))`` with a short timeout) and
+* reads what is available in chunks (``read(max(1, in_waiting))`` with a 1 ms timeout) and
   stamps each chunk with ``time.perf_counter_ns()``;
 * decodes with :class:`~exohil.harness.link_decoder.StreamDecoder` (COBS, length, CRC,
   resynchronisation, wrap-aware sequence/time unwrapping);
@@ -46,7 +46,10 @@ class SerialFrameSource:
         url: pyserial URL or device path.
         expected_sensors: reject frames with another sensor count (None: accept any).
         buffer_frames: buffer capacity; the oldest frames are discarded beyond it.
-        read_timeout_s: longest single blocking read, s (bounds stop latency).
+        read_timeout_s: longest single blocking read, s (bounds stop latency). Short on
+            purpose: each return re-polls the tty, and polling makes the kernel move bytes
+            still queued in its flip buffer, instead of waiting for a normal-priority kernel
+            worker that a loaded machine delays by milliseconds (see docs/emulator.md).
         backoff_initial_s / backoff_max_s: reconnect delay, doubling up to the cap, s.
         opener: how to open ``url`` (tests inject fakes); default :func:`open_serial_url`.
         realtime: run the reader thread under SCHED_FIFO (needs CAP_SYS_NICE; when refused,
@@ -59,7 +62,7 @@ class SerialFrameSource:
         *,
         expected_sensors: int | None = None,
         buffer_frames: int = 4096,
-        read_timeout_s: float = 0.02,
+        read_timeout_s: float = 0.001,
         backoff_initial_s: float = 0.01,
         backoff_max_s: float = 0.5,
         opener: Opener = open_serial_url,
