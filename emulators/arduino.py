@@ -37,7 +37,8 @@ class ArduinoEmulator:
     """A device that streams wire protocol v1 on a pty; a context manager (see module doc).
 
     Args:
-        values_mm: (N, S) sensor values to replay, mm (S = 1..16).
+        values_mm: (N, S) sensor values to replay, mm (S = 1..16), or a recording whose
+            sensor values (mm) to replay.
         rate_hz: frame rate (250 for the real device; tests may run several kHz).
         loop: replay the values cyclically.
         duration_s: stop after this much device time (default: end of the values, or never
@@ -63,7 +64,7 @@ class ArduinoEmulator:
 
     def __init__(
         self,
-        values_mm: np.ndarray,
+        values_mm: np.ndarray | Recording,
         *,
         rate_hz: float = 250.0,
         loop: bool = False,
@@ -79,6 +80,11 @@ class ArduinoEmulator:
         spin_s: float = SPIN_S,
         realtime: bool = False,
     ) -> None:
+        if isinstance(values_mm, Recording):
+            if values_mm.sensor_units != "mm":
+                raise ValueError(f"sensor values are in {values_mm.sensor_units!r}; the wire "
+                                 "protocol carries mm")
+            values_mm = values_mm.sensors.values
         values = np.asarray(values_mm, dtype=np.float64)
         if values.ndim != 2 or values.shape[0] == 0 or not 1 <= values.shape[1] <= 16:
             raise ValueError(f"values must be (N>0, 1..16) mm, got shape {values.shape}")
@@ -122,10 +128,7 @@ class ArduinoEmulator:
     @classmethod
     def from_recording(cls, recording: Recording, **kwargs: Any) -> ArduinoEmulator:
         """An emulator replaying ``recording``'s sensor values (mm); kwargs as ``__init__``."""
-        if recording.sensor_units != "mm":
-            raise ValueError(f"sensor values are in {recording.sensor_units!r}; the wire "
-                             "protocol carries mm")
-        return cls(recording.sensors.values, **kwargs)
+        return cls(recording, **kwargs)
 
     # ---- lifecycle -------------------------------------------------------------------
     def __enter__(self) -> ArduinoEmulator:
@@ -242,9 +245,9 @@ class ArduinoEmulator:
         t0 = time.perf_counter()
         k = 0
         while self.n_frames is None or k < self.n_frames:
+            sleep_until(t0 + k * period, self.spin_s, self._stop)
             if self._stop.is_set():
                 return
-            sleep_until(t0 + k * period, self.spin_s)
             seq = self.seq0 + k
             self.frames_generated = k + 1
             outage = injector.in_outage(k)

@@ -21,7 +21,6 @@ This module is pure: encoding, decoding and validation only; no I/O, threads or 
 from __future__ import annotations
 
 import struct
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -181,12 +180,3 @@ def decode_packet(packet: bytes, expected_sensors: int | None = None) -> WireFra
     if len(packet) > MAX_PACKET_SIZE:
         raise FrameLengthError(f"packet of {len(packet)} bytes is longer than any frame")
     return unpack_body(cobs_decode(packet), expected_sensors)
-
-
-def mm_to_raw(values_mm: Sequence[float] | np.ndarray) -> tuple[int, ...]:
-    """Quantise mm to 0.01 mm wire units (round half to even); raises ValueError when out of
-    the representable 0..655.35 mm range."""
-    raw = np.rint(np.asarray(values_mm, dtype=np.float64) / MM_PER_LSB)
-    if raw.size and (raw.min() < 0 or raw.max() > 0xFFFF or not np.all(np.isfinite(raw))):
-        raise ValueError("sensor value outside 0..655.35 mm")
-    return tuple(int(v) for v in raw)

@@ -10,6 +10,7 @@ import pytest
 import serial
 
 from exohil.emulators.arduino import ArduinoEmulator
+from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.wire import WireFrame, encode_frame
 from exohil.harness.acquisition import SerialFrameSource
 from exohil.harness.frame_buffer import FrameBuffer
@@ -184,3 +185,14 @@ def test_host_may_close_and_reopen_while_the_emulator_streams() -> None:
         assert emulator.error is None and not emulator.finished
         reasons = {r.details.get("reason") for r in emulator.fault_log if r.kind == "not_read"}
         assert reasons <= {"no host", "host attaching", "host closed the port"}
+
+
+def test_emulator_takes_a_recording_and_stops_between_slow_frames() -> None:
+    k = np.arange(5)
+    rec = Recording(("F", "SF", "SR", "R"), SensorStream(k, k / 250.0, np.full((5, 4), 123.45)))
+    emulator = ArduinoEmulator(rec, rate_hz=0.01)  # next frame due in 100 s
+    emulator.start()
+    emulator.stop(timeout_s=5.0)  # wakes the pacing wait
+    assert emulator.finished and emulator.error is None
+    assert emulator.frames_generated <= 1  # frame 0 is due at once, frame 1 never came
+    np.testing.assert_allclose(emulator.wire_values_mm, 123.45)

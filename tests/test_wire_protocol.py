@@ -19,7 +19,6 @@ from exohil.formats.wire import (
     crc16_ccitt_false,
     decode_packet,
     encode_frame,
-    mm_to_raw,
     pack_body,
 )
 from exohil.harness.frame_source import LinkStats
@@ -102,14 +101,6 @@ def test_decoder_rejects_bad_crc_length_type_and_cobs() -> None:
         decode_packet(cobs_encode(body[:5]))
     with pytest.raises(CobsError):
         decode_packet(b"\x09\x11\x01")  # code byte points past the end
-
-
-def test_mm_to_raw_quantises_and_rejects_out_of_range() -> None:
-    assert mm_to_raw([100.0, 0.004, 655.35]) == (10000, 0, 65535)
-    with pytest.raises(ValueError):
-        mm_to_raw([655.36])
-    with pytest.raises(ValueError):
-        mm_to_raw([-0.01])
 
 
 def test_encoder_rejects_out_of_range_fields() -> None:
