@@ -370,7 +370,11 @@ class Dropout:
         while lengths.sum() < n:  # alternate good/bad runs until they cover the series
             good = rng.geometric(1.0 / mean_good, size=pairs) if mean_good > 1 else np.ones(pairs)
             bad = rng.geometric(1.0 / mean_bad, size=pairs)
-            lengths = np.concatenate([lengths, np.column_stack([good, bad]).ravel()])
+            # A run longer than the series counts as the whole series: the cap keeps a rare
+            # event (tiny rate, runs of ~1e12 frames or numpy's saturated int64) from asking
+            # np.repeat for terabytes.
+            runs = np.minimum(np.column_stack([good, bad]).ravel(), n)
+            lengths = np.concatenate([lengths, runs])
         start_bad = rng.random() < self.rate
         states = np.resize(np.array([start_bad, not start_bad]), lengths.shape[0])
         kept = ~np.repeat(states, lengths.astype(np.int64))[:n]

@@ -283,3 +283,11 @@ def test_bad_effect_dicts_are_rejected_clearly(d, message):
 def test_per_sensor_list_of_the_wrong_length_is_rejected():
     with pytest.raises(ValueError, match="list of 2 values"):
         Noise(sigma_mm=[0.1, 0.2, 0.3]).apply(wave_signal(), rng())
+
+
+def test_dropout_with_a_vanishing_rate_neither_crashes_nor_drops():
+    t = np.arange(5000) / 250.0
+    signal = Signal.from_values(t, np.zeros((5000, 4)))
+    for rate in (1e-38, 1e-12):
+        kept = Dropout(rate=rate).apply(signal, np.random.default_rng(3)).keep
+        assert kept.all()
