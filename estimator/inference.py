@@ -229,26 +229,40 @@ class _NumpyRecurrentRunner:
         if first:
             self.ring.fill(self.xp)
         window = self.ring.add(self.xp)[:: self.dilation]
-        hd = self.hidden
-        prod, tmp, expit = self.prod, self.tmp, self.expit
-        for step in range(window.shape[0]):
-            if step == 0:  # h = c = 0
-                self.gates[:] = window[0]
-            else:
-                if self.grouped:
-                    np.matmul(self.h3, self.w_hh, out=self.g3)
-                else:
-                    np.dot(self.h[0], self.w_hh[0], out=self.gates[0])
-                self.gates += window[step]
-            np.tanh(self.gg, out=self.gg)
-            expit(self.fio, out=self.fio)
-            if step == 0:
-                np.multiply(self.i, self.gg, out=self.c)
-            else:
-                np.multiply(self.fi, self.cg, out=prod)  # [f·c, i·g̃]
-                np.add(prod[:, :hd], prod[:, hd:], out=self.c)
-            np.tanh(self.c, out=tmp)
-            np.multiply(self.o, tmp, out=self.h)
+        hd, tanh, expit, multiply = self.hidden, np.tanh, self.expit, np.multiply
+        gates, gg, fio, c, cg, fi, i, o = (self.gates, self.gg, self.fio, self.c, self.cg,
+                                           self.fi, self.i, self.o)
+        h, prod, tmp = self.h, self.prod, self.tmp
+        prod_f, prod_i = prod[:, :hd], prod[:, hd:]
+        # step 0: h = c = 0, so the gates are the input projection and c = i·g̃
+        gates[:] = window[0]
+        tanh(gg, out=gg)
+        expit(fio, out=fio)
+        multiply(i, gg, out=c)
+        tanh(c, out=tmp)
+        multiply(o, tmp, out=h)
+        if self.grouped:
+            h3, g3, w_hh = self.h3, self.g3, self.w_hh
+            for xp in window[1:]:
+                np.matmul(h3, w_hh, out=g3)
+                gates += xp
+                tanh(gg, out=gg)
+                expit(fio, out=fio)
+                multiply(fi, cg, out=prod)  # [f·c, i·g̃]
+                np.add(prod_f, prod_i, out=c)
+                tanh(c, out=tmp)
+                multiply(o, tmp, out=h)
+        else:
+            h0, g0, w0 = h[0], gates[0], self.w_hh[0]
+            for xp in window[1:]:
+                np.dot(h0, w0, out=g0)
+                gates += xp
+                tanh(gg, out=gg)
+                expit(fio, out=fio)
+                multiply(fi, cg, out=prod)  # [f·c, i·g̃]
+                np.add(prod_f, prod_i, out=c)
+                tanh(c, out=tmp)
+                multiply(o, tmp, out=h)
         return self.head(self.h_aug)
 
 
