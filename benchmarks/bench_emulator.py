@@ -24,7 +24,7 @@ from collections import Counter
 
 import numpy as np
 
-from benchmarks.bench_inference import machine
+from benchmarks.machine import machine
 from exohil.harness.acquisition import SerialFrameSource
 
 SENSORS = 4

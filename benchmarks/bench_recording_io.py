@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench_inference import machine
+from benchmarks.machine import machine
 from exohil.formats.mcap_io import RecordingWriter, read_recording, write_recording
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 

@@ -7,27 +7,15 @@ Run from the repository root: ``python -m benchmarks.bench_sim [--repeats N]``.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import time
 
 import numpy as np
 
+from benchmarks.machine import machine
 from exohil.emulators.effects import Signal
 from exohil.emulators.protocols import paper_protocol
 from exohil.emulators.simulate import geometric_signal, simulate
 from exohil.emulators.suit_profile import load_default_profile
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def timings(fn, repeats: int) -> np.ndarray:
@@ -48,8 +36,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=10)
     args = parser.parse_args()
-    print(f"machine: {platform.platform()}, {cpu_model()}, {os.cpu_count()} cores, "
-          f"python {platform.python_version()}, numpy {np.__version__}")
+    print(f"machine: {machine()}; numpy {np.__version__}")
     profile = load_default_profile()
     trajectory = paper_protocol(seed=1)
     ideal = geometric_signal(trajectory, profile)
