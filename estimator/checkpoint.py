@@ -66,6 +66,8 @@ def load_checkpoint(path: str | Path) -> TrainedEstimator:
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"checkpoint not found: {path}")
+    if not zipfile.is_zipfile(path):  # np.load would read .npy or talk about pickles instead
+        raise CheckpointError(f"{path}: not an exohil estimator checkpoint (not an .npz archive)")
     try:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}

@@ -56,6 +56,14 @@ def test_corrupt_file(tmp_path, payload):
         load_checkpoint(path)
 
 
+def test_plain_npy_array_is_not_a_checkpoint(tmp_path):
+    path = tmp_path / "array.npz"
+    with path.open("wb") as fh:
+        np.save(fh, np.zeros(3))
+    with pytest.raises(CheckpointError, match="not an .npz archive"):
+        load_checkpoint(path)
+
+
 def test_truncated_checkpoint(tmp_path):
     _, _, est = _trained("ennet")
     path = tmp_path / "m.npz"
