@@ -52,8 +52,10 @@ def _ground_truth(recording, est, seq: np.ndarray) -> np.ndarray:
 @click.option("--faults", default=None, help="Fault spec for the emulator, e.g. "
               "'drop:rate=0.01;corrupt:rate=0.001' (docs/emulator.md).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for faults.")
-@click.option("--backend", type=click.Choice(["numpy", "torch", "torchscript"]),
-              default="numpy", show_default=True, help="Streaming inference backend.")
+@click.option("--backend", type=click.Choice(["auto", "numpy", "torch", "torchscript",
+                                              "onnxruntime"]),
+              default="auto", show_default=True,
+              help="Streaming inference backend; auto = onnxruntime when installed, else numpy.")
 @click.option("--record", "record_path", type=click.Path(path_type=Path), default=None,
               help="Also write the frames the host received to this recording (MCAP).")
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None,
@@ -63,7 +65,7 @@ def demo(recording: Path, model: Path, seconds: float, faults: str | None, seed:
     """Run the full chain (emulated device → acquisition → ENNet → NAO) and report."""
     from exohil.emulators.arduino import ArduinoEmulator
     from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
-    from exohil.estimator.inference import StreamingEstimator
+    from exohil.estimator.inference import StreamingEstimator, default_backend
     from exohil.formats.errors import RecordingError
     from exohil.formats.mcap_io import read_recording
     from exohil.harness.acquisition import SerialFrameSource
@@ -75,6 +77,12 @@ def demo(recording: Path, model: Path, seconds: float, faults: str | None, seed:
         est = load_checkpoint(model)
         ensure_fits(est, rec, str(recording))
     except (RecordingError, CheckpointError) as err:
+        raise click.ClickException(str(err)) from None
+    if backend == "auto":
+        backend = default_backend(est)
+    try:
+        engine = StreamingEstimator(est, backend=backend)
+    except ValueError as err:
         raise click.ClickException(str(err)) from None
     angle_index = [est.target.angles.index(a) for a in SHOULDER_ANGLES
                    if a in est.target.angles]
@@ -96,7 +104,6 @@ def demo(recording: Path, model: Path, seconds: float, faults: str | None, seed:
 
     click.echo(f"exohil demo: {recording.name} → pty → acquisition → {est.kind} "
                f"({backend}) → NAO, {seconds:g} s", err=True)
-    engine = StreamingEstimator(est, backend=backend)
     try:
         with ArduinoEmulator.from_recording(rec, faults=faults, seed=seed) as emu:
             click.echo(f"  emulated device on {emu.port}", err=True)

@@ -12,7 +12,8 @@ from exohil.estimator.training import TrainConfig, train
 CASES = [("ennet", 1), ("ennet", 3), ("lnnet", 2), ("ann", 1), ("cnn", 1), ("classical", 1)]
 SUPPORTED = {"numpy": {"ennet", "lnnet", "ann", "classical"},
              "torch": {"ennet", "lnnet", "ann", "cnn"},
-             "torchscript": {"ennet", "lnnet", "ann", "cnn"}}
+             "torchscript": {"ennet", "lnnet", "ann", "cnn"},
+             "onnxruntime": {"ennet", "lnnet", "ann", "cnn"}}
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +42,9 @@ def _train(recording, kind, dilation):
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize(("kind", "dilation"), CASES)
 def test_push_matches_batch_prediction(recording, backend, kind, dilation):
+    if backend == "onnxruntime":
+        pytest.importorskip("onnxruntime")
+        pytest.importorskip("onnx")
     est = _estimator(recording, kind, dilation)
     if kind not in SUPPORTED[backend]:
         with pytest.raises(ValueError):
@@ -65,3 +69,34 @@ def test_push_reuses_its_output_buffer(recording):
 def test_unknown_backend(recording):
     with pytest.raises(ValueError, match="unknown backend"):
         StreamingEstimator(_estimator(recording, "ann", 1), "tensorrt")
+
+
+def test_onnxruntime_push_reuses_its_output_buffer(recording):
+    pytest.importorskip("onnxruntime")
+    pytest.importorskip("onnx")
+    engine = StreamingEstimator(_estimator(recording, "ennet", 1), "onnxruntime")
+    first = engine.push(recording.sensors.values[0]).copy()
+    out = engine.push(recording.sensors.values[60])
+    assert engine.push(recording.sensors.values[61]) is out
+    assert not np.array_equal(out, first)  # the bound input really changes per frame
+
+
+def test_default_backend_prefers_onnxruntime_when_installed(recording, monkeypatch):
+    from exohil.estimator import inference
+
+    ennet, classical = (_estimator(recording, k, 1) for k in ("ennet", "classical"))
+    assert inference.default_backend(classical) == "numpy"
+    monkeypatch.setattr(inference, "onnxruntime_available", lambda: False)
+    assert inference.default_backend(ennet) == "numpy"
+    assert StreamingEstimator(ennet).backend == "numpy"
+    with pytest.raises(ValueError, match="needs the onnxruntime"):
+        StreamingEstimator(ennet, "onnxruntime")
+    monkeypatch.setattr(inference, "onnxruntime_available", lambda: True)
+    assert inference.default_backend(ennet) == "onnxruntime"
+
+
+def test_demo_backend_choices_match_the_engine():
+    from exohil.harness.cmd_demo import demo
+
+    option = next(p for p in demo.params if p.name == "backend")
+    assert set(option.type.choices) == {"auto", *BACKENDS}

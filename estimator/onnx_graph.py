@@ -1,0 +1,163 @@
+"""Hand-built ONNX graphs of the trained networks, for the ONNX Runtime streaming backend.
+
+The graph is written node by node with ``onnx.helper`` from the checkpoint's weights (no
+``torch.onnx.export``). It maps one *normalised* float32 window — z = (x − x_mean)/x_std,
+computed outside the graph in float64 — to the angles in degrees: the output de-normalisation
+(ŷ·y_std + y_mean) is folded into the last Gemm.
+
+Graph input ``window``, per kind (batch of one, frames oldest first):
+- ``ennet`` / ``lnnet``: (n, 1, S), ONNX LSTM layout (sequence, batch, input);
+- ``cnn``: (1, S, n), channels first (the torch model's ``x.transpose(1, 2)``);
+- ``ann``: (1, S), the newest frame only.
+Graph output ``angles``: (1, A) float32, degrees.
+
+Gate order: PyTorch stores LSTM gates [i, f, g, o]; ONNX wants [i, o, f, c] (c = the cell
+candidate g) and two biases Wb, Rb. LNNet's S independent one-input LSTMs become one ONNX LSTM
+of hidden size S·H with block-diagonal weights: unit s·H + k belongs to sensor s only, and the
+zero blocks add exact zeros, so the maths is unchanged and the final hidden state is already
+sensor-major, as ``GroupedLSTM`` returns it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from exohil.estimator.trained import TrainedEstimator
+
+#: ONNX opset the graphs are written for (LSTM, Gemm, Relu, Conv, Flatten, Squeeze).
+OPSET = 17
+#: IR version 8 is the one that goes with opset 17; onnx's own default may be newer than what
+#: the installed onnxruntime reads.
+IR_VERSION = 8
+INPUT_NAME = "window"
+OUTPUT_NAME = "angles"
+
+
+def input_shape(est: TrainedEstimator) -> tuple[int, ...]:
+    """Shape of the graph input ``window`` for this checkpoint (see module docstring)."""
+    cfg = est.config
+    if est.kind in ("ennet", "lnnet"):
+        return (cfg.window, 1, cfg.n_sensors)
+    if est.kind == "cnn":
+        return (1, cfg.n_sensors, cfg.window)
+    if est.kind == "ann":
+        return (1, cfg.n_sensors)
+    raise ValueError(f"no ONNX graph for model kind {est.kind!r}")
+
+
+class _Graph:
+    """Nodes and initialisers of the graph being built."""
+
+    def __init__(self) -> None:
+        self.nodes: list = []
+        self.inits: list = []
+
+    def const(self, name: str, value: np.ndarray, dtype: type = np.float32) -> str:
+        """Register an initialiser and return its name."""
+        from onnx import numpy_helper
+
+        self.inits.append(numpy_helper.from_array(np.ascontiguousarray(value, dtype), name))
+        return name
+
+    def node(self, op: str, inputs: list[str], outputs: list[str], **attrs) -> str:
+        """Append one node; returns its first output's name."""
+        from onnx import helper
+
+        self.nodes.append(helper.make_node(op, inputs, outputs, **attrs))
+        return outputs[0]
+
+
+def build_onnx_model(est: TrainedEstimator):
+    """The ONNX ``ModelProto`` of ``est``'s network; raises ValueError for the classical model."""
+    import onnx
+    from onnx import TensorProto, helper
+
+    if est.kind == "classical" or est.network is None:
+        raise ValueError("the classical model has no ONNX graph; use backend='numpy'")
+    shape = input_shape(est)
+    state = {k: v.detach().cpu().numpy().astype(np.float64)
+             for k, v in est.network.state_dict().items()}  # type: ignore[union-attr]
+    g = _Graph()
+    if est.kind in ("ennet", "lnnet"):
+        features = _lstm_nodes(est, state, g)
+    elif est.kind == "cnn":
+        features = _conv_nodes(state, g)
+    else:
+        features = INPUT_NAME
+    _head_nodes(state, est.norm.y_mean, est.norm.y_std, features, g)
+    graph = helper.make_graph(
+        g.nodes, f"exohil_{est.kind}",
+        [helper.make_tensor_value_info(INPUT_NAME, TensorProto.FLOAT, list(shape))],
+        [helper.make_tensor_value_info(OUTPUT_NAME, TensorProto.FLOAT,
+                                       [1, est.config.n_angles])],
+        initializer=g.inits)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
+                              producer_name="exohil", ir_version=IR_VERSION)
+    onnx.checker.check_model(model)
+    return model
+
+
+def _to_onnx_gates(w: np.ndarray, hidden: int) -> np.ndarray:
+    """Reorder the leading 4H axis from PyTorch [i, f, g, o] to ONNX [i, o, f, c]."""
+    i, f, g, o = (w[k * hidden : (k + 1) * hidden] for k in range(4))
+    return np.concatenate([i, o, f, g])
+
+
+def _lstm_weights(est: TrainedEstimator, state: dict) -> tuple[np.ndarray, ...]:
+    """(W (4U, S), R (4U, U), Wb (4U,), Rb (4U,)) in PyTorch gate order, U hidden units."""
+    if est.kind == "ennet":
+        return (state["lstm.weight_ih_l0"], state["lstm.weight_hh_l0"],
+                state["lstm.bias_ih_l0"], state["lstm.bias_hh_l0"])
+    # lnnet: sensor s owns units s·H … s·H + H − 1 of every gate
+    w_ih, w_hh, bias = state["lstm.weight_ih"], state["lstm.weight_hh"], state["lstm.bias"]
+    n_sensors, four_h = w_ih.shape
+    h = four_h // 4
+    units = n_sensors * h
+    w = np.zeros((4 * units, n_sensors))
+    r = np.zeros((4 * units, units))
+    b = np.zeros(4 * units)
+    for gate in range(4):
+        src = slice(gate * h, (gate + 1) * h)
+        for s in range(n_sensors):
+            rows = slice(gate * units + s * h, gate * units + (s + 1) * h)
+            w[rows, s] = w_ih[s, src]
+            r[rows, s * h : (s + 1) * h] = w_hh[s, src]
+            b[rows] = bias[s, src]
+    return w, r, b, np.zeros_like(b)
+
+
+def _lstm_nodes(est: TrainedEstimator, state: dict, g: _Graph) -> str:
+    w, r, wb, rb = _lstm_weights(est, state)
+    units = r.shape[1]
+    w, r = _to_onnx_gates(w, units), _to_onnx_gates(r, units)
+    b = np.concatenate([_to_onnx_gates(wb, units), _to_onnx_gates(rb, units)])
+    inputs = [INPUT_NAME, g.const("lstm_W", w[None]), g.const("lstm_R", r[None]),
+              g.const("lstm_B", b[None])]
+    # outputs: Y (all steps) unused; Y_h (1 direction, 1 batch, U) → (1, U)
+    g.node("LSTM", inputs, ["", "lstm_h"], hidden_size=units)
+    return g.node("Squeeze", ["lstm_h", g.const("axis0", np.array([0]), np.int64)],
+                  ["features"])
+
+
+def _conv_nodes(state: dict, g: _Graph) -> str:
+    a = INPUT_NAME
+    for k, idx in enumerate((0, 2)):  # nn.Sequential: conv, relu, conv, relu
+        w, b = state[f"conv.{idx}.weight"], state[f"conv.{idx}.bias"]
+        a = g.node("Conv", [a, g.const(f"conv{k}_W", w), g.const(f"conv{k}_B", b)],
+                   [f"conv{k}"], kernel_shape=[w.shape[2]], pads=[1, 1])
+        a = g.node("Relu", [a], [f"conv{k}_relu"])
+    return g.node("Flatten", [a], ["features"], axis=1)  # channel-major, as torch flatten(1)
+
+
+def _head_nodes(state: dict, y_mean: np.ndarray, y_std: np.ndarray, a: str, g: _Graph) -> None:
+    idx = sorted({int(k.split(".")[1]) for k in state if k.startswith("head.")})
+    last = len(idx) - 1
+    for k, i in enumerate(idx):
+        w, b = state[f"head.{i}.weight"], state[f"head.{i}.bias"]
+        if k == last:  # fold angle = ŷ·y_std + y_mean
+            w, b = w * y_std[:, None], b * y_std + y_mean
+        out = OUTPUT_NAME if k == last else f"dense{k}"
+        a = g.node("Gemm", [a, g.const(f"dense{k}_W", w), g.const(f"dense{k}_B", b)], [out],
+                   transB=1)
+        if k != last:
+            a = g.node("Relu", [a], [f"{out}_relu"])
