@@ -3,7 +3,9 @@
 Builds ENNet (hidden 64, window 10, dense 512-256-128-64-32, 4 sensors → 2 angles; random
 weights: latency does not depend on their values) — or loads ``--checkpoint`` — then times
 ``StreamingEstimator.push`` for each backend over many frames and prints p50/p99/max in µs and
-the machine. Warm-up frames are excluded.
+the machine, library versions and load average. Warm-up frames are excluded. A last
+"fixed work" row times constant NumPy work of about the same duration: its p99 shows how much
+of the tail is the machine rather than the engine.
 """
 
 from __future__ import annotations
@@ -31,6 +33,24 @@ def machine() -> str:
             f"python {platform.python_version()}")
 
 
+def load_average() -> str:
+    """The 1/5/15-minute load averages (the machine is shared; the tail depends on them)."""
+    return "/".join(f"{v:.2f}" for v in os.getloadavg())
+
+
+def library_versions() -> str:
+    """Versions of the libraries the backends run on (those installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = []
+    for name in ("numpy", "torch", "onnxruntime"):
+        try:
+            found.append(f"{name} {version(name)}")
+        except PackageNotFoundError:
+            continue
+    return ", ".join(found)
+
+
 def random_estimator(kind: str = "ennet", hidden: int = 64, window: int = 10):
     """A TrainedEstimator with random weights (for timing only)."""
     import torch
@@ -44,6 +64,22 @@ def random_estimator(kind: str = "ennet", hidden: int = 64, window: int = 10):
     norm = Normalisation(np.full(4, 500.0), np.full(4, 20.0), np.zeros(2), np.full(2, 30.0))
     return TrainedEstimator(cfg, ("F", "SF", "SR", "R"), TargetSpec("shoulder", ("a", "b")),
                             norm, network=build_model(cfg).eval())
+
+
+class FixedWork:
+    """Machine-noise baseline: the same NumPy work every call (12 float32 256×256 matrix-vector
+    products, ≈ the ENNet p50), so its tail is the machine's, not an engine's."""
+
+    def __init__(self) -> None:
+        rng = np.random.default_rng(1)
+        self.w = rng.random((256, 256), dtype=np.float32)
+        self.v = rng.random(256, dtype=np.float32)
+        self.out = np.empty(256, dtype=np.float32)
+
+    def push(self, _row: np.ndarray) -> np.ndarray:
+        for _ in range(12):
+            np.dot(self.v, self.w, out=self.out)
+        return self.out
 
 
 def time_push(engine, frames: np.ndarray, warmup: int = 200) -> np.ndarray:
@@ -72,6 +108,8 @@ def main() -> None:
     frames = est.norm.x_mean + est.norm.x_std * rng.standard_normal((args.frames + 200,
                                                                       est.config.n_sensors))
     print(f"machine: {machine()}")
+    print(f"libraries: {library_versions()}")
+    print(f"load average before: {load_average()}")
     print(f"model: {est.kind} hidden {est.config.hidden} window {est.config.window} "
           f"sensors {est.config.n_sensors} angles {est.config.n_angles}; {args.frames} frames")
     print(f"{'backend':<12} {'p50 µs':>8} {'p99 µs':>8} {'max µs':>9}")
@@ -84,6 +122,10 @@ def main() -> None:
         lat = time_push(engine, frames)
         p50, p99 = np.percentile(lat, [50, 99])
         print(f"{backend:<12} {p50:8.1f} {p99:8.1f} {lat.max():9.1f}")
+    lat = time_push(FixedWork(), frames)
+    p50, p99 = np.percentile(lat, [50, 99])
+    print(f"{'fixed work':<12} {p50:8.1f} {p99:8.1f} {lat.max():9.1f}  (noise baseline)")
+    print(f"load average after: {load_average()}")
 
 
 if __name__ == "__main__":
