@@ -5,7 +5,8 @@ weights: latency does not depend on their values) — or loads ``--checkpoint`` 
 ``StreamingEstimator.push`` for each backend over many frames and prints p50/p99/max in µs and
 the machine, library versions and load average. Warm-up frames are excluded. A last
 "fixed work" row times constant NumPy work of about the same duration: its p99 shows how much
-of the tail is the machine rather than the engine.
+of the tail is the machine rather than the engine. ``--pace-hz 250`` spaces the calls like the
+live 250 Hz stream instead of calling back to back (caches go cold between frames).
 """
 
 from __future__ import annotations
@@ -82,13 +83,25 @@ class FixedWork:
         return self.out
 
 
-def time_push(engine, frames: np.ndarray, warmup: int = 200) -> np.ndarray:
-    """Per-call latencies in µs (after ``warmup`` calls)."""
+def time_push(engine, frames: np.ndarray, warmup: int = 200, pace_hz: float = 0.0) -> np.ndarray:
+    """Per-call latencies in µs (after ``warmup`` calls).
+
+    ``pace_hz`` > 0 starts one call every 1/pace_hz s, as a live stream does (sleep, then spin
+    the last 0.5 ms for an accurate start); 0 calls back to back (caches stay warm).
+    """
     for row in frames[:warmup]:
         engine.push(row)
     out = np.empty(frames.shape[0] - warmup)
     clock = time.perf_counter_ns
+    period_ns = int(1e9 / pace_hz) if pace_hz > 0 else 0
+    due = clock()
     for i, row in enumerate(frames[warmup:]):
+        if period_ns:
+            due += period_ns
+            while clock() < due - 500_000:
+                time.sleep(0.0002)
+            while clock() < due:
+                pass
         t0 = clock()
         engine.push(row)
         out[i] = (clock() - t0) / 1000.0
@@ -102,6 +115,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=20_000, help="timed frames per backend")
     ap.add_argument("--checkpoint", help="time this checkpoint instead of a random ENNet")
+    ap.add_argument("--pace-hz", type=float, default=0.0,
+                    help="one push every 1/HZ s like a live stream (e.g. 250); default: back "
+                         "to back")
     args = ap.parse_args()
     est = load_checkpoint(args.checkpoint) if args.checkpoint else random_estimator()
     rng = np.random.default_rng(0)
@@ -111,7 +127,8 @@ def main() -> None:
     print(f"libraries: {library_versions()}")
     print(f"load average before: {load_average()}")
     print(f"model: {est.kind} hidden {est.config.hidden} window {est.config.window} "
-          f"sensors {est.config.n_sensors} angles {est.config.n_angles}; {args.frames} frames")
+          f"sensors {est.config.n_sensors} angles {est.config.n_angles}; {args.frames} frames; "
+          + (f"paced at {args.pace_hz:g} Hz" if args.pace_hz > 0 else "back to back"))
     print(f"{'backend':<12} {'p50 µs':>8} {'p99 µs':>8} {'max µs':>9}")
     for backend in BACKENDS:
         try:
@@ -119,10 +136,10 @@ def main() -> None:
         except ValueError as exc:
             print(f"{backend:<12} skipped: {exc}")
             continue
-        lat = time_push(engine, frames)
+        lat = time_push(engine, frames, pace_hz=args.pace_hz)
         p50, p99 = np.percentile(lat, [50, 99])
         print(f"{backend:<12} {p50:8.1f} {p99:8.1f} {lat.max():9.1f}")
-    lat = time_push(FixedWork(), frames)
+    lat = time_push(FixedWork(), frames, pace_hz=args.pace_hz)
     p50, p99 = np.percentile(lat, [50, 99])
     print(f"{'fixed work':<12} {p50:8.1f} {p99:8.1f} {lat.max():9.1f}  (noise baseline)")
     print(f"load average after: {load_average()}")
