@@ -110,6 +110,7 @@ def demo(recording: Path, model: Path, seconds: float, faults: str | None, seed:
             with SerialFrameSource(emu.port, expected_sensors=len(rec.sensor_names)) as source:
                 run = Pipeline(source, engine, sinks).run(duration_s=seconds, progress=_progress)
             fault_log = list(emu.fault_log)
+            clipped = emu.clipped_values
     except ValueError as err:
         raise click.ClickException(str(err)) from None
     finally:
@@ -136,6 +137,7 @@ def demo(recording: Path, model: Path, seconds: float, faults: str | None, seed:
         "rate_hz": round(run.frames / run.wall_s, 2),
         "link": vars(run.link),
         "device_log": dict(Counter(record.kind for record in fault_log)),
+        "values_clipped_to_wire_range": clipped,
         "estimator_compute": percentiles_us(run.compute_ns),
         "end_to_end_latency": percentiles_us(run.latency_ns),
         "rmse_deg": _rmse(err, est.target.angles),
@@ -181,6 +183,9 @@ def _print_summary(s: dict, record_path: Path | None) -> None:
         per_angle = ", ".join(f"{k} {v}°" for k, v in obs["rmse_deg"].items())
         lines.append(f"            RMSE {per_angle} where φ ≥ {OBSERVABLE_ELEVATION_DEG:g}° "
                      f"({obs['frames']} frames; θ is undefined with the arm hanging)")
+    if s["values_clipped_to_wire_range"]:
+        lines.append(f"warning     {s['values_clipped_to_wire_range']} sensor values were outside "
+                     "the wire's 0..655.35 mm and were clipped")
     if s["nao"]:
         nao = s["nao"]
         lines.append(f"NAO         {nao['commands']} commands, {nao['clamped_commands']} "
