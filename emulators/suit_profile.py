@@ -105,8 +105,17 @@ def _require(table: dict, key: str, where: str) -> Any:
     return table[key]
 
 
+def _reject_unknown(table: dict[str, Any], allowed: set[str], where: str) -> None:
+    """A misspelt key (e.g. ``[[efect]]``) must not silently drop part of the suit."""
+    unknown = set(table) - allowed
+    if unknown:
+        raise ProfileError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
+
+
 def profile_from_dict(data: dict[str, Any]) -> SuitProfile:
     """Validate parsed TOML (or :meth:`SuitProfile.to_dict` output) into a profile."""
+    _reject_unknown(data, {"schema", "version", "name", "description", "cap", "tendon",
+                           "effect"}, "profile")
     if data.get("schema") != PROFILE_SCHEMA:
         raise ProfileError(f"'schema' must be \"{PROFILE_SCHEMA}\", got {data.get('schema')!r}")
     if data.get("version") != PROFILE_VERSION:
@@ -116,6 +125,7 @@ def profile_from_dict(data: dict[str, Any]) -> SuitProfile:
     if not isinstance(name, str) or not name:
         raise ProfileError("'name' must be a non-empty string")
     cap = _require(data, "cap", "profile")
+    _reject_unknown(cap, {"centre_mm", "radius_mm"}, "[cap]")
     centre = np.asarray(_require(cap, "centre_mm", "[cap]"), dtype=np.float64)
     if centre.shape != (3,):
         raise ProfileError("[cap] centre_mm must be [x, y, z] in mm")
@@ -130,9 +140,7 @@ def profile_from_dict(data: dict[str, Any]) -> SuitProfile:
         where = f"[[tendon]] #{i + 1}"
         tname = _require(table, "name", where)
         where = f"[[tendon]] {tname!r}"
-        unknown = set(table) - {"name", "thorax_points_mm", "humerus_points_mm"}
-        if unknown:
-            raise ProfileError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
+        _reject_unknown(table, {"name", "thorax_points_mm", "humerus_points_mm"}, where)
         tendons.append(Tendon(
             name=str(tname),
             thorax_points_mm=_points(_require(table, "thorax_points_mm", where),

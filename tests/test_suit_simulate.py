@@ -123,6 +123,9 @@ def default_text() -> str:
      "list of 4 values"),
     (lambda s: s + "\n[[tendon]]\nname = 'X'\n", "missing key 'thorax_points_mm'"),
     (lambda s: s + "\nthis is not toml", "not a readable TOML"),
+    (lambda s: s.replace("radius_mm = 55.0", "radius_mm = 55.0\nradius = 1.0"),
+     r"\[cap\]: unknown key\(s\) radius"),
+    (lambda s: s.replace("[[effect]]", "[[efect]]", 1), r"profile: unknown key\(s\) efect"),
 ])
 def test_bad_profiles_give_one_clear_error(tmp_path, edit, message):
     path = write_profile(tmp_path, edit(default_text()))
