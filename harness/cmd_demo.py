@@ -55,7 +55,8 @@ def _ground_truth(recording, est, seq: np.ndarray) -> np.ndarray:
 @click.option("--backend", type=click.Choice(["auto", "numpy", "torch", "torchscript",
                                               "onnxruntime"]),
               default="auto", show_default=True,
-              help="Streaming inference backend; auto = onnxruntime when installed, else numpy.")
+              help="Streaming inference backend; auto = onnxruntime when installed, else numpy "
+                   "(torch for a CNN).")
 @click.option("--record", "record_path", type=click.Path(path_type=Path), default=None,
               help="Also write the frames the host received to this recording (MCAP).")
 @click.option("--json", "json_out", type=click.Path(path_type=Path), default=None,

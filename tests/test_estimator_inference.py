@@ -84,11 +84,12 @@ def test_onnxruntime_push_reuses_its_output_buffer(recording):
 def test_default_backend_prefers_onnxruntime_when_installed(recording, monkeypatch):
     from exohil.estimator import inference
 
-    ennet, classical = (_estimator(recording, k, 1) for k in ("ennet", "classical"))
+    ennet, classical, cnn = (_estimator(recording, k, 1) for k in ("ennet", "classical", "cnn"))
     assert inference.default_backend(classical) == "numpy"
     monkeypatch.setattr(inference, "onnxruntime_available", lambda: False)
     assert inference.default_backend(ennet) == "numpy"
     assert StreamingEstimator(ennet).backend == "numpy"
+    assert StreamingEstimator(cnn).backend == "torch"  # the numpy engine has no CNN
     with pytest.raises(ValueError, match="needs the onnxruntime"):
         StreamingEstimator(ennet, "onnxruntime")
     monkeypatch.setattr(inference, "onnxruntime_available", lambda: True)
