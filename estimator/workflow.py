@@ -74,6 +74,9 @@ def load_recordings(
     from exohil.formats.mcap_io import read_recording
 
     recs = [read_recording(p) for p in paths]
+    for p, r in zip(paths, recs, strict=True):
+        if len(r.sensors) == 0 or not r.sensor_names:
+            raise DatasetError(f"{p}: no sensor frames (a mocap-only recording?)")
     sensors = expected_sensors or recs[0].sensor_names
     for p, r in zip(paths, recs, strict=True):
         check_sensors(r, tuple(sensors), str(p))

@@ -11,7 +11,19 @@ import click
 from exohil import __version__
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Group(click.Group):
+    """Turns an operating-system error anywhere in a command (a file that vanished, a full
+    disk, a permission) into one error line and exit code 1 instead of a traceback."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except OSError as err:
+            where = f"{err.filename}: " if err.filename else ""
+            raise click.ClickException(f"{where}{err.strerror or err}") from None
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="exohil")
 def main() -> None:
     """exohil: hardware-in-the-loop harness and conformance suite for a soft shoulder

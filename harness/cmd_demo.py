@@ -19,6 +19,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from exohil.harness.cli_types import OutputFile
 from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
 
 DEFAULT_RECORDING = FIXTURES_DIR / "paper_protocol.mcap"
@@ -57,9 +58,9 @@ def _ground_truth(recording, est, seq: np.ndarray) -> np.ndarray:
               default="auto", show_default=True,
               help="Streaming inference backend; auto = onnxruntime when installed, else numpy "
                    "(torch for a CNN).")
-@click.option("--record", "record_path", type=click.Path(path_type=Path), default=None,
+@click.option("--record", "record_path", type=OutputFile(), default=None,
               help="Also write the frames the host received to this recording (MCAP).")
-@click.option("--json", "json_out", type=click.Path(path_type=Path), default=None,
+@click.option("--json", "json_out", type=OutputFile(), default=None,
               help="Write the summary as JSON to this file.")
 def demo(recording: Path, model: Path, seconds: float, faults: str | None, seed: int,
          backend: str, record_path: Path | None, json_out: Path | None) -> None:

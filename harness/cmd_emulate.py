@@ -11,6 +11,8 @@ from pathlib import Path
 
 import click
 
+from exohil.harness.cli_types import OutputFile
+
 
 def _load_values(path: Path):
     from exohil.formats.errors import RecordingError
@@ -61,7 +63,7 @@ def _raise_interrupt(signum: int, frame: object) -> None:
 @click.option("--realtime", is_flag=True,
               help="Pace under SCHED_FIFO (Linux, needs CAP_SYS_NICE): tighter timing on a "
                    "loaded machine; falls back with a warning when refused.")
-@click.option("--fault-log", "fault_log", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--fault-log", "fault_log", type=OutputFile(),
               default=None, help="Write every injected fault as JSON lines here on exit.")
 def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None, seed: int,
                     duration: float | None, spin_ms: float, realtime: bool,

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import click
 
+from exohil.harness.cli_types import OutputFile
+
 
 @dataclass(frozen=True)
 class CsvPreset:
@@ -86,7 +88,7 @@ def _command_line() -> str:
 
 @import_group.command("csv")
 @click.argument("input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", "out", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)),
               help="Fill the mapping for a known layout (graphene-knee: shared/realdata).")
@@ -189,7 +191,7 @@ def import_csv(
 
 @import_group.command("mot")
 @click.argument("input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", "out", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
 @click.option("--license", "license_note", help="License note stored in the metadata.")
 def import_mot(input_file: Path, out: Path, license_note: str | None) -> None:

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from exohil.harness.cli_types import OutputFile
+
 
 @click.command("plot")
 @click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
@@ -21,7 +23,7 @@ import click
 @click.option("--segment", help="Keep only the spans of this labelled segment.")
 @click.option("--t0", type=float, help="Start of the time window, s.")
 @click.option("--t1", type=float, help="End of the time window, s.")
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", required=True, type=OutputFile(),
               help="Output PNG file.")
 def plot_command(
     file: Path,

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import click
 
+from exohil.harness.cli_types import OutputFile
+
 MODEL_CHOICES = ("ennet", "lnnet", "ann", "cnn", "classical")
 
 _recordings = click.argument(
@@ -82,7 +84,7 @@ def _command_line() -> str:
 @click.option("--model", "kind", type=click.Choice(MODEL_CHOICES), default="ennet",
               show_default=True, help="Estimator to train.")
 @_recordings
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", required=True, type=OutputFile(),
               help="Checkpoint file to write (.npz).")
 @click.option("--hidden", type=click.IntRange(min=1), help="LSTM hidden size (per sensor for "
               "LNNet) or CNN channels; default ennet 64, lnnet 32, cnn 32.")
@@ -129,7 +131,7 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
 @click.command("evaluate")
 @click.argument("checkpoint", type=click.Path(dir_okay=False, path_type=Path))
 @_recordings
-@click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--json", "json_out", type=OutputFile(),
               help="Also write the metrics as JSON to this file.")
 @click.option("--test-fraction", type=click.FloatRange(0.0, 0.9), default=0.0,
               show_default=True, help="Score only the last fraction of each movement piece "
@@ -207,12 +209,12 @@ def _angle_limits(items: tuple[str, ...], angles: tuple[str, ...]) -> dict[str, 
               show_default=True, help="Within-recording split: test = last fraction.")
 @click.option("--models", default=",".join(("ann", "classical", "cnn", "lnnet", "ennet")),
               show_default=True, help="Comma-separated model kinds, in table order.")
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", type=OutputFile(),
               help="Markdown file to put the table into (e.g. docs/results.md).")
 @click.option("--section", default="comparison", show_default=True,
               help="Name of the table section inside --out (replaced when present).")
 @click.option("--title", default="Model comparison", show_default=True, help="Table heading.")
-@click.option("--json", "json_out", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--json", "json_out", type=OutputFile(),
               help="Also write all metrics as JSON.")
 @click.option("--save-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Also save every trained model's checkpoint here.")

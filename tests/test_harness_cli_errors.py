@@ -1,0 +1,52 @@
+"""Bad paths give one error line and a non-zero exit, never a traceback."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from exohil.harness.cli import main
+
+FIXTURE = "fixtures/paper_protocol.mcap"
+
+
+@pytest.mark.parametrize("args", [
+    ["train", "--model", "ann", FIXTURE, "--out", "{missing}/a.npz"],
+    ["evaluate", "fixtures/models/ann.npz", FIXTURE, "--json", "{missing}/m.json"],
+    ["demo", "--json", "{missing}/s.json"],
+    ["plot", FIXTURE, "--kind", "timeseries", "--out", "{missing}/p.png"],
+])
+def test_output_in_a_missing_folder_is_refused_before_any_work(tmp_path, args):
+    missing = tmp_path / "no" / "such"
+    result = CliRunner().invoke(main, [a.format(missing=missing) for a in args])
+    assert result.exit_code == 2
+    assert "does not exist" in result.output and "Traceback" not in result.output
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
+def test_an_os_error_inside_a_command_is_one_line():
+    # /proc exists, so the path passes the folder check; writing a new file there then fails
+    # with an OSError deep inside matplotlib.
+    result = CliRunner().invoke(main, ["plot", FIXTURE, "--kind", "timeseries", "--t1", "1",
+                                       "--out", "/proc/exohil-test.png"])
+    assert result.exit_code == 1
+    assert result.output.startswith("Error: /proc/exohil-test.png")
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_training_on_a_mocap_only_recording_is_one_line(tmp_path):
+    from exohil.formats.mcap_io import write_recording
+    from exohil.formats.recording import AngleStream, Recording, SensorStream
+
+    path = tmp_path / "mocap_only.mcap"
+    t = np.arange(50) / 100.0
+    write_recording(path, Recording(
+        sensor_names=(),
+        sensors=SensorStream(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 0))),
+        mocap={"shoulder": AngleStream(t, ("elv_angle", "shoulder_elv", "shoulder_rot"),
+                                       np.zeros((50, 3)))}))
+    result = CliRunner().invoke(main, ["train", "--model", "ann", str(path),
+                                       "--out", str(tmp_path / "m.npz")])
+    assert result.exit_code == 1
+    assert "no sensor frames" in result.output and "Traceback" not in result.output
