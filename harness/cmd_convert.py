@@ -102,12 +102,15 @@ def convert(source: str, target: str, convention: str, axes: str, side: str, hin
         numbers = np.array([float(v) for v in values])
     except ValueError as err:
         raise click.BadParameter(f"VALUES must be numbers ({err})", param_hint="VALUES") from None
-    if numbers.size != expected or not np.all(np.isfinite(numbers)):
+    if numbers.size != expected:
         raise click.BadParameter(
-            f"--from {source} takes {expected} finite numbers "
+            f"--from {source} takes {expected} numbers "
             f"({' '.join(_SOURCES[source])}), got {len(values)}",
             param_hint="VALUES",
         )
+    if not np.all(np.isfinite(numbers)):
+        bad = ", ".join(v for v, n in zip(values, numbers, strict=True) if not np.isfinite(n))
+        raise click.BadParameter(f"values must be finite, got {bad}", param_hint="VALUES")
     try:
         q = _to_quat(source, numbers, convention, axes)
     except ValueError as err:

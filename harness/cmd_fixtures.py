@@ -42,6 +42,7 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
         parse_sums,
         sha256_file,
     )
+    from exohil.formats.opensim_mot import MotError
 
     if not shoulder_ik_dir.is_dir():
         raise click.ClickException(f"shoulder-ik data not found at {shoulder_ik_dir} "
@@ -52,7 +53,11 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
         hashes = {}
         for spec in FIXTURES:
             click.echo(f"building {spec.filename}: {spec.description}", err=True)
-            hashes[spec.filename] = sha256_file(build_fixture(spec, out_dir, shoulder_ik_dir))
+            try:
+                built = build_fixture(spec, out_dir, shoulder_ik_dir)
+            except MotError as exc:
+                raise click.ClickException(f"{spec.filename}: {exc} (see --shoulder-ik)") from None
+            hashes[spec.filename] = sha256_file(built)
         if not check:
             for source, target in SHOULDER_IK_NOTICES.items():
                 shutil.copyfile(shoulder_ik_dir / source, fixtures_dir / target)

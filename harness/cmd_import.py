@@ -51,6 +51,12 @@ def import_group() -> None:
     """Convert other tools' files into recordings (format v1 MCAP)."""
 
 
+def _one_character(ctx: click.Context, param: click.Parameter, value: str) -> str:
+    if len(value) != 1:
+        raise click.BadParameter(f"must be exactly one character, got {value!r}")
+    return value
+
+
 def _names(text: str | None) -> tuple[str, ...] | None:
     return tuple(name.strip() for name in text.split(",")) if text else None
 
@@ -101,7 +107,8 @@ def _command_line() -> str:
 @click.option("--sensor-units", help="Unit of the sensor values; default 'mm'.")
 @click.option("--skip-rows", type=click.IntRange(min=0), default=0, show_default=True,
               help="Lines to drop before the header/data.")
-@click.option("--delimiter", default=",", show_default=True, help="Field separator.")
+@click.option("--delimiter", default=",", show_default=True, callback=_one_character,
+              help="Field separator (one character).")
 @click.option("--decimals", type=click.IntRange(0, 9), default=6, show_default=True,
               help="Decimal places kept for sensor values and angles.")
 @click.option("--license", "license_note", help="License note stored in the metadata.")

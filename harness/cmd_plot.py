@@ -17,9 +17,11 @@ from exohil.harness.cli_types import OutputFile
 @click.option("--sensor", "sensors", multiple=True,
               help="Sensor name (hysteresis: default SF or the first; timeseries: repeat to "
               "choose, default all).")
-@click.option("--joint", default="shoulder", show_default=True, help="Mocap joint (hysteresis).")
-@click.option("--angle", default="shoulder_elv", show_default=True,
-              help="Mocap angle on the x axis (hysteresis).")
+@click.option("--joint", default=None,
+              help="Mocap joint (hysteresis; default: shoulder, or the recording's only joint).")
+@click.option("--angle", default=None,
+              help="Mocap angle on the x axis (hysteresis; default: shoulder_elv, or the "
+                   "joint's only angle).")
 @click.option("--segment", help="Keep only the spans of this labelled segment.")
 @click.option("--t0", type=float, help="Start of the time window, s.")
 @click.option("--t1", type=float, help="End of the time window, s.")
@@ -29,8 +31,8 @@ def plot_command(
     file: Path,
     kind: str,
     sensors: tuple[str, ...],
-    joint: str,
-    angle: str,
+    joint: str | None,
+    angle: str | None,
     segment: str | None,
     t0: float | None,
     t1: float | None,
@@ -55,6 +57,9 @@ def plot_command(
             if len(sensors) > 1:
                 raise click.BadParameter("hysteresis takes one --sensor", param_hint="--sensor")
             sensor = sensors[0] if sensors else _default_sensor(rec.sensor_names)
+            joint = joint or _only_or(tuple(rec.mocap), "shoulder")
+            stream = rec.mocap.get(joint)
+            angle = angle or _only_or(stream.names if stream else (), "shoulder_elv")
             figure = plot_hysteresis(
                 rec, sensor, joint=joint, angle=angle, window=window,
                 title=f"{file.name}: {sensor} vs {angle}" + (f" ({segment})" if segment else ""),
@@ -68,6 +73,11 @@ def plot_command(
     except OSError as exc:
         raise click.ClickException(f"{out}: cannot write: {exc.strerror or exc}") from exc
     click.echo(f"wrote {out}", err=True)
+
+
+def _only_or(names: tuple[str, ...], preferred: str) -> str:
+    """``preferred`` when present or when there is no single alternative, else the only name."""
+    return names[0] if len(names) == 1 and preferred not in names else preferred
 
 
 def _default_sensor(names: tuple[str, ...]) -> str:

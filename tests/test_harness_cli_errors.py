@@ -50,3 +50,31 @@ def test_training_on_a_mocap_only_recording_is_one_line(tmp_path):
                                        "--out", str(tmp_path / "m.npz")])
     assert result.exit_code == 1
     assert "no sensor frames" in result.output and "Traceback" not in result.output
+
+
+def test_the_cli_group_turns_os_errors_into_one_line():
+    import click
+
+    from exohil.harness.cli import _Group
+
+    @click.group(cls=_Group)
+    def group():
+        pass
+
+    @group.command()
+    def boom():
+        raise FileNotFoundError(2, "No such file or directory", "/x/y.mcap")
+
+    result = CliRunner().invoke(group, ["boom"])
+    assert result.exit_code == 1
+    assert result.output == "Error: /x/y.mcap: No such file or directory\n"
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["convert", "--from", "ms", "--to", "nao", "nan", "0", "0"], "must be finite, got nan"),
+    (["import", "csv", FIXTURE, "--rate", "100", "--sensor-cols", "1", "--angle-cols", "0",
+      "--delimiter", ";;", "--out", "x.mcap"], "exactly one character"),
+])
+def test_bad_option_values_name_the_problem(args, message):
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2 and message in result.output
