@@ -31,7 +31,7 @@ class CsvPreset:
 
 
 PRESETS = {
-    # shared/realdata/graphene-knee (see its SOURCE.md): no header, BOM, 100 Hz;
+    # ../shared/realdata/graphene-knee (see its SOURCE.md): no header, BOM, 100 Hz;
     # col 0 knee flexion (deg, optical mocap), cols 1-5 textile sensors (normalised ΔR/R0).
     "graphene-knee": CsvPreset(
         rate_hz=100.0,
@@ -97,7 +97,7 @@ def _command_line() -> str:
 @click.option("--out", "out", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)),
-              help="Fill the mapping for a known layout (graphene-knee: shared/realdata).")
+              help="Fill the mapping for a known layout (graphene-knee: ../shared/realdata).")
 @click.option("--rate", type=float, help="Row rate, Hz (rows are equally spaced).")
 @click.option("--sensor-cols", help="0-based sensor columns: '1-5', '1,3,6-8'.")
 @click.option("--angle-cols", help="0-based angle columns (degrees), e.g. '0'.")

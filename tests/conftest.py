@@ -1,7 +1,8 @@
 """Shared test configuration: hypothesis profiles.
 
-``HYPOTHESIS_PROFILE=ci`` (set by .ci/run and tox) runs ≥ 1000 examples per property;
-the default ``dev`` profile runs fewer for a quick local loop.
+``HYPOTHESIS_PROFILE=ci`` (set by .ci/run and tox) allows 1000 examples per property, which
+the conversion properties use in full; expensive properties (a pty emulator per example, file
+writes) set their own lower ``max_examples``. The default ``dev`` profile runs fewer.
 """
 
 import os
