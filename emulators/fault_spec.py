@@ -107,7 +107,11 @@ def parse_fault_spec(spec: str) -> FaultPlan:
             name, sep, text = assignment.partition("=")
             if not sep or not name.strip() or not text.strip():
                 raise ValueError(f"{kind}: expected param=value, got {assignment!r}")
-            entry[name.strip()] = _value(text)
+            value = _value(text)
+            if any(isinstance(v, str) for v in (value if isinstance(value, list) else [value])):
+                raise ValueError(f"{kind.strip()}: {name.strip()} must be a number "
+                                 f"(or numbers separated by '/'), got {text.strip()!r}")
+            entry[name.strip()] = value
         entries.append(entry)
     return plan_from_dicts(entries)
 

@@ -224,7 +224,8 @@ def test_spec_string_and_toml_give_the_same_plan(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("bad", ["drop:rate=2", "warp:speed=9", "drop:rate", "drop:rat=0.1",
-                                 "stall:every_s=1,duration_ms=2000", "noise:sigma_mm=-1"])
+                                 "stall:every_s=1,duration_ms=2000", "noise:sigma_mm=-1",
+                                 "drop:rate=abc", "noise:sigma_mm=1/x"])
 def test_bad_specs_raise_value_error_naming_the_problem(bad: str) -> None:
     with pytest.raises(ValueError, match=bad.split(":")[0]):
         parse_fault_spec(bad)
