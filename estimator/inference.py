@@ -31,6 +31,7 @@ fastest back to back, level with numpy at the live 250 Hz pace, docs/estimator.m
 from __future__ import annotations
 
 import warnings
+from functools import partial
 
 import numpy as np
 
@@ -222,6 +223,12 @@ class _NumpyRecurrentRunner:
         self.xp = np.zeros((self.groups, 4 * h), dtype=f32)
         self.x32 = np.zeros(est.config.n_sensors, dtype=f32)
         self.head = _FoldedHead(_head_layers(state), est.norm.y_mean, est.norm.y_std)
+        # h·W_hh into the gate slots: one batched matmul over the groups (LNNet), or a plain
+        # vector-matrix dot for the single LSTM (ENNet), which is the cheaper call.
+        # (The output array is passed positionally: keyword arguments would cost a dict merge
+        # in every call of the partial.)
+        self._recurrent = (partial(np.matmul, self.h3, self.w_hh, self.g3) if self.grouped
+                           else partial(np.dot, self.h[0], self.w_hh[0], self.gates[0]))
 
     def reset(self) -> None:
         self.ring.fill(0.0)
@@ -251,28 +258,16 @@ class _NumpyRecurrentRunner:
         multiply(i, gg, out=c)
         tanh(c, out=tmp)
         multiply(o, tmp, out=h)
-        if self.grouped:
-            h3, g3, w_hh = self.h3, self.g3, self.w_hh
-            for xp in window[1:]:
-                np.matmul(h3, w_hh, out=g3)
-                gates += xp
-                tanh(gg, out=gg)
-                expit(fio, out=fio)
-                multiply(fi, cg, out=prod)  # [f·c, i·g̃]
-                np.add(prod_f, prod_i, out=c)
-                tanh(c, out=tmp)
-                multiply(o, tmp, out=h)
-        else:
-            h0, g0, w0 = h[0], gates[0], self.w_hh[0]
-            for xp in window[1:]:
-                np.dot(h0, w0, out=g0)
-                gates += xp
-                tanh(gg, out=gg)
-                expit(fio, out=fio)
-                multiply(fi, cg, out=prod)  # [f·c, i·g̃]
-                np.add(prod_f, prod_i, out=c)
-                tanh(c, out=tmp)
-                multiply(o, tmp, out=h)
+        recurrent = self._recurrent
+        for xp in window[1:]:
+            recurrent()  # gates = h·W_hh
+            gates += xp
+            tanh(gg, out=gg)
+            expit(fio, out=fio)
+            multiply(fi, cg, out=prod)  # [f·c, i·g̃]
+            np.add(prod_f, prod_i, out=c)
+            tanh(c, out=tmp)
+            multiply(o, tmp, out=h)
         return self.head(self.h_aug)
 
 
