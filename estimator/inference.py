@@ -106,24 +106,43 @@ class _Normaliser:
 
 
 class _Ring:
-    """Double-written ring of the newest ``span`` rows of width ``shape``."""
+    """The newest ``window`` rows, ``dilation`` frames apart, oldest first.
 
-    def __init__(self, span: int, shape: tuple[int, ...], dtype: type = np.float64) -> None:
-        self.span = span
-        self.buf = np.zeros((2 * span, *shape), dtype=dtype)
+    A double-written ring (each row stored at k and k + span), so the newest ``span`` rows are
+    always one contiguous view; the first row of a stream fills the whole ring, which is the
+    edge padding used in training and evaluation.
+    """
+
+    def __init__(self, window: int, dilation: int, shape: tuple[int, ...],
+                 dtype: type = np.float32) -> None:
+        self.dilation = dilation
+        self.span = (window - 1) * dilation + 1
+        self.buf = np.zeros((2 * self.span, *shape), dtype=dtype)
         self.pos = 0
 
-    def fill(self, row: np.ndarray) -> None:
-        self.buf[:] = row
+    @classmethod
+    def of_sensors(cls, est: TrainedEstimator) -> _Ring:
+        """A ring of normalised sensor frames for ``est``'s window (one frame for the ANN)."""
+        cfg = est.config
+        if est.kind == "ann":
+            return cls(1, 1, (cfg.n_sensors,))
+        return cls(cfg.window, cfg.dilation, (cfg.n_sensors,))
+
+    def reset(self) -> None:
+        self.buf[:] = 0.0
         self.pos = 0
 
-    def add(self, row: np.ndarray) -> np.ndarray:
-        """Store ``row`` as the newest and return the contiguous (span, …) view, oldest first."""
+    def push(self, row: np.ndarray, first: bool) -> np.ndarray:
+        """Store ``row`` as the newest (filling the ring when ``first``); return the window,
+        (window, …) oldest first, as a view."""
+        if first:
+            self.buf[:] = row
+            self.pos = 0
         p = self.pos
         self.buf[p] = row
         self.buf[p + self.span] = row
         self.pos = (p + 1) % self.span
-        return self.buf[p + 1 : p + 1 + self.span]
+        return self.buf[p + 1 : p + 1 + self.span : self.dilation]
 
 
 class _FoldedHead:
@@ -205,9 +224,7 @@ class _NumpyRecurrentRunner:
         self.w_ih_sensorwise = np.ascontiguousarray(self.w_ih[:, 0, :])
         self.w_hh = np.ascontiguousarray(w_hh[:, :, order], dtype=f32)
         self.bias = np.ascontiguousarray(bias[:, order], dtype=f32)
-        self.dilation = est.config.dilation
-        span = (est.config.window - 1) * self.dilation + 1
-        self.ring = _Ring(span, (self.groups, 4 * hidden), np.float32)
+        self.ring = _Ring(est.config.window, est.config.dilation, (self.groups, 4 * hidden))
         h = hidden
         self.buf = np.zeros((self.groups, 5 * h), dtype=f32)
         self.gates = self.buf[:, h:]
@@ -231,7 +248,7 @@ class _NumpyRecurrentRunner:
                            else partial(np.dot, self.h[0], self.w_hh[0], self.gates[0]))
 
     def reset(self) -> None:
-        self.ring.fill(0.0)
+        self.ring.reset()
 
     def _project(self, x: np.ndarray) -> None:
         self.x32[:] = x
@@ -243,9 +260,7 @@ class _NumpyRecurrentRunner:
 
     def step(self, x: np.ndarray, first: bool) -> np.ndarray:
         self._project(x)
-        if first:
-            self.ring.fill(self.xp)
-        window = self.ring.add(self.xp)[:: self.dilation]
+        window = self.ring.push(self.xp, first)
         hd, tanh, expit, multiply = self.hidden, np.tanh, self.expit, np.multiply
         gates, gg, fio, c, cg, fi, i, o = (self.gates, self.gg, self.fio, self.c, self.cg,
                                            self.fi, self.i, self.o)
@@ -318,9 +333,7 @@ class _TorchRunner:
         self.torch = torch
         self.norm = _Normaliser(est)
         cfg = est.config
-        self.dilation = cfg.dilation if est.kind != "ann" else 1
-        span = 1 if est.kind == "ann" else (cfg.window - 1) * cfg.dilation + 1
-        self.ring = _Ring(span, (cfg.n_sensors,), np.float32)
+        self.ring = _Ring.of_sensors(est)
         net = est.network
         assert isinstance(net, torch.nn.Module)
         net.eval()
@@ -336,13 +349,10 @@ class _TorchRunner:
         self.xview = self.xbuf.numpy()
 
     def reset(self) -> None:
-        self.ring.fill(0.0)
+        self.ring.reset()
 
     def step(self, x: np.ndarray, first: bool) -> np.ndarray:
-        z = self.norm.inputs(x)
-        if first:
-            self.ring.fill(z)
-        win = self.ring.add(z)[:: self.dilation]
+        win = self.ring.push(self.norm.inputs(x), first)
         self.xview[0, -win.shape[0] :] = win
         with self.torch.inference_mode():
             y = self.net(self.xbuf)
@@ -378,9 +388,7 @@ class _OrtRunner:
                                             providers=["CPUExecutionProvider"])
         self.norm = _Normaliser(est)
         cfg = est.config
-        self.dilation = cfg.dilation if est.kind != "ann" else 1
-        span = 1 if est.kind == "ann" else (cfg.window - 1) * cfg.dilation + 1
-        self.ring = _Ring(span, (cfg.n_sensors,), np.float32)
+        self.ring = _Ring.of_sensors(est)
         self.inp = np.zeros(input_shape(est), dtype=np.float32)
         # the window as (frames, sensors), oldest first, whatever the graph's input layout
         if est.kind == "cnn":
@@ -396,13 +404,10 @@ class _OrtRunner:
         self.binding.bind_ortvalue_output(OUTPUT_NAME, self._ort_values[1])
 
     def reset(self) -> None:
-        self.ring.fill(0.0)
+        self.ring.reset()
 
     def step(self, x: np.ndarray, first: bool) -> np.ndarray:
-        z = self.norm.inputs(x)
-        if first:
-            self.ring.fill(z)
-        self.win_view[:] = self.ring.add(z)[:: self.dilation]
+        self.win_view[:] = self.ring.push(self.norm.inputs(x), first)
         self.session.run_with_iobinding(self.binding)
         self.out[:] = self.y[0]
         return self.out
