@@ -8,9 +8,7 @@ from pathlib import Path
 
 import click
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_FIXTURES_DIR = REPO_ROOT / "fixtures"
-DEFAULT_SHOULDER_IK_DIR = REPO_ROOT.parent / "shared" / "realdata" / "shoulder-ik"
+from exohil.harness.paths import FIXTURES_DIR, SHOULDER_IK_DIR
 
 
 @click.group("fixtures")
@@ -23,9 +21,9 @@ def fixtures_group() -> None:
               help="Rebuild into a temporary folder and compare sha256 against "
                    "fixtures/SHA256SUMS (and the committed files); exit 1 on any mismatch.")
 @click.option("--dir", "fixtures_dir", type=click.Path(file_okay=False, path_type=Path),
-              default=DEFAULT_FIXTURES_DIR, show_default=True, help="Fixtures folder.")
+              default=FIXTURES_DIR, show_default=True, help="Fixtures folder.")
 @click.option("--shoulder-ik", "shoulder_ik_dir", type=click.Path(file_okay=False, path_type=Path),
-              default=DEFAULT_SHOULDER_IK_DIR, show_default=True,
+              default=SHOULDER_IK_DIR, show_default=True,
               help="Folder of the shoulder-ik .mot trials (real motion, CC BY 4.0).")
 def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> None:
     """Regenerate every fixture (bit-identical on rebuild) and fixtures/SHA256SUMS.

@@ -3,6 +3,10 @@
 Radians everywhere; degrees only at the edges (CLI, files). See docs/conventions.md.
 """
 
+if __name__ != "exohil.kinematics":  # e.g. `import kinematics` from the repository root
+    raise ImportError(f"import exohil.kinematics, not {__name__}: the folder is a subpackage of "
+                      "exohil, and a second copy of its modules would not share their classes")
+
 from exohil.kinematics.arm import humerus_direction
 from exohil.kinematics.robot import NAO_JOINTS, NAO_LIMITS, NaoArm, humerus_to_nao, quat_to_zyx
 from exohil.kinematics.rotations import (
