@@ -410,7 +410,7 @@ def effect_from_dict(d: dict) -> Effect:
 def effect_to_dict(e: Effect) -> dict:
     """The inverse of :func:`effect_from_dict`: ``{"kind": e.name, <parameters>...}``."""
     out: dict[str, Any] = {"kind": e.name}
-    for f in dataclasses.fields(e):
+    for f in dataclasses.fields(e):  # type: ignore[arg-type]  # every Effect is a dataclass
         value = getattr(e, f.name)
         if value is not None:
             out[f.name] = list(value) if isinstance(value, tuple | np.ndarray) else value

@@ -25,7 +25,15 @@ from pathlib import Path
 from typing import Any
 
 from exohil.emulators.effects import Effect, EffectChain, effect_from_dict
-from exohil.emulators.faults import FRAME_FAULT_TYPES, FrameFault
+from exohil.emulators.faults import (
+    FRAME_FAULT_TYPES,
+    Corrupt,
+    Disconnect,
+    Drop,
+    FrameFault,
+    Stall,
+    Truncate,
+)
 
 
 @dataclass
@@ -90,7 +98,7 @@ def plan_from_dicts(entries: list[dict[str, Any]]) -> FaultPlan:
     plan = FaultPlan()
     for entry in entries:
         fault = fault_from_dict(entry)
-        if isinstance(fault, tuple(FRAME_FAULT_TYPES.values())):
+        if isinstance(fault, Drop | Corrupt | Truncate | Stall | Disconnect):
             plan.frame_faults.append(fault)
         else:
             plan.value_effects.append(fault)

@@ -55,10 +55,10 @@ def save_checkpoint(path: str | Path, est: TrainedEstimator) -> None:
         arrays["classical/alphas"] = est.classical.alphas
         arrays["classical/weights"] = est.classical.weights
     else:
-        for name, tensor in est.network.state_dict().items():  # type: ignore[union-attr]
-            arrays[f"net/{name}"] = tensor.detach().cpu().numpy()
+        for name, array in est.weights(dtype=np.float32).items():
+            arrays[f"net/{name}"] = array
     with open(path, "wb") as fh:
-        np.savez(fh, **arrays)
+        np.savez(fh, allow_pickle=False, **arrays)
 
 
 def load_checkpoint(path: str | Path) -> TrainedEstimator:

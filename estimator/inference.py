@@ -117,7 +117,7 @@ class _Ring:
                  dtype: type = np.float32) -> None:
         self.dilation = dilation
         self.span = (window - 1) * dilation + 1
-        self.buf = np.zeros((2 * self.span, *shape), dtype=dtype)
+        self.buf: np.ndarray = np.zeros((2 * self.span, *shape), dtype=dtype)
         self.pos = 0
 
     @classmethod
@@ -175,12 +175,6 @@ class _FoldedHead:
         return self.out
 
 
-def _state_numpy(est: TrainedEstimator) -> dict[str, np.ndarray]:
-    net = est.network
-    return {k: v.detach().cpu().numpy().astype(np.float64)
-            for k, v in net.state_dict().items()}  # type: ignore[union-attr]
-
-
 def _head_layers(state: dict, prefix: str = "head.") -> list[tuple[np.ndarray, np.ndarray]]:
     idx = sorted({int(k.split(".")[1]) for k in state if k.startswith(prefix)})
     return [(state[f"{prefix}{i}.weight"], state[f"{prefix}{i}.bias"]) for i in idx]
@@ -200,7 +194,7 @@ class _NumpyRecurrentRunner:
         from scipy.special import expit
 
         self.expit = expit
-        state = _state_numpy(est)
+        state = est.weights()
         mean, std = est.norm.x_mean, est.norm.x_std
         if est.kind == "ennet":
             w_ih = state["lstm.weight_ih_l0"].T[None]  # (1, S, 4H)
@@ -292,7 +286,7 @@ class _NumpyANNRunner:
     def __init__(self, est: TrainedEstimator) -> None:
         self.norm = _Normaliser(est)
         self.z_aug = np.ones(est.config.n_sensors + 1, dtype=np.float32)
-        self.head = _FoldedHead(_head_layers(_state_numpy(est)), est.norm.y_mean,
+        self.head = _FoldedHead(_head_layers(est.weights()), est.norm.y_mean,
                                 est.norm.y_std)
 
     def reset(self) -> None:

@@ -75,8 +75,7 @@ def build_onnx_model(est: TrainedEstimator):
     if est.kind == "classical" or est.network is None:
         raise ValueError("the classical model has no ONNX graph; use backend='numpy'")
     shape = input_shape(est)
-    state = {k: v.detach().cpu().numpy().astype(np.float64)
-             for k, v in est.network.state_dict().items()}  # type: ignore[union-attr]
+    state = est.weights()
     g = _Graph()
     if est.kind in ("ennet", "lnnet"):
         features = _lstm_nodes(est, state, g)

@@ -96,6 +96,14 @@ class TrainedEstimator:
         """Estimates (degrees) for each block."""
         return [self.predict_block(b) for b in blocks]
 
+    def weights(self, dtype: type = np.float64) -> dict[str, np.ndarray]:
+        """The network's parameters as NumPy arrays, by torch ``state_dict`` name (neural kinds
+        only; raises ValueError for the classical model)."""
+        if self.network is None:
+            raise ValueError(f"{self.kind} has no network weights")
+        state = self.network.state_dict()  # type: ignore[attr-defined]
+        return {name: t.detach().cpu().numpy().astype(dtype) for name, t in state.items()}
+
 
 def _safe_std(a: np.ndarray) -> np.ndarray:
     std = a.std(0)

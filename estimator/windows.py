@@ -27,8 +27,8 @@ class FrameTable:
     def from_blocks(cls, blocks: list[Block], dtype: type = np.float32) -> FrameTable:
         if not blocks:
             raise ValueError("no frames")
-        x = np.concatenate([b.x for b in blocks]).astype(dtype)
-        y = np.concatenate([b.y for b in blocks]).astype(dtype)
+        x: np.ndarray = np.concatenate([b.x for b in blocks]).astype(dtype)
+        y: np.ndarray = np.concatenate([b.y for b in blocks]).astype(dtype)
         starts = np.cumsum([0] + [len(b) for b in blocks[:-1]])
         block_start = np.repeat(starts, [len(b) for b in blocks]).astype(np.int64)
         return cls(x, y, block_start)

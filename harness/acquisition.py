@@ -31,10 +31,10 @@ from exohil.harness.frame_buffer import FrameBuffer
 from exohil.harness.frame_source import Frame, LinkStats
 from exohil.harness.link_decoder import StreamDecoder
 
-Opener = Callable[[str, float], serial.SerialBase]
+Opener = Callable[[str, float], serial.Serial]
 
 
-def open_serial_url(url: str, read_timeout_s: float) -> serial.SerialBase:
+def open_serial_url(url: str, read_timeout_s: float) -> serial.Serial:
     """Open any pyserial URL with a read timeout (seconds)."""
     return serial.serial_for_url(url, timeout=read_timeout_s)
 
@@ -155,7 +155,7 @@ class SerialFrameSource:
                 except (serial.SerialException, OSError):
                     pass
 
-    def _read_until_disconnect(self, port: serial.SerialBase) -> None:
+    def _read_until_disconnect(self, port: serial.Serial) -> None:
         while not self._stop.is_set():
             try:
                 data = port.read(max(1, port.in_waiting))

@@ -19,7 +19,9 @@ from exohil.kinematics import (
     quat_to_ms,
     quat_to_zyx,
 )
+from exohil.kinematics.robot import Side
 from exohil.kinematics.rotations import normalize_quat
+from exohil.kinematics.shoulder import Axes, Convention
 
 _SOURCES = {
     "ms": ("elv_angle", "shoulder_elv", "shoulder_rot"),
@@ -44,7 +46,7 @@ _TARGET_FIELDS = {
 }
 
 
-def _to_quat(source: str, values: np.ndarray, convention: str, axes: str) -> np.ndarray:
+def _to_quat(source: str, values: np.ndarray, convention: Convention, axes: Axes) -> np.ndarray:
     if source == "quat":
         return normalize_quat(values)
     radians = np.deg2rad(values)
@@ -53,7 +55,8 @@ def _to_quat(source: str, values: np.ndarray, convention: str, axes: str) -> np.
     return isb_to_quat(radians)
 
 
-def _from_quat(target: str, q: np.ndarray, convention: str, side: str, hint_deg: float) -> dict:
+def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
+               hint_deg: float) -> dict:
     hint = np.deg2rad(hint_deg)
     if target == "quat":
         return {"values": dict(zip(_TARGET_FIELDS["quat"], _clean(q), strict=True))}
@@ -91,7 +94,8 @@ def _from_quat(target: str, q: np.ndarray, convention: str, side: str, hint_deg:
               help="Degrees used at singularities: plane of elevation (ms/isb), yaw (zyx), "
                    "pitch (nao).")
 @click.argument("values", nargs=-1, required=True)
-def convert(source: str, target: str, convention: str, axes: str, side: str, hint: float,
+def convert(source: str, target: str, convention: Convention, axes: Axes, side: Side,
+            hint: float,
             values: tuple[str, ...]) -> None:
     """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w).
 

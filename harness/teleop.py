@@ -18,6 +18,7 @@ from typing import Protocol
 import numpy as np
 
 from exohil.kinematics import NAO_JOINTS, humerus_to_nao, ms_to_quat
+from exohil.kinematics.robot import Side
 
 
 class JointTarget(Protocol):
@@ -30,7 +31,7 @@ class JointTarget(Protocol):
 class SimulatedNao:
     """A stand-in NAO arm: remembers the last command and counts commands and clamps."""
 
-    side: str = "right"
+    side: Side = "right"
     joints: np.ndarray = field(default_factory=lambda: np.array([np.pi / 2, 0.0, 0.0]))
     commands: int = 0
     clamped_commands: int = 0
@@ -63,7 +64,7 @@ class SimulatedNao:
 class TeleopSink:
     """Turns each (θ, φ) estimate (degrees) into a NAO command on ``target``."""
 
-    def __init__(self, target: JointTarget, side: str = "right",
+    def __init__(self, target: JointTarget, side: Side = "right",
                  shoulder_rot_deg: float = 0.0) -> None:
         self.target = target
         self.side = side
