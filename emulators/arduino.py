@@ -3,7 +3,11 @@
 ``ArduinoEmulator`` runs in a thread. Frame ``k`` (unwrapped sequence number ``seq0 + k``) is
 sampled at device time ``k / rate_hz`` s, stamped ``t_us0 + round(k * 1e6 / rate_hz)`` µs
 (mod 2**32) and sent at the absolute deadline ``t0 + k / rate_hz`` on the host's
-``perf_counter`` clock, so the mean rate does not drift. Like the real device it streams
+``perf_counter`` clock, so the mean rate does not drift. Replaying a recording, the device
+keeps the recording's own clock and numbering: ``seq0`` and ``t_us0`` are its first frame's,
+and sequence numbers the recording lacks are not sent (logged ``drop``, reason ``absent from
+the recording``), so a host can align its frames with the recording's motion capture by
+device time or by sequence number. Like the real device it streams
 whether or not a host is reading; frames that cannot be handed over are logged as
 ``not_read``. Every fault and loss is in :attr:`ArduinoEmulator.fault_log` (docs/emulator.md).
 
@@ -24,13 +28,17 @@ import numpy as np
 from exohil.emulators.effects import Signal
 from exohil.emulators.fault_spec import FaultPlan, fault_plan
 from exohil.emulators.faults import FaultRecord, FrameFaultInjector
-from exohil.emulators.pacing import SPIN_S, request_realtime, sleep_until
+from exohil.emulators.pacing import SPIN_S, sleep_until
 from exohil.emulators.pty_port import VirtualSerialPort
 from exohil.formats.recording import Recording
 from exohil.formats.wire import MM_PER_LSB, SEQ_MODULUS, TIME_MODULUS_US, WireFrame, encode_frame
+from exohil.realtime import request_realtime
 
 _IDLE_POLL_S = 0.001
 _RECENT_FRAMES = 8192
+#: How many recent frames keep their write time for :meth:`ArduinoEmulator.write_time_ns`
+#: (2**16 frames: 262 s at 250 Hz).
+_WRITE_TIMES = 1 << 16
 
 
 class ArduinoEmulator:
@@ -45,8 +53,10 @@ class ArduinoEmulator:
             when looping).
         faults: a :class:`FaultPlan`, a spec string or a TOML path (see fault_spec).
         seed: seeds every random fault and effect.
-        seq0: sequence number of the first frame (wire value is mod 65536).
-        t_us0: device timestamp of the first frame, µs (wire value is mod 2**32).
+        seq0: sequence number of the first frame (wire value is mod 65536); default: the
+            recording's first, else 0.
+        t_us0: device timestamp of the first frame, µs (wire value is mod 2**32); default: the
+            recording's first sensor time, else 0.
         autostart: start streaming as soon as the port exists; otherwise wait for
             :meth:`begin` (tests use it to start once their reader is attached).
         attach_grace_s: after a host opens the port, frames are not handed over until it has
@@ -71,8 +81,8 @@ class ArduinoEmulator:
         duration_s: float | None = None,
         faults: FaultPlan | str | None = None,
         seed: int = 0,
-        seq0: int = 0,
-        t_us0: int = 0,
+        seq0: int | None = None,
+        t_us0: int | None = None,
         autostart: bool = True,
         attach_grace_s: float = 0.5,
         drain_timeout_s: float = 1.0,
@@ -80,11 +90,18 @@ class ArduinoEmulator:
         spin_s: float = SPIN_S,
         realtime: bool = False,
     ) -> None:
+        present = None
         if isinstance(values_mm, Recording):
-            if values_mm.sensor_units != "mm":
-                raise ValueError(f"sensor values are in {values_mm.sensor_units!r}; the wire "
+            recording = values_mm
+            if recording.sensor_units != "mm":
+                raise ValueError(f"sensor values are in {recording.sensor_units!r}; the wire "
                                  "protocol carries mm")
-            values_mm = values_mm.sensors.values
+            if recording.sensors.values.shape[0] == 0:
+                raise ValueError("the recording has no sensor frames")
+            values_mm, present = _on_sequence_grid(recording.sensors.seq,
+                                                   recording.sensors.values)
+            seq0 = int(recording.sensors.seq[0]) if seq0 is None else seq0
+            t_us0 = round(float(recording.sensors.t[0]) * 1e6) if t_us0 is None else t_us0
         values = np.asarray(values_mm, dtype=np.float64)
         if values.ndim != 2 or values.shape[0] == 0 or not 1 <= values.shape[1] <= 16:
             raise ValueError(f"values must be (N>0, 1..16) mm, got shape {values.shape}")
@@ -95,12 +112,14 @@ class ArduinoEmulator:
         self.rate_hz = float(rate_hz)
         self.plan = faults if isinstance(faults, FaultPlan) else fault_plan(faults)
         self.seed = int(seed)
-        self.seq0 = int(seq0)
-        self.t_us0 = int(t_us0)
+        self.seq0 = int(seq0 or 0)
+        self.t_us0 = int(t_us0 or 0)
         self.attach_grace_s = attach_grace_s
         self.drain_timeout_s = drain_timeout_s
         self.n_frames = self._frame_count(values.shape[0], loop, duration_s)
         self._raw, self._keep = self._prepare(values, loop)
+        self._present = (np.ones(self._raw.shape[0], dtype=bool) if present is None
+                         else np.resize(present, self._raw.shape[0]))
         self.sensor_count = int(values.shape[1])
 
         self._port = VirtualSerialPort()
@@ -108,6 +127,8 @@ class ArduinoEmulator:
         self._log: list[FaultRecord] = []
         self._recent: deque[tuple[int, int]] = deque(maxlen=_RECENT_FRAMES)
         self.send_times: list[tuple[int, int]] | None = [] if record_send_times else None
+        self._write_seq = np.full(_WRITE_TIMES, -1, dtype=np.int64)
+        self._write_ns = np.zeros(_WRITE_TIMES, dtype=np.int64)
         self.frames_generated = 0
         self.frames_written = 0
         self.bytes_written = 0
@@ -170,6 +191,15 @@ class ArduinoEmulator:
     def fault_log(self) -> list[FaultRecord]:
         """A copy of the fault log so far (complete once finished)."""
         return list(self._log)
+
+    def write_time_ns(self, seq: int) -> int | None:
+        """When frame ``seq`` (unwrapped) began to be written to the port, on the
+        ``time.perf_counter_ns()`` clock (system-wide monotonic on Linux); None for a frame not
+        written (yet) or older than the last 65,536 frames."""
+        slot = seq % _WRITE_TIMES
+        if self._write_seq[slot] != seq:
+            return None
+        return int(self._write_ns[slot])
 
     @property
     def wire_values_mm(self) -> np.ndarray:
@@ -266,8 +296,13 @@ class ArduinoEmulator:
                 self._attached_at = None
                 self._host_ready = False
             row = k % self._raw.shape[0]
-            if dropped is not None or not self._keep[row]:
-                details = dropped if dropped is not None else {"effect": "dropout"}
+            if dropped is not None or not self._keep[row] or not self._present[row]:
+                if dropped is not None:
+                    details = dropped
+                elif not self._present[row]:
+                    details = {"reason": "absent from the recording"}
+                else:
+                    details = {"effect": "dropout"}
                 self._log_fault(seq, "drop", **details)
                 k += 1
                 continue
@@ -335,6 +370,9 @@ class ArduinoEmulator:
             if not self._host_ready:
                 self._log_fault(seq, "not_read", reason="host attaching")
                 return
+        slot = seq % _WRITE_TIMES
+        self._write_ns[slot] = time.perf_counter_ns()
+        self._write_seq[slot] = seq
         if not self._port.send(data, seq):
             self._log_fault(seq, "not_read", reason="buffer full")
             return
@@ -343,3 +381,16 @@ class ArduinoEmulator:
         self._recent.append((seq, len(data)))
         if self.send_times is not None:
             self.send_times.append((seq, time.perf_counter_ns()))
+
+
+def _on_sequence_grid(seq: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A recording's sensor rows spread over every sequence number from its first to its last:
+    ((P, S) values, (P,) present). Rows the recording lacks are interpolated (so value effects
+    such as filters see a smooth signal) and marked absent; they are never sent."""
+    offsets = np.asarray(seq, dtype=np.int64) - int(seq[0])
+    grid = np.arange(int(offsets[-1]) + 1)
+    present = np.zeros(grid.shape[0], dtype=bool)
+    present[offsets] = True
+    filled = np.column_stack([np.interp(grid, offsets, values[:, i])
+                              for i in range(values.shape[1])])
+    return filled, present
