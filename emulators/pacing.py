@@ -8,7 +8,6 @@ late frame does not shift the ones after it, so the mean rate does not drift.
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 
@@ -28,19 +27,3 @@ def sleep_until(deadline_s: float, spin_s: float = SPIN_S,
             return
     while time.perf_counter() < deadline_s:
         time.sleep(0)
-
-
-REALTIME_PRIORITY = 10
-
-
-def request_realtime(priority: int = REALTIME_PRIORITY) -> str | None:
-    """Put the calling thread under SCHED_FIFO at ``priority`` (Linux; needs CAP_SYS_NICE).
-
-    Returns None on success, else why not (the thread keeps its normal policy). Opt-in only:
-    a SCHED_FIFO thread outranks every normal task on a shared machine.
-    """
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (AttributeError, OSError) as exc:
-        return f"SCHED_FIFO unavailable: {exc}"
-    return None

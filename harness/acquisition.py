@@ -26,10 +26,10 @@ from collections.abc import Callable
 
 import serial
 
-from exohil.emulators.pacing import request_realtime
 from exohil.harness.frame_buffer import FrameBuffer
 from exohil.harness.frame_source import Frame, LinkStats
 from exohil.harness.link_decoder import StreamDecoder
+from exohil.realtime import request_realtime
 
 Opener = Callable[[str, float], serial.Serial]
 

@@ -31,7 +31,8 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
     With --check nothing under fixtures/ changes: the fixtures are rebuilt in a temporary
     folder and their hashes compared with the recorded ones.
     """
-    from exohil.emulators.fixture_specs import (
+    from exohil.formats.opensim_mot import MotError
+    from exohil.harness.fixture_specs import (
         FIXTURES,
         SHOULDER_IK_NOTICES,
         SUMS_FILE,
@@ -40,7 +41,6 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
         parse_sums,
         sha256_file,
     )
-    from exohil.formats.opensim_mot import MotError
 
     if not shoulder_ik_dir.is_dir():
         raise click.ClickException(f"shoulder-ik data not found at {shoulder_ik_dir} "
