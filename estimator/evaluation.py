@@ -12,10 +12,18 @@ figures only.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 
 from exohil.estimator.dataset import Block
 from exohil.estimator.trained import TrainedEstimator
+from exohil.formats.measurement import Limit, Measurement
+from exohil.kinematics import humerus_direction
+
+#: Shoulder elevation (deg) from which the plane of elevation counts as observable: below it
+#: θ is ill-defined (undefined at φ = 0), see docs/conventions.md.
+OBSERVABLE_ELEVATION_DEG = 20.0
 
 
 def error_stats(err: np.ndarray, angles: tuple[str, ...]) -> dict:
@@ -64,3 +72,59 @@ def evaluate(est: TrainedEstimator, blocks: list[Block],
              min_angle: dict[str, float] | None = None) -> dict:
     """Run the estimator on every block and score it (see :func:`evaluate_predictions`)."""
     return evaluate_predictions(blocks, est.predict(blocks), est.target.angles, min_angle)
+
+
+def arm_direction_error_deg(theta_est, phi_est, theta_true, phi_true) -> np.ndarray:
+    """Angle (deg) between the estimated and the true humerus axis, per frame; well defined
+    at every pose, including the arm hanging where θ is not. Inputs in degrees."""
+    a = humerus_direction(np.deg2rad(theta_est), np.deg2rad(phi_est))
+    b = humerus_direction(np.deg2rad(theta_true), np.deg2rad(phi_true))
+    cos = np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)
+    return np.rad2deg(np.arccos(cos))
+
+
+def accuracy_measurements(estimates: np.ndarray, truth: np.ndarray, angles: Sequence[str],
+                          limits: Mapping[str, Limit] | None = None) -> list[Measurement]:
+    """exohil's one accuracy definition, as measurements (degrees).
+
+    For a shoulder model (angles include ``elv_angle`` and ``shoulder_elv``):
+    ``accuracy.rmse.<angle>`` over the frames whose true elevation is at least
+    :data:`OBSERVABLE_ELEVATION_DEG`, and ``accuracy.direction_rmse``, the RMSE of the angle
+    between estimated and true humerus axis over all frames. For other joints: the RMSE per
+    angle over all frames. Frames whose truth is not finite are not scored. ``limits`` maps a
+    measurement name to its limit.
+
+    Args:
+        estimates / truth: (N, A) degrees, columns in ``angles`` order.
+    """
+    limits = limits or {}
+    ok = np.all(np.isfinite(truth), axis=1) & np.all(np.isfinite(estimates), axis=1)
+    est, true = estimates[ok], truth[ok]
+    out = [Measurement.judge("accuracy.frames_scored", int(ok.sum()), "count",
+                             limits.get("accuracy.frames_scored"))]
+    shoulder = "elv_angle" in angles and "shoulder_elv" in angles
+    keep = np.ones(true.shape[0], dtype=bool)
+    note = "all frames"
+    if shoulder:
+        phi = list(angles).index("shoulder_elv")
+        keep = true[:, phi] >= OBSERVABLE_ELEVATION_DEG
+        note = (f"{int(keep.sum())} frames where elevation >= {OBSERVABLE_ELEVATION_DEG:g} deg "
+                "(the plane of elevation is undefined with the arm hanging)")
+    for j, name in enumerate(angles):
+        key = f"accuracy.rmse.{name}"
+        if not keep.any():
+            out.append(Measurement.skipped(key, "deg", "no frame to score", limits.get(key)))
+            continue
+        rmse = float(np.sqrt(np.mean((est[keep, j] - true[keep, j]) ** 2)))
+        out.append(Measurement.judge(key, rmse, "deg", limits.get(key), note))
+    if shoulder:
+        key = "accuracy.direction_rmse"
+        th, ph = list(angles).index("elv_angle"), list(angles).index("shoulder_elv")
+        if true.shape[0] == 0:
+            out.append(Measurement.skipped(key, "deg", "no frame to score", limits.get(key)))
+        else:
+            err = arm_direction_error_deg(est[:, th], est[:, ph], true[:, th], true[:, ph])
+            out.append(Measurement.judge(key, float(np.sqrt(np.mean(err**2))), "deg",
+                                         limits.get(key),
+                                         f"{true.shape[0]} frames, every pose"))
+    return out

@@ -13,18 +13,30 @@ from exohil.formats.recording import Recording
 def angles_at_sensor_times(
     rec: Recording, joint: str = "shoulder", names: Sequence[str] | None = None
 ) -> np.ndarray:
-    """Mocap angles linearly interpolated at each sensor frame time.
+    """Mocap angles linearly interpolated at each sensor frame time; see :func:`angles_at`.
 
-    Both clocks are taken as sharing an origin (seconds). Sensor frames before the first or
-    after the last mocap sample get NaN, so callers can drop them explicitly.
+    Returns:
+        (N, A) float64 degrees, N = sensor frames, A = len(names).
+    """
+    return angles_at(rec, rec.sensors.t, joint, names)
+
+
+def angles_at(
+    rec: Recording, t: np.ndarray, joint: str = "shoulder", names: Sequence[str] | None = None
+) -> np.ndarray:
+    """Mocap angles linearly interpolated at times ``t`` (s, the sensor/device clock).
+
+    Both clocks are taken as sharing an origin (seconds). Times before the first or after the
+    last mocap sample get NaN, so callers can drop them explicitly.
 
     Args:
         rec: the recording.
+        t: (N,) times, s.
         joint: mocap joint (topic suffix), e.g. "shoulder".
         names: angle fields in the wanted column order (default: all, in stream order).
 
     Returns:
-        (N, A) float64 degrees, N = sensor frames, A = len(names).
+        (N, A) float64 degrees, A = len(names).
 
     Raises:
         RecordingError: unknown joint or angle name.
@@ -36,7 +48,7 @@ def angles_at_sensor_times(
     missing = [name for name in wanted if name not in stream.names]
     if missing:
         raise RecordingError(f"mocap joint {joint!r} has no angle(s) {missing} ({stream.names})")
-    t_sensor = np.asarray(rec.sensors.t, dtype=np.float64)
+    t_sensor = np.asarray(t, dtype=np.float64)
     out = np.full((t_sensor.size, len(wanted)), np.nan)
     if len(stream) == 0 or t_sensor.size == 0:
         return out
