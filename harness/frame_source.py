@@ -23,12 +23,14 @@ class Frame:
         device_time_s: device timestamp, seconds, unwrapped past the u32 µs wrap.
         values_mm: (S,) float64 tendon lengths, mm.
         host_ns: host receive time, ``time.perf_counter_ns()`` when its bytes were read.
+        decoded_ns: when the frame was decoded and validated (same clock); 0 if not stamped.
     """
 
     seq: int
     device_time_s: float
     values_mm: np.ndarray
     host_ns: int
+    decoded_ns: int = 0
 
 
 @dataclass

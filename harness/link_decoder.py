@@ -9,6 +9,8 @@ the device time by ``(t_us - prev) mod 2**32`` µs. A gap of 65536 frames or mor
 
 from __future__ import annotations
 
+import time
+
 from exohil.formats.wire import (
     MAX_PACKET_SIZE,
     SEQ_MODULUS,
@@ -87,4 +89,5 @@ class StreamDecoder:
         self._wire_seq, self._wire_time_us = wire.seq, wire.t_us
         self._stats.frames += 1
         return Frame(seq=self._seq, device_time_s=self._time_us / 1e6,
-                     values_mm=wire.values_mm, host_ns=host_ns)
+                     values_mm=wire.values_mm, host_ns=host_ns,
+                     decoded_ns=time.perf_counter_ns())

@@ -2,9 +2,13 @@
 
 This is the paper's two-thread layout: the acquisition thread (inside the frame source) keeps
 reading the device at 250 Hz; this loop, on the calling thread, takes each frame, runs the
-estimator on it (window kept inside the engine) and hands the angles to the sinks (teleop,
-recorder, ...). Per frame it measures the estimator's compute time and the end-to-end latency
-from the host receiving the frame's bytes to the last sink returning (``perf_counter_ns``).
+estimator on it (window kept inside the engine) and hands a :class:`Sample` to each sink in
+order (teleoperation, recorder, ...).
+
+Every frame is stamped on one monotonic clock (``time.perf_counter_ns()``, system-wide on
+Linux, so an emulator in the same or another process stamps on it too) at each stage of
+:data:`STAGES`: the device's write (when the device can say, see ``device_clock``), host
+receive, decoded, estimate done, teleoperation command issued, and all sinks done.
 """
 
 from __future__ import annotations
@@ -19,6 +23,12 @@ import numpy as np
 
 from exohil.harness.frame_source import Frame, FrameSource, LinkStats
 
+#: Per-frame stamps, in order. ``device_write`` only when the device reports its write times
+#: (the emulator does); ``commanded`` only when a teleoperation sink ran.
+STAGES = ("device_write", "host_receive", "decoded", "estimated", "commanded", "done")
+#: Stamp value of a stage that was not reached or not observable.
+NOT_STAMPED = -1
+
 
 class Estimator(Protocol):
     """One call per frame: sensor values (S,) → angles (A,), degrees (e.g. StreamingEstimator)."""
@@ -26,8 +36,48 @@ class Estimator(Protocol):
     def push(self, values: np.ndarray) -> np.ndarray: ...
 
 
-#: A sink receives each frame with its angle estimates (degrees, estimator order).
-Sink = Callable[[Frame, np.ndarray], None]
+@dataclass
+class RobotCommand:
+    """Joint command sent to the robot for one frame.
+
+    Attributes:
+        joints: (3,) NAO ShoulderPitch, ShoulderRoll, ElbowYaw, radians (after clamping).
+        clamped: (3,) which joints hit their limit.
+    """
+
+    joints: np.ndarray
+    clamped: np.ndarray
+
+
+@dataclass
+class Sample:
+    """What each sink receives for one frame.
+
+    Attributes:
+        frame: the frame as delivered by the source.
+        angles: (A,) estimates, degrees, in the estimator's target order.
+        stamps: stage → ``perf_counter_ns`` (see :data:`STAGES`); sinks may add stages.
+        command: the robot command, once a teleoperation sink has issued it.
+    """
+
+    frame: Frame
+    angles: np.ndarray
+    stamps: dict[str, int] = field(default_factory=dict)
+    command: RobotCommand | None = None
+
+
+class Sink(Protocol):
+    """A consumer of samples (teleoperation, recorder, network). ``accept`` runs on the
+    pipeline's thread for every frame and must not block; ``close`` finishes the sink's work
+    (flushes files, stops threads) and is called once, after the run."""
+
+    def accept(self, sample: Sample) -> None: ...
+
+    def close(self) -> None: ...
+
+
+#: ``seq → perf_counter_ns`` of the device's write of that frame, or None when unknown.
+DeviceClock = Callable[[int], int | None]
 
 
 @dataclass
@@ -36,18 +86,24 @@ class PipelineRun:
 
     Attributes:
         seq / device_time_s: (N,) of the frames processed, in order.
+        values: (N, S) their sensor values as received, mm.
         estimates: (N, A) angle estimates, degrees.
+        stamps: (N, len(STAGES)) ``perf_counter_ns`` per stage, :data:`NOT_STAMPED` where absent.
         compute_ns: (N,) estimator time per frame, ns.
-        latency_ns: (N,) host receive → all sinks done, ns.
+        commands: (N, 3) robot joint commands, radians (NaN where none was issued).
+        clamped: (N,) whether any joint of the command was clamped.
         link: the link counters at the end.
         wall_s: duration of the run, s.
     """
 
     seq: np.ndarray
     device_time_s: np.ndarray
+    values: np.ndarray
     estimates: np.ndarray
+    stamps: np.ndarray
     compute_ns: np.ndarray
-    latency_ns: np.ndarray
+    commands: np.ndarray
+    clamped: np.ndarray
     link: LinkStats
     wall_s: float
 
@@ -55,23 +111,45 @@ class PipelineRun:
     def frames(self) -> int:
         return int(self.seq.shape[0])
 
+    def interval_ms(self, start: str, end: str) -> np.ndarray:
+        """Per-frame time from stage ``start`` to ``end``, ms, over frames with both stamps."""
+        a, b = self.stamps[:, STAGES.index(start)], self.stamps[:, STAGES.index(end)]
+        ok = (a != NOT_STAMPED) & (b != NOT_STAMPED)
+        return (b[ok] - a[ok]) / 1e6
+
 
 @dataclass
 class _Log:
     seq: list[int] = field(default_factory=list)
     t: list[float] = field(default_factory=list)
+    values: list[np.ndarray] = field(default_factory=list)
     est: list[np.ndarray] = field(default_factory=list)
+    stamps: list[list[int]] = field(default_factory=list)
     compute: list[int] = field(default_factory=list)
-    latency: list[int] = field(default_factory=list)
+    commands: list[np.ndarray] = field(default_factory=list)
+    clamped: list[bool] = field(default_factory=list)
+
+
+_NO_COMMAND = np.full(3, np.nan)
 
 
 class Pipeline:
-    """Drives frames through the estimator into the sinks (see module doc)."""
+    """Drives frames through the estimator into the sinks (see module doc).
 
-    def __init__(self, source: FrameSource, estimator: Estimator, sinks: Sequence[Sink] = ()):
+    Args:
+        source: the frames (already started by the caller).
+        estimator: the streaming estimator.
+        sinks: consumers, called in order for every frame.
+        device_clock: when the device can tell when it wrote a frame (the emulator's
+            ``write_time_ns``), the ``device_write`` stage is stamped from it.
+    """
+
+    def __init__(self, source: FrameSource, estimator: Estimator, sinks: Sequence[Sink] = (),
+                 device_clock: DeviceClock | None = None) -> None:
         self.source = source
         self.estimator = estimator
         self.sinks = list(sinks)
+        self.device_clock = device_clock
 
     def run(
         self,
@@ -83,13 +161,14 @@ class Pipeline:
         idle_timeout_s: float | None = None,
     ) -> PipelineRun:
         """Process frames until ``duration_s`` (wall clock) or ``max_frames`` or ``stop`` is set,
-        or no frame arrived for ``idle_timeout_s``. ``progress(frames, link, last)`` is called
-        about every ``progress_every_s``. The frame source must already be started."""
+        or, once frames have started to arrive, none arrived for ``idle_timeout_s``.
+        ``progress(frames, link, last)`` is called about every ``progress_every_s``. The sinks
+        are not closed (their owner does)."""
         log = _Log()
         start = time.perf_counter()
         deadline = None if duration_s is None else start + duration_s
         next_progress = start + progress_every_s
-        last_frame_at = start
+        last_frame_at: float | None = None
         last: np.ndarray | None = None
         while True:
             now = time.perf_counter()
@@ -97,7 +176,8 @@ class Pipeline:
                 break
             if max_frames is not None and len(log.seq) >= max_frames:
                 break
-            if idle_timeout_s is not None and now - last_frame_at > idle_timeout_s:
+            if (idle_timeout_s is not None and last_frame_at is not None
+                    and now - last_frame_at > idle_timeout_s):
                 break
             if progress is not None and now >= next_progress:
                 progress(len(log.seq), self.source.stats(), last)
@@ -106,38 +186,49 @@ class Pipeline:
             if frame is None:
                 continue
             last_frame_at = time.perf_counter()
-            t0 = time.perf_counter_ns()
-            angles = self.estimator.push(frame.values_mm)
-            t1 = time.perf_counter_ns()
-            last = angles.copy()
-            for sink in self.sinks:
-                sink(frame, last)
-            done = time.perf_counter_ns()
-            log.seq.append(frame.seq)
-            log.t.append(frame.device_time_s)
-            log.est.append(last)
-            log.compute.append(t1 - t0)
-            log.latency.append(done - frame.host_ns)
-        n_angles = 0 if last is None else last.shape[0]
-        estimates = np.asarray(log.est, dtype=np.float64).reshape(len(log.est), n_angles)
+            sample = self._process(frame, log)
+            last = sample.angles
+        return self._result(log, time.perf_counter() - start)
+
+    def _process(self, frame: Frame, log: _Log) -> Sample:
+        t0 = time.perf_counter_ns()
+        angles = np.array(self.estimator.push(frame.values_mm), dtype=np.float64)
+        t1 = time.perf_counter_ns()
+        stamps = {"host_receive": frame.host_ns, "estimated": t1}
+        if frame.decoded_ns:
+            stamps["decoded"] = frame.decoded_ns
+        if self.device_clock is not None:
+            written = self.device_clock(frame.seq)
+            if written is not None:
+                stamps["device_write"] = written
+        sample = Sample(frame, angles, stamps)
+        for sink in self.sinks:
+            sink.accept(sample)
+        stamps["done"] = time.perf_counter_ns()
+        log.seq.append(frame.seq)
+        log.t.append(frame.device_time_s)
+        log.values.append(frame.values_mm)
+        log.est.append(angles)
+        log.stamps.append([stamps.get(stage, NOT_STAMPED) for stage in STAGES])
+        log.compute.append(t1 - t0)
+        command = sample.command
+        log.commands.append(_NO_COMMAND if command is None else command.joints)
+        log.clamped.append(bool(command is not None and command.clamped.any()))
+        return sample
+
+    def _result(self, log: _Log, wall_s: float) -> PipelineRun:
+        n = len(log.seq)
+        n_angles = log.est[0].shape[0] if n else 0
+        n_sensors = log.values[0].shape[0] if n else 0
         return PipelineRun(
             seq=np.asarray(log.seq, dtype=np.int64),
             device_time_s=np.asarray(log.t, dtype=np.float64),
-            estimates=estimates,
+            values=np.asarray(log.values, dtype=np.float64).reshape(n, n_sensors),
+            estimates=np.asarray(log.est, dtype=np.float64).reshape(n, n_angles),
+            stamps=np.asarray(log.stamps, dtype=np.int64).reshape(n, len(STAGES)),
             compute_ns=np.asarray(log.compute, dtype=np.int64),
-            latency_ns=np.asarray(log.latency, dtype=np.int64),
+            commands=np.asarray(log.commands, dtype=np.float64).reshape(n, 3),
+            clamped=np.asarray(log.clamped, dtype=bool),
             link=self.source.stats(),
-            wall_s=time.perf_counter() - start,
+            wall_s=wall_s,
         )
-
-
-def percentiles_us(ns: np.ndarray) -> dict[str, float]:
-    """p50 / p99 / max of nanosecond samples, in µs (NaN when empty)."""
-    if ns.size == 0:
-        return {"p50_us": float("nan"), "p99_us": float("nan"), "max_us": float("nan")}
-    us = ns / 1e3
-    return {
-        "p50_us": round(float(np.percentile(us, 50)), 1),
-        "p99_us": round(float(np.percentile(us, 99)), 1),
-        "max_us": round(float(us.max()), 1),
-    }

@@ -12,16 +12,14 @@ import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import numpy as np
-
 from exohil.formats.mcap_io import RecordingWriter
-from exohil.harness.frame_source import Frame
+from exohil.harness.pipeline import Sample
 
 _STOP = object()
 
 
 class RecorderSink:
-    """A pipeline sink (``sink(frame, angles)``) that records sensor frames to ``path``."""
+    """A pipeline sink that records the sensor frames the host received to ``path``."""
 
     def __init__(self, path: str | Path, sensor_names: Sequence[str], *,
                  sensor_units: str = "mm", metadata: Mapping[str, str] | None = None) -> None:
@@ -33,8 +31,8 @@ class RecorderSink:
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
 
-    def __call__(self, frame: Frame, angles: np.ndarray) -> None:
-        self._queue.put(frame)
+    def accept(self, sample: Sample) -> None:
+        self._queue.put(sample.frame)
 
     def _run(self) -> None:
         while True:

@@ -5,18 +5,21 @@ the coupled MS→ISB convention (docs/conventions.md). The estimator gives θ an
 rotation ψ is held at a fixed value (0 by default). The previous command is the hint at the
 NAO roll singularity, so the command stream stays continuous.
 
-Commands go to a :class:`JointTarget`; :class:`SimulatedNao` is the bundled one (it keeps the
-commanded joint state and counts what was clamped). A robot bridge (e.g. CoppeliaSim's remote
-API) would implement the same one-method protocol.
+:class:`TeleopSink` is a pipeline sink; it sends each command to its robot targets, anything
+implementing :class:`JointTarget`: :class:`SimulatedNao` (keeps the commanded joint state and
+counts clamps), the MuJoCo arm, the UDP/JSON bridge, CoppeliaSim.
 """
 
 from __future__ import annotations
 
+import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
+from exohil.harness.pipeline import RobotCommand, Sample
 from exohil.kinematics import NAO_JOINTS, humerus_to_nao, ms_to_quat
 from exohil.kinematics.robot import Side
 
@@ -61,20 +64,53 @@ class SimulatedNao:
         }
 
 
-class TeleopSink:
-    """Turns each (θ, φ) estimate (degrees) into a NAO command on ``target``."""
+#: The estimator outputs the teleoperation needs: MoBL-ARMS θ (plane of elevation), φ (elevation).
+SHOULDER_ANGLES = ("elv_angle", "shoulder_elv")
 
-    def __init__(self, target: JointTarget, side: Side = "right",
-                 shoulder_rot_deg: float = 0.0) -> None:
-        self.target = target
+
+class TeleopSink:
+    """A pipeline sink: each (θ, φ) estimate → one NAO command on every robot target.
+
+    Args:
+        targets: robots that receive the commands (simulated, MuJoCo, UDP, ...).
+        angle_names: the estimator's output names, in order (a checkpoint's
+            ``target.angles``); θ and φ are taken from them by name.
+        side: arm side.
+        shoulder_rot_deg: the axial rotation ψ to assume (the suit does not measure it), deg.
+
+    Raises:
+        ValueError: when ``angle_names`` lacks ``elv_angle`` or ``shoulder_elv``.
+    """
+
+    def __init__(self, targets: Sequence[JointTarget], angle_names: Sequence[str],
+                 side: Side = "right", shoulder_rot_deg: float = 0.0) -> None:
+        missing = [a for a in SHOULDER_ANGLES if a not in angle_names]
+        if missing:
+            raise ValueError(f"teleoperation needs the shoulder angles {', '.join(missing)}; "
+                             f"the estimator gives {', '.join(angle_names) or 'nothing'}")
+        self.targets = list(targets)
         self.side = side
         self.psi = np.deg2rad(shoulder_rot_deg)
+        self._theta = list(angle_names).index("elv_angle")
+        self._phi = list(angle_names).index("shoulder_elv")
         self._previous: np.ndarray | None = None
 
-    def accept(self, t: float, elv_angle_deg: float, shoulder_elv_deg: float) -> np.ndarray:
-        """Send one command; returns the joint angles (rad) that were commanded."""
+    def command_for(self, elv_angle_deg: float, shoulder_elv_deg: float) -> RobotCommand:
+        """The NAO command for one pose (continuous with the previous one), not sent."""
         q = ms_to_quat(np.deg2rad(elv_angle_deg), np.deg2rad(shoulder_elv_deg), self.psi)
         arm = humerus_to_nao(q, side=self.side, hint=self._previous)
         self._previous = arm.unclamped
-        self.target.command(t, arm.angles, arm.clamped)
-        return arm.angles
+        return RobotCommand(joints=arm.angles, clamped=arm.clamped)
+
+    def accept(self, sample: Sample) -> None:
+        command = self.command_for(sample.angles[self._theta], sample.angles[self._phi])
+        for target in self.targets:
+            target.command(sample.frame.device_time_s, command.joints, command.clamped)
+        sample.command = command
+        sample.stamps["commanded"] = time.perf_counter_ns()
+
+    def close(self) -> None:
+        for target in self.targets:
+            close = getattr(target, "close", None)
+            if close is not None:
+                close()

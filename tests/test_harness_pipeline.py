@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from exohil.harness.frame_source import Frame, FrameSource, LinkStats
-from exohil.harness.pipeline import Pipeline, percentiles_us
+from exohil.harness.pipeline import NOT_STAMPED, STAGES, Pipeline, Sample
 
 
 class FakeSource:
@@ -58,15 +58,45 @@ def test_fake_source_satisfies_the_protocol():
     assert isinstance(FakeSource([]), FrameSource)
 
 
+class ListSink:
+    def __init__(self, stage=None):
+        self.seen = []
+        self.stage = stage
+        self.closed = False
+
+    def accept(self, sample: Sample):
+        self.seen.append((sample.frame.seq, sample.angles.copy(), dict(sample.stamps)))
+        if self.stage:
+            sample.stamps[self.stage] = time.perf_counter_ns()
+
+    def close(self):
+        self.closed = True
+
+
 def test_every_frame_reaches_every_sink_in_order():
-    seen = []
-    run = Pipeline(FakeSource(frames(50)), SumEstimator(),
-                   [lambda f, a: seen.append((f.seq, a.copy()))]).run(max_frames=50)
-    assert run.frames == 50 and [s for s, _ in seen] == list(range(50))
+    first, second = ListSink(stage="commanded"), ListSink()
+    run = Pipeline(FakeSource(frames(50)), SumEstimator(), [first, second]).run(max_frames=50)
+    assert run.frames == 50 and [s for s, _, _ in first.seen] == list(range(50))
     assert np.array_equal(run.estimates[:, 0], 4.0 * np.arange(50))
     assert np.array_equal(run.estimates[:, 1], np.arange(1, 51))  # buffer reuse did not alias
     assert np.array_equal(run.seq, np.arange(50))
-    assert np.all(run.latency_ns >= run.compute_ns) and np.all(run.compute_ns >= 0)
+    assert all("commanded" in stamps for _, _, stamps in second.seen)  # sinks run in order
+    assert not first.closed  # the sinks' owner closes them
+
+
+def test_every_frame_is_stamped_in_stage_order():
+    writes = {k: time.perf_counter_ns() - 1000 for k in range(0, 20, 2)}  # odd frames unknown
+    run = Pipeline(FakeSource(frames(20)), SumEstimator(), [ListSink(stage="commanded")],
+                   device_clock=writes.get).run(max_frames=20)
+    stamps = run.stamps
+    device = stamps[:, STAGES.index("device_write")]
+    assert np.all(device[::2] != NOT_STAMPED) and np.all(device[1::2] == NOT_STAMPED)
+    later = stamps[:, STAGES.index("host_receive"):]
+    later = later[:, [i for i, s in enumerate(STAGES[1:]) if s != "decoded"]]  # fake: no decode
+    assert np.all(np.diff(later, axis=1) >= 0)
+    assert run.interval_ms("device_write", "done").shape == (10,)
+    assert np.all(run.interval_ms("host_receive", "done") >= 0)
+    assert np.all(np.isnan(run.commands))  # ListSink issues no robot command
 
 
 def test_run_ends_when_the_source_goes_quiet_or_stop_is_set():
@@ -75,13 +105,6 @@ def test_run_ends_when_the_source_goes_quiet_or_stop_is_set():
     stop = threading.Event()
     stop.set()
     assert Pipeline(FakeSource(frames(5)), SumEstimator()).run(stop=stop).frames == 0
-
-
-def test_percentiles_in_microseconds():
-    ns = np.arange(1, 101) * 1000
-    p = percentiles_us(ns)
-    assert p["max_us"] == 100.0 and p["p50_us"] == 50.5
-    assert np.isnan(percentiles_us(np.array([], dtype=np.int64))["p50_us"])
 
 
 def test_recorder_sink_writes_every_frame_it_was_given(tmp_path):
