@@ -24,8 +24,8 @@ from collections import Counter
 
 import numpy as np
 
-from benchmarks.machine import machine
 from exohil.harness.acquisition import SerialFrameSource
+from exohil.harness.machine import machine
 
 SENSORS = 4
 

@@ -11,11 +11,11 @@ import time
 
 import numpy as np
 
-from benchmarks.machine import machine
 from exohil.emulators.effects import Signal
 from exohil.emulators.protocols import paper_protocol
 from exohil.emulators.simulate import geometric_signal, simulate
 from exohil.emulators.suit_profile import load_default_profile
+from exohil.harness.machine import machine
 
 
 def timings(fn, repeats: int) -> np.ndarray:

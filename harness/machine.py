@@ -1,4 +1,4 @@
-"""The machine a benchmark ran on, for its report."""
+"""The machine a benchmark, a demo or a conformance run ran on, for its report."""
 
 from __future__ import annotations
 

@@ -1,0 +1,195 @@
+"""What a bench is: the device, the model and the sinks, in one small TOML file.
+
+Following labgrid's split between what a place *is* and how it is *driven*, a bench
+configuration only names things; :func:`open_device` turns its device into a running
+:class:`~exohil.harness.frame_source.FrameSource`. ``exohil demo``, ``exohil run`` and
+``exohil conform`` all read this format (``--bench FILE``), and their command-line options
+fill in or override it. Example (every key but ``model`` is optional)::
+
+    [device]                      # the emulator replaying a recording ...
+    emulator = "fixtures/paper_protocol_heldout.mcap"
+    faults = "drop:rate=0.002;corrupt:rate=0.001"
+    seed = 0
+    # url = "/dev/ttyACM0"        # ... or any pyserial URL of a real device
+    # reference = "trial.mcap"    # ground truth for a real device (aligned by device time)
+
+    [sensors]
+    names = ["F", "SF", "SR", "R"]  # checked against the model's
+    rate_hz = 250
+
+    [model]
+    checkpoint = "fixtures/models/ennet.npz"
+    backend = "auto"
+
+    [teleop]
+    robots = ["simulated"]          # "simulated", "mujoco", "udp:HOST:PORT"
+
+    [record]
+    path = "session.mcap"
+
+Relative paths are relative to the TOML file's folder. A device *target* on the command line
+is ``emulator:RECORDING[?faults=SPEC&seed=N]`` or a pyserial URL (:func:`parse_target`).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs
+
+from exohil.harness.acquisition import SerialFrameSource
+from exohil.harness.pipeline import DeviceClock
+
+
+class BenchError(ValueError):
+    """A bench configuration or target that cannot be used; the message says why."""
+
+
+@dataclass(frozen=True)
+class EmulatorDevice:
+    """The software Arduino on a pty, replaying ``recording`` with seeded ``faults``."""
+
+    recording: Path
+    faults: str | None = None
+    seed: int = 0
+
+    def describe(self) -> str:
+        faults = f" with faults {self.faults!r}" if self.faults else ""
+        return f"emulator replaying {self.recording}{faults}"
+
+
+@dataclass(frozen=True)
+class SerialDevice:
+    """A device behind a pyserial URL; ``reference`` holds its ground truth, if any."""
+
+    url: str
+    reference: Path | None = None
+
+    def describe(self) -> str:
+        return f"serial device {self.url}"
+
+
+Device = EmulatorDevice | SerialDevice
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """One bench (see module doc)."""
+
+    device: Device | None = None
+    model: Path | None = None
+    backend: str = "auto"
+    sensor_names: tuple[str, ...] | None = None
+    rate_hz: float = 250.0
+    robots: tuple[str, ...] = ("simulated",)
+    record: Path | None = None
+    source: Path | None = field(default=None, compare=False)
+
+    def with_overrides(self, **changes: Any) -> BenchConfig:
+        """A copy with every non-None value of ``changes`` applied."""
+        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+
+def parse_target(text: str) -> Device:
+    """``emulator:RECORDING[?faults=SPEC&seed=N]`` → :class:`EmulatorDevice`; anything else is
+    a pyserial URL or device path → :class:`SerialDevice`."""
+    if not text:
+        raise BenchError("empty target")
+    if not text.startswith("emulator:"):
+        return SerialDevice(text)
+    path, _, query = text[len("emulator:"):].partition("?")
+    if not path:
+        raise BenchError("emulator target without a recording: emulator:RECORDING[?faults=...]")
+    params = {k: v[-1] for k, v in parse_qs(query, keep_blank_values=True).items()}
+    unknown = sorted(set(params) - {"faults", "seed"})
+    if unknown:
+        raise BenchError(f"unknown emulator option(s) {', '.join(unknown)}; allowed: faults, seed")
+    try:
+        seed = int(params.get("seed", "0"))
+    except ValueError:
+        raise BenchError(f"seed must be an integer, got {params['seed']!r}") from None
+    return EmulatorDevice(Path(path), params.get("faults") or None, seed)
+
+
+_SECTIONS = {"device": {"emulator", "faults", "seed", "url", "reference"},
+             "sensors": {"names", "rate_hz"}, "model": {"checkpoint", "backend"},
+             "teleop": {"robots"}, "record": {"path"}}
+
+
+def load_bench(path: Path) -> BenchConfig:
+    """Read a bench TOML file (see module doc); BenchError names any problem."""
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
+        raise BenchError(f"{path}: {err}") from None
+    where = Path(path).resolve().parent
+    for name, value in data.items():
+        if name not in _SECTIONS or not isinstance(value, dict):
+            raise BenchError(f"{path}: unknown section [{name}]; allowed: {', '.join(_SECTIONS)}")
+        unknown = sorted(set(value) - _SECTIONS[name])
+        if unknown:
+            raise BenchError(f"{path}: unknown key(s) {', '.join(unknown)} in [{name}]")
+
+    def rel(p: str | None) -> Path | None:
+        return None if p is None else where / p
+
+    dev = data.get("device", {})
+    device: Device | None = None
+    if "emulator" in dev and "url" in dev:
+        raise BenchError(f"{path}: [device] names both an emulator and a url; pick one")
+    if "emulator" in dev:
+        device = EmulatorDevice(where / dev["emulator"], dev.get("faults"), int(dev.get("seed", 0)))
+    elif "url" in dev:
+        device = SerialDevice(str(dev["url"]), rel(dev.get("reference")))
+    sensors = data.get("sensors", {})
+    names = sensors.get("names")
+    model = data.get("model", {})
+    return BenchConfig(
+        device=device,
+        model=rel(model.get("checkpoint")),
+        backend=str(model.get("backend", "auto")),
+        sensor_names=None if names is None else tuple(str(n) for n in names),
+        rate_hz=float(sensors.get("rate_hz", 250.0)),
+        robots=tuple(data.get("teleop", {}).get("robots", ("simulated",))),
+        record=rel(data.get("record", {}).get("path")),
+        source=Path(path),
+    )
+
+
+@dataclass
+class OpenDevice:
+    """A started device: its frames, its write clock (emulator only) and the emulator."""
+
+    source: SerialFrameSource
+    device_clock: DeviceClock | None
+    emulator: Any = None  # exohil.emulators.arduino.ArduinoEmulator, for its fault log
+
+
+@contextmanager
+def open_device(device: Device, expected_sensors: int | None, *, realtime: bool = False,
+                duration_s: float | None = None) -> Iterator[OpenDevice]:
+    """Start ``device`` and an acquisition thread on it; stops both on exit.
+
+    The emulator runs in this process (its recording is read here) and streams ``duration_s``
+    of device time (default: the whole recording); a serial device is opened by URL and
+    reconnected on loss by the acquisition thread.
+    """
+    if isinstance(device, SerialDevice):
+        with SerialFrameSource(device.url, expected_sensors=expected_sensors,
+                               realtime=realtime) as source:
+            yield OpenDevice(source, None)
+        return
+    from exohil.emulators.arduino import ArduinoEmulator
+    from exohil.formats.mcap_io import read_recording
+
+    recording = read_recording(device.recording)
+    with ArduinoEmulator.from_recording(recording, faults=device.faults, seed=device.seed,
+                                        realtime=realtime, duration_s=duration_s) as emulator:
+        with SerialFrameSource(emulator.port, expected_sensors=expected_sensors,
+                               realtime=realtime) as source:
+            yield OpenDevice(source, emulator.write_time_ns, emulator)
+

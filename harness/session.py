@@ -1,0 +1,334 @@
+"""One bench session: open the device, stream through the model into the sinks, measure.
+
+``exohil demo``, ``exohil run`` and the conformance suite's real-time checks all run a
+:func:`run_session` on a :class:`~exohil.harness.bench.BenchConfig` and report the
+:class:`~exohil.formats.measurement.Measurement` lists built here, so the three can never
+define a figure differently:
+
+* :func:`latency_measurements`: per-stage times of every frame (ms), see ``pipeline.STAGES``;
+* :func:`link_measurements`: host counters, and for the emulator an exact reconciliation with
+  its fault log;
+* :func:`accuracy_measurements` (from the estimator layer): against the reference's motion
+  capture, aligned by device time;
+* :func:`teleop_measurements`: robot commands against those computed from the true angles.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
+from exohil.estimator.evaluation import accuracy_measurements
+from exohil.estimator.inference import StreamingEstimator, default_backend
+from exohil.estimator.trained import TrainedEstimator
+from exohil.formats.alignment import angles_at
+from exohil.formats.errors import RecordingError
+from exohil.formats.measurement import Limit, Measurement, distribution
+from exohil.formats.recording import Recording
+from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, SerialDevice, open_device
+from exohil.harness.frame_source import LinkStats
+from exohil.harness.pipeline import STAGES, Pipeline, PipelineRun, Sink
+from exohil.harness.teleop import SHOULDER_ANGLES, SimulatedNao, TeleopSink
+from exohil.kinematics import NAO_JOINTS
+
+Limits = Mapping[str, Limit]
+Progress = Callable[[int, LinkStats, np.ndarray | None], None]
+
+#: Interval measurements: name → (from stage, to stage).
+LATENCY_INTERVALS = {
+    "latency.device_to_host": ("device_write", "host_receive"),
+    "latency.decode": ("host_receive", "decoded"),
+    "latency.queue_and_estimate": ("decoded", "estimated"),
+    "latency.command": ("estimated", "commanded"),
+}
+#: Kinds of emulator fault-log records that are frames the host can never receive intact.
+_LOST_KINDS = frozenset({"drop", "corrupt", "truncate", "disconnect", "not_read"})
+
+
+class SessionError(Exception):
+    """A session that cannot start or produced nothing; the message says why (one line)."""
+
+
+def sha256_file(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+@dataclass
+class LoadedModel:
+    """A checkpoint and its streaming engine."""
+
+    path: Path
+    estimator: TrainedEstimator
+    backend: str
+    sha256: str
+
+    def engine(self) -> StreamingEstimator:
+        """A fresh streaming engine (empty window)."""
+        return StreamingEstimator(self.estimator, backend=self.backend)
+
+
+def load_model(path: Path, backend: str = "auto") -> LoadedModel:
+    """Load a checkpoint and check that ``backend`` can run it; SessionError if not."""
+    try:
+        est = load_checkpoint(path)
+        chosen = default_backend(est) if backend == "auto" else backend
+        StreamingEstimator(est, backend=chosen)
+    except (CheckpointError, ValueError, OSError) as err:
+        raise SessionError(str(err)) from None
+    return LoadedModel(Path(path), est, chosen, sha256_file(path))
+
+
+def read_reference(path: Path) -> Recording:
+    """A recording holding ground truth; SessionError if it cannot be read."""
+    from exohil.formats.mcap_io import read_recording
+
+    try:
+        return read_recording(path)
+    except RecordingError as err:
+        raise SessionError(str(err)) from None
+
+
+def reference_path(config: BenchConfig) -> Path | None:
+    """The recording that holds the ground truth of ``config``'s device, if any."""
+    device = config.device
+    if isinstance(device, EmulatorDevice):
+        return device.recording
+    if isinstance(device, SerialDevice):
+        return device.reference
+    return None
+
+
+def truth_at(reference: Recording, est: TrainedEstimator, device_time_s: np.ndarray) -> np.ndarray:
+    """(N, A) true angles (deg) at the frames' device times, in the estimator's order; NaN
+    outside the reference's motion capture."""
+    return angles_at(reference, device_time_s, est.target.joint, est.target.angles)
+
+
+def build_robots(names: Sequence[str]) -> list[Any]:
+    """Robot targets by name: ``simulated`` (bookkeeping only), ``mujoco`` (physics),
+    ``udp:HOST:PORT`` (JSON datagrams)."""
+    robots: list[Any] = []
+    for name in names:
+        if name == "simulated":
+            robots.append(SimulatedNao())
+        else:
+            raise BenchError(f"unknown robot {name!r}; available: simulated")
+    return robots
+
+
+@dataclass
+class SessionResult:
+    """Everything one session produced (see :func:`run_session`)."""
+
+    config: BenchConfig
+    model: LoadedModel
+    run: PipelineRun
+    truth: np.ndarray | None
+    fault_log: list[Any] | None
+    emulator_seq0: int | None
+    wire_values_mm: np.ndarray | None
+    clipped_values: int
+    robots: list[Any] = field(default_factory=list)
+
+    @property
+    def fault_counts(self) -> dict[str, int] | None:
+        if self.fault_log is None:
+            return None
+        return dict(Counter(record.kind for record in self.fault_log))
+
+
+def run_session(config: BenchConfig, seconds: float, *, progress: Progress | None = None,
+                stop: threading.Event | None = None, extra_sinks: Sequence[Sink] = (),
+                realtime: bool = False) -> SessionResult:
+    """Stream ``seconds`` of the bench's device through its model into its sinks.
+
+    An emulator streams exactly ``seconds`` of device time and the run ends once every frame
+    it sent has been processed, so its fault log and the host's counters cover the same
+    frames; a serial device is read for ``seconds`` of wall time (or until ``stop``).
+    """
+    if config.device is None:
+        raise SessionError("no device: give a target (emulator:RECORDING or a serial URL)")
+    if config.model is None:
+        raise SessionError("no model: give a checkpoint")
+    model = load_model(config.model, config.backend)
+    est = model.estimator
+    if config.sensor_names is not None and tuple(config.sensor_names) != est.sensor_names:
+        raise SessionError(f"the bench's sensors {list(config.sensor_names)} are not the "
+                           f"model's {list(est.sensor_names)}")
+    ref_path = reference_path(config)
+    reference = None if ref_path is None else read_reference(ref_path)
+    if reference is not None:
+        try:
+            ensure_fits(est, reference, str(ref_path))
+        except CheckpointError as err:
+            raise SessionError(str(err)) from None
+    inputs = [p for p in (config.model, ref_path) if p is not None]
+    if config.record is not None and any(_same_file(config.record, p) for p in inputs):
+        raise SessionError(f"refusing to record onto an input: {config.record}")
+    robots = build_robots(config.robots) if _is_shoulder(est) else []
+    sinks: list[Sink] = []
+    if robots:
+        sinks.append(TeleopSink(robots, est.target.angles))
+    sinks.extend(extra_sinks)
+    if config.record is not None:
+        from exohil.harness.recorder import RecorderSink
+
+        sinks.append(RecorderSink(config.record, est.sensor_names, metadata={
+            "generator": "exohil", "source": config.device.describe(),
+            "model_sha256": model.sha256}))
+    try:
+        with open_device(config.device, len(est.sensor_names), realtime=realtime,
+                         duration_s=seconds) as opened:
+            pipeline = Pipeline(opened.source, model.engine(), sinks, opened.device_clock)
+            if opened.emulator is not None:
+                run = pipeline.run(duration_s=seconds + 30.0, idle_timeout_s=1.0, stop=stop,
+                                   progress=progress)
+            else:
+                run = pipeline.run(duration_s=seconds, stop=stop, progress=progress)
+            emulator = opened.emulator
+            fault_log = None if emulator is None else emulator.fault_log
+            seq0 = None if emulator is None else emulator.seq0
+            wire = None if emulator is None else emulator.wire_values_mm
+            clipped = 0 if emulator is None else emulator.clipped_values
+    except (ValueError, RecordingError) as err:
+        raise SessionError(str(err)) from None
+    finally:
+        for sink in sinks:
+            sink.close()
+    if run.frames == 0:
+        stats = run.link
+        hint = (f" ({stats.decode_errors} packets of another shape: does the device send "
+                f"{len(est.sensor_names)} sensors?)" if stats.decode_errors else "")
+        raise SessionError(f"no frame arrived from the {config.device.describe()}{hint}")
+    truth = None if reference is None else truth_at(reference, est, run.device_time_s)
+    return SessionResult(config, model, run, truth, fault_log, seq0, wire, clipped, robots)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    return Path(a).resolve() == Path(b).resolve()
+
+
+def _is_shoulder(est: TrainedEstimator) -> bool:
+    return est.target.joint == "shoulder" and all(a in est.target.angles for a in SHOULDER_ANGLES)
+
+
+def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list[Measurement]:
+    """p50/p99/max of each stage interval and of end to end, ms. End to end runs from the
+    device's write (when known, else host receive) to the robot command (else the sinks done).
+    ``limits`` maps e.g. ``latency.end_to_end.max`` to its limit."""
+    limits = limits or {}
+
+    def lim(name: str) -> dict[str, Limit]:
+        return {stat: limits[f"{name}.{stat}"] for stat in ("p50", "p99", "max")
+                if f"{name}.{stat}" in limits}
+
+    out: list[Measurement] = []
+    for name, (a, b) in LATENCY_INTERVALS.items():
+        out += distribution(name, run.interval_ms(a, b), "ms", lim(name), f"{a} → {b}")
+    out += distribution("latency.estimator", run.compute_ns / 1e6, "ms",
+                        lim("latency.estimator"), "estimator compute per frame")
+    first = run.stamps[:, STAGES.index("device_write")]
+    start_stage = "device_write" if np.any(first >= 0) else "host_receive"
+    end_stage = "commanded" if np.any(run.stamps[:, STAGES.index("commanded")] >= 0) else "done"
+    out += distribution("latency.end_to_end", run.interval_ms(start_stage, end_stage), "ms",
+                        lim("latency.end_to_end"), f"{start_stage} → {end_stage}")
+    return out
+
+
+def link_measurements(result: SessionResult, limits: Limits | None = None) -> list[Measurement]:
+    """Host link counters and, for the emulator, their reconciliation with its fault log:
+
+    * ``link.lost_on_host``: frames the device delivered that the host lost (buffer overflow,
+      or a gap the device did not log), must be 0;
+    * ``link.bad_frames_delivered``: frames whose values differ from what the device sent for
+      that sequence number (a CRC that let corruption through), must be 0;
+    * ``link.dropped_unexplained``: host-counted drops minus the device's logged losses
+      within the received span, must be 0.
+    """
+    limits = limits or {}
+    run = result.run
+    link = run.link
+
+    def m(name: str, value: float, unit: str = "count", note: str = "") -> Measurement:
+        return Measurement.judge(name, value, unit, limits.get(name), note)
+
+    span = float(run.device_time_s[-1] - run.device_time_s[0]) if run.frames > 1 else 0.0
+    rate = (run.frames - 1) / span if span > 0 else float("nan")
+    out = [m("link.frames", run.frames),
+           m("link.rate", rate, "Hz", note="frames received per second of device time"),
+           m("link.dropped", link.dropped, note="sequence gaps seen by the host"),
+           m("link.crc_errors", link.crc_errors), m("link.decode_errors", link.decode_errors),
+           m("link.overflow", link.overflow, note="frames the host buffer discarded")]
+    if result.fault_log is None or result.wire_values_mm is None or result.emulator_seq0 is None:
+        why = "no device fault log (not the in-process emulator)"
+        for name in ("link.lost_on_host", "link.bad_frames_delivered",
+                     "link.dropped_unexplained"):
+            out.append(Measurement.skipped(name, "count", why, limits.get(name)))
+        return out
+    first, last = int(run.seq[0]), int(run.seq[-1])
+    lost = {r.seq for r in result.fault_log if r.kind in _LOST_KINDS and first <= r.seq <= last}
+    received = set(run.seq.tolist())
+    expected = set(range(first, last + 1)) - lost
+    wire = result.wire_values_mm
+    rows = (run.seq - result.emulator_seq0) % wire.shape[0]
+    bad = int(np.count_nonzero(np.any(np.abs(run.values - wire[rows]) > 1e-9, axis=1)))
+    out += [
+        m("link.lost_on_host", len(expected - received) + link.overflow,
+          note=f"{len(expected)} frames the device delivered in seq {first}..{last}"),
+        m("link.bad_frames_delivered", bad, note="values differ from what the device sent"),
+        m("link.dropped_unexplained", link.dropped - len(lost),
+          note=f"host {link.dropped} vs device log {len(lost)} in the received span"),
+    ]
+    return out
+
+
+def teleop_measurements(result: SessionResult,
+                        limits: Limits | None = None) -> list[Measurement]:
+    """Robot commands from the estimates against the commands the same mapping gives for the
+    true angles: RMSE per joint (deg) and the share of clamped commands."""
+    limits = limits or {}
+    run, truth, est = result.run, result.truth, result.model.estimator
+    names = [f"teleop.rmse.{j}" for j in NAO_JOINTS]
+    if truth is None or not result.robots or np.all(np.isnan(run.commands)):
+        why = "no reference" if truth is None else "no teleoperation (not a shoulder model)"
+        return [Measurement.skipped(n, "deg", why, limits.get(n)) for n in names]
+    mapping = TeleopSink([], est.target.angles)
+    th, ph = est.target.angles.index("elv_angle"), est.target.angles.index("shoulder_elv")
+    ok = np.all(np.isfinite(truth), axis=1) & np.all(np.isfinite(run.commands), axis=1)
+    reference = np.full_like(run.commands, np.nan)
+    for i in np.flatnonzero(ok):
+        reference[i] = mapping.command_for(truth[i, th], truth[i, ph]).joints
+    err = np.rad2deg(run.commands[ok] - reference[ok])
+    note = f"{int(ok.sum())} frames"
+    out = [Measurement.judge(n, float(np.sqrt(np.mean(err[:, j] ** 2))), "deg",
+                             limits.get(n), note) for j, n in enumerate(names)]
+    share = float(np.mean(run.clamped)) if run.frames else float("nan")
+    out.append(Measurement.judge("teleop.clamped_share", share, "ratio",
+                                 limits.get("teleop.clamped_share"),
+                                 "commands with a joint at its limit"))
+    return out
+
+
+def session_accuracy(result: SessionResult, limits: Limits | None = None) -> list[Measurement]:
+    """Accuracy of the streamed estimates against the reference (skipped without one)."""
+    est = result.model.estimator
+    if result.truth is None:
+        names = [f"accuracy.rmse.{a}" for a in est.target.angles]
+        if _is_shoulder(est):
+            names.append("accuracy.direction_rmse")
+        return [Measurement.skipped(n, "deg", "no reference recording", (limits or {}).get(n))
+                for n in names]
+    return accuracy_measurements(result.run.estimates, result.truth, est.target.angles, limits)

@@ -1,0 +1,121 @@
+"""The report of a bench session (``exohil demo`` and ``exohil run``): every figure is a
+:class:`~exohil.formats.measurement.Measurement` from :mod:`exohil.harness.session`; this
+module lays them out as the summary JSON and the lines a person reads.
+
+``summary.json``::
+
+    {"rmse": {angle: deg}, "direction_rmse_deg": deg,
+     "latency_ms": {stage: {"p50", "p99", "max"}},
+     "frames": {"sent", "received", "dropped", "crc_errors"},
+     "teleop": {"rmse_deg": {joint: deg}, "clamped_share"},
+     "device_log": {kind: count}, "measurements": [Measurement.to_dict(), ...],
+     "model", "model_sha256", "backend", "target", "machine", "finished_at"}
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from exohil.formats.measurement import Measurement
+from exohil.harness.machine import machine
+from exohil.harness.session import (
+    SessionResult,
+    latency_measurements,
+    link_measurements,
+    session_accuracy,
+    teleop_measurements,
+)
+
+
+def session_measurements(result: SessionResult) -> list[Measurement]:
+    """Every measurement of a session, without limits (the demo and ``run`` report them)."""
+    return (link_measurements(result) + latency_measurements(result.run)
+            + session_accuracy(result) + teleop_measurements(result))
+
+
+def _value(measurements: list[Measurement], name: str) -> float | None:
+    for m in measurements:
+        if m.name == name:
+            return None if math.isnan(m.value) else round(m.value, 4)
+    return None
+
+
+def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str, Any]:
+    """The summary JSON (module doc)."""
+    est = result.model.estimator
+    stages = list(dict.fromkeys(m.name.rsplit(".", 1)[0] for m in measurements
+                                if m.name.startswith("latency.")))
+    counts = result.fault_counts
+    run = result.run
+    sent = None
+    if counts is not None:
+        sent = run.frames + sum(counts.get(k, 0) for k in ("drop", "corrupt", "truncate",
+                                                            "disconnect"))
+    return {
+        "target": result.config.device.describe() if result.config.device else None,
+        "model": str(result.model.path),
+        "model_sha256": result.model.sha256,
+        "model_kind": est.kind,
+        "backend": result.model.backend,
+        "rmse": {a: _value(measurements, f"accuracy.rmse.{a}") for a in est.target.angles},
+        "direction_rmse_deg": _value(measurements, "accuracy.direction_rmse"),
+        "latency_ms": {s.removeprefix("latency."): {stat: _value(measurements, f"{s}.{stat}")
+                                                     for stat in ("p50", "p99", "max")}
+                       for s in stages},
+        "frames": {"sent": sent, "received": run.frames, "dropped": run.link.dropped,
+                   "crc_errors": run.link.crc_errors},
+        "link": vars(run.link),
+        "device_log": counts,
+        "values_clipped_to_wire_range": result.clipped_values,
+        "teleop": {
+            "rmse_deg": {m.name.removeprefix("teleop.rmse."): _value(measurements, m.name)
+                         for m in measurements if m.name.startswith("teleop.rmse.")},
+            "clamped_share": _value(measurements, "teleop.clamped_share"),
+            "robots": {type(r).__name__: r.summary() for r in result.robots
+                       if hasattr(r, "summary")},
+        },
+        "wall_s": round(run.wall_s, 3),
+        "measurements": [m.to_dict() for m in measurements],
+        "machine": machine(),
+        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+
+
+def summary_lines(s: dict[str, Any]) -> list[str]:
+    """What a person reads at the end of a run."""
+    link = s["link"]
+    lines = [
+        "",
+        f"frames      {s['frames']['received']} received in {s['wall_s']} s  "
+        f"dropped {link['dropped']}  crc errors {link['crc_errors']}  "
+        f"decode errors {link['decode_errors']}  reconnects {link['reconnects']}  "
+        f"host overflow {link['overflow']}",
+    ]
+    if s["device_log"] is not None:
+        log = ", ".join(f"{k} {v}" for k, v in sorted(s["device_log"].items()))
+        lines.append(f"device log  {log or 'nothing injected or lost'}")
+    for stage, stats in s["latency_ms"].items():
+        if stats["p50"] is None:
+            continue
+        lines.append(f"{'latency':11s} {stage:22s} p50 {stats['p50']:.3f}  p99 {stats['p99']:.3f}"
+                     f"  max {stats['max']:.3f} ms")
+    rmse = ", ".join(f"{k} {v:.2f}°" for k, v in s["rmse"].items() if v is not None)
+    if rmse:
+        direction = s["direction_rmse_deg"]
+        lines.append(f"accuracy    RMSE {rmse} where elevation ≥ 20° (θ is undefined with the "
+                     "arm hanging)")
+        if direction is not None:
+            lines.append(f"            arm-direction RMSE {direction:.2f}° over all frames")
+    else:
+        lines.append("accuracy    not measured: no reference recording")
+    teleop = s["teleop"]
+    if teleop["rmse_deg"] and any(v is not None for v in teleop["rmse_deg"].values()):
+        joints = ", ".join(f"{k} {v:.2f}°" for k, v in teleop["rmse_deg"].items())
+        lines.append(f"teleop      command RMSE vs true pose: {joints}; clamped "
+                     f"{100 * (teleop['clamped_share'] or 0):.1f}% of commands")
+    if s["values_clipped_to_wire_range"]:
+        lines.append(f"warning     {s['values_clipped_to_wire_range']} sensor values were outside "
+                     "the wire's 0..655.35 mm and were clipped")
+    return lines
