@@ -193,7 +193,9 @@ def test_simulate_command_bad_input_is_one_clear_error(tmp_path, args, message):
 def test_committed_fixtures_rebuild_bit_identically():
     result = CliRunner().invoke(main, ["fixtures", "build", "--check"])
     assert result.exit_code == 0, result.output
-    assert "all 2 fixtures match" in result.output
+    from exohil.harness.fixture_specs import FIXTURES
+
+    assert f"all {len(FIXTURES)} fixtures match" in result.output
 
 
 @needs_shoulder_ik
