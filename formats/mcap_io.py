@@ -213,6 +213,25 @@ class RecordingWriter:
             payload = {"t": sample_t, **dict(zip(names, sample, strict=True))}
             self._emit(channel, sample_t, payload)
 
+    def add_channel(self, topic: str, schema_name: str, schema: dict[str, Any]) -> int:
+        """Register an extra JSON channel (estimates, robot commands, timing) and return its id
+        for :meth:`add_message`. Format v1 readers ignore topics outside ``/suit/sensors`` and
+        ``/mocap/*`` (and list them as notes); MCAP tools such as Foxglove show them."""
+        self._check_open()
+        if topic == SENSOR_TOPIC or topic.startswith(MOCAP_PREFIX):
+            raise RecordingError(f"{self.path}: {topic} is a format v1 topic; use the "
+                                 "sensor/mocap methods")
+        return self._register(topic, schema_name, schema)
+
+    def add_message(self, channel: int, t: float, payload: Mapping[str, Any]) -> None:
+        """Append one JSON message at ``t`` (s) to a channel from :meth:`add_channel`
+        (finite numbers only: JSON has no NaN)."""
+        self._check_open()
+        if channel not in self._counts or channel == self._sensor_channel \
+                or channel in self._mocap_channels.values():
+            raise RecordingError(f"{self.path}: channel {channel} was not added by add_channel")
+        self._emit(channel, t, dict(payload))
+
     def add_segment(self, segment: Segment) -> None:
         """Label a time span (seconds on the sensor clock); stored in the metadata at close."""
         self._check_open()

@@ -190,11 +190,3 @@ def distribution(name: str, samples: Iterable[float] | np.ndarray, unit: str,
     return [Measurement.judge(f"{name}.{stat}", values[stat], unit, limits.get(stat), counted)
             for stat in DISTRIBUTION_STATS]
 
-
-def overall_verdict(measurements: Iterable[Measurement]) -> Verdict:
-    """FAIL if any failed, else PASS if any passed, else SKIP if any skipped, else INFO."""
-    verdicts = {m.verdict for m in measurements}
-    for v in (Verdict.FAIL, Verdict.PASS, Verdict.SKIP):
-        if v in verdicts:
-            return v
-    return Verdict.INFO

@@ -6,6 +6,8 @@ stays fast.
 
 from __future__ import annotations
 
+from importlib.metadata import entry_points
+
 import click
 
 from exohil import __version__
@@ -49,6 +51,9 @@ def _register() -> None:
     ):
         for command in module.COMMANDS:
             main.add_command(command)
-
+    # Commands of the layers above the harness (`exohil conform`) come in through the
+    # `exohil.commands` entry point, so the harness never imports them.
+    for entry in entry_points(group="exohil.commands"):
+        main.add_command(entry.load())
 
 _register()

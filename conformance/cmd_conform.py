@@ -1,0 +1,69 @@
+"""``exohil conform``: the conformance suite, a thin wrapper around pytest and its plugin.
+
+It runs ``pytest --pyargs exohil.conformance`` with the same options, so ``exohil conform``
+and plain pytest can never disagree, and writes ``junit.xml`` (measurements as properties),
+``conformance.json``, ``summary.md`` and ``run.mcap`` into ``--out``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("conform")
+@click.option("--target", required=True,
+              help="emulator:RECORDING[?faults=SPEC&seed=N] (the emulator on a pty, in "
+                   "process) or a pyserial URL / device path (/dev/ttyACM0, a pty printed by "
+                   "`exohil emulate`, socket://host:port).")
+@click.option("--model", required=True, type=click.Path(path_type=Path),
+              help="Checkpoint under test (.npz).")
+@click.option("--profile", default="default", show_default=True,
+              help="Profile: default, bench, ci, or a .toml file (docs/conformance.md).")
+@click.option("--baseline", type=click.Path(path_type=Path), default=None,
+              help="Baseline checkpoint: accuracy and latency must not regress beyond the "
+                   "profile's margin and factor.")
+@click.option("--reference", type=click.Path(path_type=Path), default=None,
+              help="Ground truth recording for a serial device (aligned by device time); "
+                   "without it the accuracy checks are skipped, never passed.")
+@click.option("--backend", default="auto", show_default=True,
+              type=click.Choice(["auto", "numpy", "torch", "torchscript", "onnxruntime"]),
+              help="Streaming inference backend.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("conformance-report"), show_default=True,
+              help="Folder for junit.xml, conformance.json, summary.md, run.mcap.")
+@click.option("-k", "select", default=None,
+              help="Run only the checks matching this pytest -k expression.")
+def conform(target: str, model: Path, profile: str, baseline: Path | None,
+            reference: Path | None, backend: str, out_dir: Path, select: str | None) -> None:
+    """Run the conformance suite on MODEL against TARGET; exit 0 only when every required
+    check passed. The last line names the verdict (and the first failing check)."""
+    import json
+
+    import pytest
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    args = ["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
+            "-o", "junit_family=xunit1", "-W", "ignore::pytest.PytestAssertRewriteWarning",
+            f"--junitxml={out_dir / 'junit.xml'}",
+            "--exohil-target", target, "--exohil-model", str(model),
+            "--exohil-profile", profile, "--exohil-backend", backend,
+            "--exohil-out", str(out_dir)]
+    for option, value in (("--exohil-baseline", baseline), ("--exohil-reference", reference)):
+        if value is not None:
+            args += [option, str(value)]
+    if select:
+        args += ["-k", select]
+    code = pytest.main(args)
+    report = out_dir / "conformance.json"
+    if code == pytest.ExitCode.USAGE_ERROR or not report.is_file():
+        raise click.ClickException(f"the conformance suite did not run (pytest exit {int(code)})")
+    from exohil.conformance.report import final_line
+
+    data = json.loads(report.read_text(encoding="utf-8"))
+    click.echo(f"reports in {out_dir}/: junit.xml conformance.json summary.md"
+               + (" run.mcap" if (out_dir / "run.mcap").is_file() else ""))
+    click.echo(final_line(data))
+    raise SystemExit(0 if data["verdict"] == "pass" else 1)
+

@@ -1,0 +1,278 @@
+"""What one conformance run measures, shared by its checks.
+
+:class:`ConformanceRun` holds the target, the model, the profile and (optionally) the
+reference and the baseline, and computes each expensive piece once, on first use:
+
+* the *replay*: every sensor frame of the reference recording pushed through the same
+  streaming engine the pipeline uses, as fast as it goes (the accuracy check);
+* the *real-time session*: ``realtime_seconds`` of the device over its serial link at its
+  own rate, through the whole pipeline with teleoperation (latency, link, teleop checks).
+
+Each ``*_measurements`` method returns the measurements of one check with the profile's
+limits; the pytest checks (``test_checks.py``) record and judge them.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from exohil.conformance.conversions import run_properties
+from exohil.conformance.profile import Profile
+from exohil.estimator.evaluation import accuracy_measurements
+from exohil.formats.alignment import angles_at_sensor_times
+from exohil.formats.measurement import Limit, Measurement, distribution
+from exohil.formats.recording import Recording
+from exohil.harness.bench import (
+    BenchConfig,
+    EmulatorDevice,
+    SerialDevice,
+    parse_target,
+)
+from exohil.harness.session import (
+    LoadedModel,
+    SessionError,
+    SessionResult,
+    latency_measurements,
+    link_measurements,
+    load_model,
+    read_reference,
+    reference_path,
+    run_session,
+    session_accuracy,
+    sha256_file,
+    teleop_measurements,
+)
+
+
+class CheckBlocked(Exception):
+    """A check cannot be measured (the message says why); it is reported as skipped."""
+
+
+@dataclass
+class Replay:
+    """The reference recording replayed through the model: estimates and truth, degrees."""
+
+    estimates: np.ndarray
+    truth: np.ndarray
+    seconds: float
+
+
+class ConformanceRun:
+    """One target × model × profile (see module doc)."""
+
+    def __init__(self, target: str, model: Path, profile: Profile, *,
+                 reference: Path | None = None, baseline: Path | None = None,
+                 backend: str = "auto") -> None:
+        device = parse_target(target)
+        if isinstance(device, EmulatorDevice) and device.faults is None:
+            device = EmulatorDevice(device.recording, profile.setting("faults") or None,
+                                    profile.setting("seed"))
+        if isinstance(device, SerialDevice) and reference is not None:
+            device = SerialDevice(device.url, reference)
+        self.target = target
+        self.device = device
+        self.profile = profile
+        self.model_path = Path(model)
+        self.baseline_path = None if baseline is None else Path(baseline)
+        self.backend = backend
+        self.config = BenchConfig(device=device, model=self.model_path, backend=backend)
+        self.started = time.time()
+
+    # ---- shared pieces ---------------------------------------------------------------
+    @cached_property
+    def model(self) -> LoadedModel:
+        return load_model(self.model_path, self.backend)
+
+    @cached_property
+    def reference_file(self) -> Path | None:
+        return reference_path(self.config)
+
+    @cached_property
+    def reference(self) -> Recording | None:
+        path = self.reference_file
+        return None if path is None else read_reference(path)
+
+    def compatible_reason(self) -> str | None:
+        """Why the model cannot run on this target's data, or None."""
+        rec, est = self.reference, self.model.estimator
+        if rec is None:
+            return None
+        if tuple(rec.sensor_names) != est.sensor_names:
+            return (f"the model expects {len(est.sensor_names)} sensors "
+                    f"{list(est.sensor_names)}; the device's recording has "
+                    f"{len(rec.sensor_names)} {list(rec.sensor_names)}")
+        stream = rec.mocap.get(est.target.joint)
+        missing = [a for a in est.target.angles if stream is None or a not in stream.names]
+        if missing:
+            return f"the reference has no {est.target.joint} angle(s) {missing}"
+        return None
+
+    def _require_compatible(self) -> None:
+        reason = self.compatible_reason()
+        if reason is not None:
+            raise CheckBlocked(f"incompatible model and device ({reason}); see compatibility")
+
+    @cached_property
+    def replay(self) -> Replay:
+        self._require_compatible()
+        rec = self.reference
+        if rec is None:
+            raise CheckBlocked("no reference recording (give --reference for a device)")
+        return self._replay(self.model, rec)
+
+    @staticmethod
+    def _replay(model: LoadedModel, rec: Recording) -> Replay:
+        est = model.estimator
+        engine = model.engine()
+        start = time.perf_counter()
+        values = rec.sensors.values
+        out = np.empty((values.shape[0], len(est.target.angles)))
+        for i in range(values.shape[0]):
+            out[i] = engine.push(values[i])
+        seconds = time.perf_counter() - start
+        truth = angles_at_sensor_times(rec, est.target.joint, est.target.angles)
+        return Replay(out, truth, seconds)
+
+    @cached_property
+    def session(self) -> SessionResult:
+        self._require_compatible()
+        try:
+            return run_session(self.config, self.profile.setting("realtime_seconds"))
+        except SessionError as err:
+            raise CheckBlocked(f"the real-time segment could not run: {err}") from None
+
+    # ---- checks ----------------------------------------------------------------------
+    def compatibility_measurements(self) -> list[Measurement]:
+        limits = self.profile.limits("compatibility")
+        rec, est = self.reference, self.model.estimator
+        if rec is None:
+            session = self.session
+            bad = int(session.run.frames == 0 and session.run.link.decode_errors > 0)
+            return [Measurement.judge("compatibility.sensor_mismatch", bad, "count",
+                                      limits.get("compatibility.sensor_mismatch"),
+                                      "frames of the model's sensor count arrive")]
+        stream = rec.mocap.get(est.target.joint)
+        missing = [a for a in est.target.angles if stream is None or a not in stream.names]
+        sensors_ok = tuple(rec.sensor_names) == est.sensor_names
+        return [
+            Measurement.judge("compatibility.sensor_mismatch", 0 if sensors_ok else 1, "count",
+                              limits.get("compatibility.sensor_mismatch"),
+                              f"model {list(est.sensor_names)} vs device "
+                              f"{list(rec.sensor_names)}"),
+            Measurement.judge("compatibility.angle_mismatch", len(missing), "count",
+                              limits.get("compatibility.angle_mismatch"),
+                              f"estimated angles missing from the reference: {missing}"
+                              if missing else "every estimated angle has ground truth"),
+        ]
+
+    def heldout_measurements(self) -> list[Measurement]:
+        limits = self.profile.limits("heldout")
+        path = self.reference_file
+        if path is None:
+            raise CheckBlocked("no reference recording to compare with the training data")
+        digest = sha256_file(path)
+        sources = self.model.estimator.info.get("sources", [])
+        trained = [s.get("file", "?") for s in sources if s.get("sha256") == digest]
+        note = (f"{path.name} was used to train the model (as {', '.join(trained)}): score "
+                "it on a recording it never saw" if trained else
+                f"{path.name} is not among the model's {len(sources)} training recording(s)")
+        if not sources:
+            note = "the checkpoint records no training recordings; cannot prove held-out"
+        return [Measurement.judge("heldout.overlap", len(trained) if sources else 1, "count",
+                                  limits.get("heldout.overlap"), note)]
+
+    def accuracy_measurements(self) -> list[Measurement]:
+        limits = self.profile.limits("accuracy")
+        est = self.model.estimator
+        if self.profile.setting("replay") == "full" and isinstance(self.device, EmulatorDevice):
+            replay = self.replay
+            return accuracy_measurements(replay.estimates, replay.truth, est.target.angles,
+                                         limits)
+        if self.reference is None:
+            raise CheckBlocked("no reference recording (give --reference for a device)")
+        return session_accuracy(self.session, limits)
+
+    def latency_measurements(self) -> list[Measurement]:
+        return latency_measurements(self.session.run, self.profile.limits("latency"))
+
+    def link_measurements(self) -> list[Measurement]:
+        return link_measurements(self.session, self.profile.limits("link"))
+
+    def teleop_measurements(self) -> list[Measurement]:
+        return teleop_measurements(self.session, self.profile.limits("teleop"))
+
+    def conversion_measurements(self) -> list[Measurement]:
+        """How many conversion properties failed, how many examples ran, the largest error."""
+        limits = self.profile.limits("conversions")
+        results = run_properties(self.profile.setting("conversion_examples"),
+                                 self.profile.setting("seed"))
+        failures = [r for r in results if r.failure]
+        out = [
+            Measurement.judge("conversions.failures", len(failures), "count",
+                              limits.get("conversions.failures"),
+                              "; ".join(f"{r.name}: {r.failure}" for r in failures)
+                              or f"{len(results)} properties held"),
+            Measurement.judge("conversions.examples", sum(r.examples for r in results), "count",
+                              limits.get("conversions.examples"),
+                              f"seed {self.profile.setting('seed')}"),
+            Measurement.judge("conversions.max_error", max(r.max_error_deg for r in results),
+                              "deg", limits.get("conversions.max_error"),
+                              "largest round-trip or oracle error"),
+        ]
+        return out
+
+    def regression_measurements(self) -> list[Measurement]:
+        if self.baseline_path is None:
+            raise CheckBlocked("no --baseline given")
+        limits = dict(self.profile.limits("regression"))
+        margin = self.profile.setting("regression_accuracy_margin_deg")
+        factor = self.profile.setting("regression_latency_factor")
+        baseline = load_model(self.baseline_path, self.backend)
+        rec = self.reference
+        if rec is None:
+            raise CheckBlocked("no reference recording to compare accuracy on")
+        mine = accuracy_measurements(self.replay.estimates, self.replay.truth,
+                                     self.model.estimator.target.angles)
+        base_replay = self._replay(baseline, rec)
+        theirs = accuracy_measurements(base_replay.estimates, base_replay.truth,
+                                       baseline.estimator.target.angles)
+        base_values = {m.name: m.value for m in theirs}
+        out = []
+        for m in mine:
+            if m.unit != "deg" or m.name not in base_values:
+                continue
+            name = "regression." + m.name
+            limit = limits.get(name, Limit(high=margin, unit="deg", inclusive=True))
+            out.append(Measurement.judge(name, m.value - base_values[m.name], "deg", limit,
+                                         f"{m.value:.3f} vs baseline {base_values[m.name]:.3f}"))
+        mine_p99, base_p99 = _paced_p99_ms(self.model, baseline, rec.sensors.values)
+        limit = limits.get("regression.latency_p99_ratio", Limit(high=factor, unit="x",
+                                                                 inclusive=True))
+        out.append(Measurement.judge("regression.latency_p99_ratio", mine_p99 / base_p99, "x",
+                                     limit, f"estimator p99 {mine_p99:.3f} ms vs baseline "
+                                            f"{base_p99:.3f} ms, interleaved on one machine"))
+        return out
+
+
+def _paced_p99_ms(a: LoadedModel, b: LoadedModel, values: np.ndarray,
+                  frames: int = 3000) -> tuple[float, float]:
+    """Estimator p99 (ms) of two models timed frame by frame, interleaved, on the same frames,
+    so machine noise hits both alike."""
+    ea, eb = a.engine(), b.engine()
+    ta, tb = np.empty(frames), np.empty(frames)
+    for i in range(frames):
+        row = values[i % values.shape[0]]
+        t0 = time.perf_counter_ns()
+        ea.push(row)
+        t1 = time.perf_counter_ns()
+        eb.push(row)
+        t2 = time.perf_counter_ns()
+        ta[i], tb[i] = (t1 - t0) / 1e6, (t2 - t1) / 1e6
+    pa = distribution("a", ta[100:], "ms")[1].value
+    pb = distribution("b", tb[100:], "ms")[1].value
+    return pa, pb

@@ -1,0 +1,168 @@
+"""The pytest plugin behind ``exohil conform`` (registered under the ``pytest11`` entry point).
+
+    pytest --pyargs exohil.conformance \\
+        --exohil-target emulator:fixtures/paper_protocol_heldout.mcap \\
+        --exohil-model fixtures/models/ennet.npz [--exohil-profile ci] [--exohil-out DIR]
+
+Each check of ``test_checks.py`` records its measurements (name, value, unit, limit, verdict)
+as JUnit properties and into the run's report. A check whose limits are all met passes; one
+that cannot be measured (no reference, not in the profile, no baseline) is skipped, and a
+skipped *required* check (one the profile names, other than ``regression`` without a
+baseline) makes the run fail: skipped is never passed. With ``--exohil-out DIR`` the run
+writes ``conformance.json``, ``summary.md`` and ``run.mcap`` there (``exohil conform`` adds
+``junit.xml``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from exohil.formats.measurement import Measurement, Verdict
+
+CHECKS_MODULE = "exohil.conformance.test_checks"
+_RESULTS = pytest.StashKey[list["CheckResult"]]()
+_RUN = pytest.StashKey[object]()
+
+
+@dataclass
+class CheckResult:
+    """The outcome of one check."""
+
+    name: str
+    verdict: Verdict
+    required: bool
+    message: str
+    duration_s: float
+    measurements: list[Measurement] = field(default_factory=list)
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("exohil", "exohil conformance suite (docs/conformance.md)")
+    group.addoption("--exohil-target", default=None,
+                    help="emulator:RECORDING[?faults=SPEC&seed=N] or a pyserial URL.")
+    group.addoption("--exohil-model", default=None, help="Checkpoint under test (.npz).")
+    group.addoption("--exohil-profile", default="default",
+                    help="Profile name (default, bench, ci) or a .toml file.")
+    group.addoption("--exohil-baseline", default=None,
+                    help="Baseline checkpoint for the regression check.")
+    group.addoption("--exohil-reference", default=None,
+                    help="Ground truth recording for a serial device (aligned by device time).")
+    group.addoption("--exohil-backend", default="auto", help="Streaming inference backend.")
+    group.addoption("--exohil-out", default=None,
+                    help="Folder for conformance.json, summary.md and run.mcap.")
+
+
+def _is_check(item: pytest.Item) -> bool:
+    module = getattr(item, "module", None)
+    return module is not None and module.__name__ == CHECKS_MODULE
+
+
+def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config,
+                                  items: list[pytest.Item]) -> None:
+    if not any(_is_check(item) for item in items):
+        return
+    missing = [opt for opt in ("--exohil-target", "--exohil-model")
+               if not config.getoption(opt.lstrip("-").replace("-", "_"))]
+    if missing:
+        raise pytest.UsageError(f"the conformance suite needs {' and '.join(missing)}")
+    from exohil.conformance.context import ConformanceRun
+    from exohil.conformance.profile import ProfileError, load_profile
+    from exohil.harness.bench import BenchError
+
+    try:
+        profile = load_profile(config.getoption("exohil_profile"))
+        reference = config.getoption("exohil_reference")
+        baseline = config.getoption("exohil_baseline")
+        run = ConformanceRun(config.getoption("exohil_target"),
+                             Path(config.getoption("exohil_model")), profile,
+                             reference=None if reference is None else Path(reference),
+                             baseline=None if baseline is None else Path(baseline),
+                             backend=config.getoption("exohil_backend"))
+    except (ProfileError, BenchError) as err:
+        raise pytest.UsageError(str(err)) from None
+    config.stash[_RUN] = run
+    config.stash[_RESULTS] = []
+
+
+@pytest.fixture(scope="session")
+def conformance_run(request: pytest.FixtureRequest):
+    """The run under test (:class:`exohil.conformance.context.ConformanceRun`)."""
+    return request.config.stash[_RUN]
+
+
+@pytest.fixture
+def check(request: pytest.FixtureRequest, conformance_run, record_property):
+    """``check(name, produce)``: measure one check with ``produce(run)`` and judge it."""
+    from exohil.conformance.context import CheckBlocked
+    from exohil.harness.session import SessionError
+
+    results = request.config.stash[_RESULTS]
+    profile = conformance_run.profile
+
+    def run_check(name: str, produce: Callable[[object], list[Measurement]]) -> None:
+        start = time.perf_counter()
+        required = name in profile.checks and not (
+            name == "regression" and conformance_run.baseline_path is None)
+
+        def done(verdict: Verdict, message: str, measurements: list[Measurement]) -> None:
+            results.append(CheckResult(name, verdict, required, message,
+                                       time.perf_counter() - start, measurements))
+
+        if name not in profile.checks:
+            done(Verdict.SKIP, f"not in profile {profile.name}", [])
+            pytest.skip(f"{name}: not in profile {profile.name}")
+        try:
+            measurements = produce(conformance_run)
+        except CheckBlocked as err:
+            done(Verdict.SKIP, str(err), [])
+            pytest.skip(f"{name}: {err}")
+        except SessionError as err:
+            done(Verdict.FAIL, str(err), [])
+            pytest.fail(f"{name}: {err}", pytrace=False)
+        for m in measurements:
+            for key, value in m.junit_properties():
+                record_property(key, value)
+        failed = [m for m in measurements if m.failed]
+        judged = [m for m in measurements if m.limit is not None]
+        if failed:
+            message = "; ".join(m.describe() for m in failed)
+            done(Verdict.FAIL, message, measurements)
+            pytest.fail(f"{name}: {message}", pytrace=False)
+        if judged and all(m.verdict is Verdict.SKIP for m in judged):
+            message = "; ".join(f"{m.name}: {m.note}" for m in judged)
+            done(Verdict.SKIP, message, measurements)
+            pytest.skip(f"{name}: {message}")
+        passed = sum(m.verdict is Verdict.PASS for m in measurements)
+        done(Verdict.PASS, f"{passed} measurement(s) within limits", measurements)
+
+    return run_check
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    config = session.config
+    if _RESULTS not in config.stash:
+        return
+    results = config.stash[_RESULTS]
+    if any(r.required and r.verdict is not Verdict.PASS for r in results) \
+            and session.exitstatus == pytest.ExitCode.OK:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+    out = config.getoption("exohil_out")
+    if out:
+        from exohil.conformance.report import write_reports
+
+        write_reports(Path(out), config.stash[_RUN], results)
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:
+    if _RESULTS not in config.stash:
+        return
+    from exohil.conformance.report import summary_lines
+
+    terminalreporter.section("exohil conformance")
+    for line in summary_lines(config.stash[_RUN], config.stash[_RESULTS]):
+        terminalreporter.write_line(line)

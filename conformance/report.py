@@ -1,0 +1,141 @@
+"""What a conformance run leaves behind: ``conformance.json``, ``summary.md``, ``run.mcap``.
+
+``conformance.json`` (schema ``exohil-conformance/1``, docs/conformance.md)::
+
+    {"schema": "exohil-conformance/1", "verdict": "pass" | "fail",
+     "target": str, "reference": str | null, "model": {"path", "sha256", "kind"},
+     "baseline": str | null, "profile": {"name", "path"},
+     "versions": {"exohil", "python", "numpy", "torch", "onnxruntime"}, "machine": str,
+     "started": ISO time, "duration_s": s,
+     "checks": [{"name", "verdict", "required", "message", "duration_s",
+                 "measurements": [{"name", "value", "unit", "limit", "verdict", "note"}]}]}
+
+Every file is written to a temporary name and renamed into place when complete.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from exohil.formats.measurement import Verdict
+from exohil.harness.machine import machine
+
+SCHEMA = "exohil-conformance/1"
+
+
+def _version(package: str) -> str | None:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def overall(results: list[Any]) -> Verdict:
+    """PASS only when at least one check ran, every required check passed and none failed."""
+    required = [r for r in results if r.required]
+    ok = bool(required) and all(r.verdict is Verdict.PASS for r in required)
+    return Verdict.PASS if ok and not any(r.verdict is Verdict.FAIL for r in results) \
+        else Verdict.FAIL
+
+
+def report_dict(run: Any, results: list[Any]) -> dict[str, Any]:
+    """The conformance.json content (module doc)."""
+    model: dict[str, Any] = {"path": str(run.model_path)}
+    try:
+        model.update(sha256=run.model.sha256, kind=run.model.estimator.kind)
+    except Exception:  # an unreadable model is reported by its failed checks
+        model.update(sha256=None, kind=None)
+    return {
+        "schema": SCHEMA,
+        "verdict": overall(results).value,
+        "target": run.target,
+        "reference": None if run.reference_file is None else str(run.reference_file),
+        "model": model,
+        "baseline": None if run.baseline_path is None else str(run.baseline_path),
+        "profile": {"name": run.profile.name, "path": str(run.profile.path)},
+        "versions": {"exohil": _version("exohil"), "python": platform.python_version(),
+                     **{p: _version(p) for p in ("numpy", "torch", "onnxruntime", "pytest",
+                                                 "hypothesis")}},
+        "machine": machine(),
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(run.started)),
+        "duration_s": round(time.time() - run.started, 3),
+        "checks": [{"name": r.name, "verdict": r.verdict.value, "required": r.required,
+                    "message": r.message, "duration_s": round(r.duration_s, 3),
+                    "measurements": [m.to_dict() for m in r.measurements]} for r in results],
+    }
+
+
+def _fmt(value: float) -> str:
+    return "—" if math.isnan(value) else f"{value:.4g}"
+
+
+def summary_markdown(run: Any, results: list[Any]) -> str:
+    """A table a person reads in CI logs."""
+    verdict = overall(results)
+    lines = [f"# exohil conformance: {verdict.value.upper()}", "",
+             f"- target: `{run.target}`", f"- model: `{run.model_path}`",
+             f"- profile: `{run.profile.name}`", f"- machine: {machine()}", "",
+             "| check | verdict | measurement | value | unit | limit |",
+             "|---|---|---|---:|---|---|"]
+    for r in results:
+        if not r.measurements:
+            lines.append(f"| {r.name} | {r.verdict.value} | — | — | — | {r.message} |")
+        for m in r.measurements:
+            limit = m.limit.describe() if m.limit else ""
+            lines.append(f"| {r.name} | {m.verdict.value} | {m.name} | {_fmt(m.value)} | "
+                         f"{m.unit} | {limit} |")
+    return "\n".join(lines) + "\n"
+
+
+def summary_lines(run: Any, results: list[Any]) -> list[str]:
+    """The terminal summary; its last line names the verdict and, on failure, the first
+    failing check and its figure."""
+    lines = [f"{'check':14s} {'verdict':8s} message"]
+    for r in results:
+        req = "" if r.required else " (optional)"
+        lines.append(f"{r.name:14s} {r.verdict.value.upper():8s} {r.message}{req}")
+    lines.append(final_line(report_dict(run, results)))
+    return lines
+
+
+def final_line(report: dict[str, Any]) -> str:
+    """From a conformance.json dict: ``PASS: 8 checks passed`` or ``FAIL: <check>: <figure>``
+    naming the first failing (or skipped required) check."""
+    checks = report["checks"]
+    if report["verdict"] == Verdict.PASS.value:
+        return f"PASS: {sum(c['verdict'] == 'pass' for c in checks)} checks passed"
+    bad = next((c for c in checks if c["verdict"] == "fail"), None) or next(
+        (c for c in checks if c["required"] and c["verdict"] != "pass"), None)
+    if bad is None:
+        return "FAIL: no required check ran"
+    state = "" if bad["verdict"] == "fail" else "skipped, not passed: "
+    return f"FAIL: {bad['name']}: {state}{bad['message']}"
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+
+
+def write_reports(out: Path, run: Any, results: list[Any]) -> None:
+    """conformance.json, summary.md and (when the real-time segment ran) run.mcap in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    _write_text(out / "conformance.json", json.dumps(report_dict(run, results), indent=2) + "\n")
+    _write_text(out / "summary.md", summary_markdown(run, results))
+    session = vars(run).get("session")  # the real-time segment, if a check ran it
+    if session is not None:
+        from exohil.harness.run_recording import write_run_recording
+
+        est = session.model.estimator
+        write_run_recording(out / "run.mcap", session.run, est.sensor_names, est.target.joint,
+                            est.target.angles, {"generator": "exohil conform",
+                                                "source": run.target,
+                                                "model_sha256": session.model.sha256,
+                                                "profile": run.profile.name})

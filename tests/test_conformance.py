@@ -1,0 +1,270 @@
+"""The conformance suite: profiles, outputs, and the gate proven to fail when it should.
+
+Each mutation test breaks one thing (a worse model, perturbed weights, a slow estimator, a sign
+error in a conversion, a decoder that lets bad CRCs through, training data as test data, a
+device with another sensor count) and checks that the run fails on the check that should
+catch it, with that check named in the last line. The control run passes every check of the
+same fast profile. Latency is only asserted in the failing direction, with a 20 ms-per-frame
+estimator against a 12 ms limit (no timing is asserted to pass on these machines).
+"""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from exohil.conformance.profile import ProfileError, load_profile, parse_limit
+from exohil.estimator.checkpoint import load_checkpoint, save_checkpoint
+from exohil.formats.mcap_io import write_recording
+from exohil.harness.cli import main
+from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
+
+HELDOUT = FIXTURES_DIR / "paper_protocol_heldout.mcap"
+TRAINED_ON = FIXTURES_DIR / "paper_protocol.mcap"
+ENNET = MODELS_DIR / "ennet.npz"
+ANN = MODELS_DIR / "ann.npz"
+
+FAST_PROFILE = """
+name = "fast-test"
+description = "the default checks and accuracy limits, a 3 s real-time segment"
+[settings]
+realtime_seconds = 3
+faults = "drop:rate=0.01;corrupt:rate=0.02"
+conversion_examples = 40
+[checks.compatibility]
+[checks.heldout]
+[checks.accuracy]
+"accuracy.rmse.elv_angle" = "< 3.0 deg"
+"accuracy.rmse.shoulder_elv" = "< 2.0 deg"
+"accuracy.direction_rmse" = "< 3.0 deg"
+[checks.latency]
+[checks.link]
+[checks.conversions]
+[checks.teleop]
+[checks.regression]
+"""
+
+
+@pytest.fixture(scope="module")
+def fast_profile(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("profile") / "fast.toml"
+    path.write_text(FAST_PROFILE, encoding="utf-8")
+    return path
+
+
+def conform(out: Path, profile: Path, *args: str, target: Path = HELDOUT,
+            model: Path = ENNET) -> tuple[int, str, dict]:
+    result = CliRunner().invoke(main, ["conform", "--target", f"emulator:{target}",
+                                       "--model", str(model), "--profile", str(profile),
+                                       "--out", str(out), *args])
+    report = json.loads((out / "conformance.json").read_text()) if \
+        (out / "conformance.json").is_file() else {}
+    return result.exit_code, result.output, report
+
+
+def last_line(output: str) -> str:
+    return output.strip().splitlines()[-1]
+
+
+def verdicts(report: dict) -> dict[str, str]:
+    return {c["name"]: c["verdict"] for c in report["checks"]}
+
+
+# ---- profiles ------------------------------------------------------------------------------
+def test_bundled_profiles_load():
+    for name in ("default", "bench", "ci"):
+        profile = load_profile(name)
+        assert "accuracy" in profile.checks and "latency" in profile.checks
+    bench = load_profile("bench").limits("latency")
+    assert bench["latency.end_to_end.p99"].high == 4.0
+    assert load_profile("default").limits("latency")["latency.end_to_end.max"].high == 12.0
+
+
+@pytest.mark.parametrize("text, message", [
+    ('[checks.acuracy]\n', "unknown check 'acuracy'"),
+    ('[checks.accuracy]\n"accuracy.rmse.elv_angle" = "< 3 furlong"\n', "unknown unit"),
+    ('[checks.accuracy]\n"accuracy.rmse.elv_angle" = "< 3 ms"\n', "cannot compare"),
+    ('[checks.latency]\n"latency.warp.p99" = "< 3 ms"\n', "has no measurement"),
+    ('[checks.latency]\n"latency.end_to_end.max" = "about 3 ms"\n', "is not"),
+    ('[settings]\nrealtime_secs = 3\n', "unknown setting"),
+    ('colour = "red"\n', "unknown key"),
+])
+def test_bad_profiles_are_clear_errors(tmp_path, text, message):
+    path = tmp_path / "p.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ProfileError, match=message):
+        load_profile(str(path))
+
+
+def test_limits_parse():
+    assert parse_limit("< 3 deg").high == 3.0
+    assert parse_limit("<= 0 count").inclusive
+    assert parse_limit(">= 249 Hz").low == 249.0
+    limit = parse_limit("1 .. 5 ms")
+    assert (limit.low, limit.high) == (1.0, 5.0)
+
+
+def test_an_unknown_profile_is_one_error_line(tmp_path):
+    code, output, _ = conform(tmp_path, Path("nonexistent"))
+    assert code != 0 and "no profile 'nonexistent'" in output
+
+
+# ---- the control run -----------------------------------------------------------------------
+def test_the_reference_ennet_passes_and_writes_every_report(tmp_path, fast_profile):
+    code, output, report = conform(tmp_path, fast_profile)
+    assert code == 0, output
+    assert last_line(output).startswith("PASS")
+    assert verdicts(report) == {"compatibility": "pass", "heldout": "pass", "accuracy": "pass",
+                                "latency": "pass", "link": "pass", "conversions": "pass",
+                                "teleop": "pass", "regression": "skip"}
+    assert report["schema"] == "exohil-conformance/1" and report["model"]["sha256"]
+    names = {m["name"] for c in report["checks"] for m in c["measurements"]}
+    assert {"latency.end_to_end.max", "latency.device_to_host.p99", "link.lost_on_host",
+            "accuracy.direction_rmse", "teleop.rmse.ShoulderPitch"} <= names
+    junit = ET.parse(tmp_path / "junit.xml")
+    props = {p.get("name"): p.get("value") for p in junit.iter("property")}
+    assert props["accuracy.rmse.elv_angle.verdict"] == "pass"
+    assert float(props["accuracy.rmse.elv_angle[deg]"]) < 3.0
+    summary = (tmp_path / "summary.md").read_text()
+    assert "| accuracy | pass | accuracy.rmse.elv_angle |" in summary
+    from exohil.formats.mcap_io import scan_recording
+
+    scan = scan_recording(tmp_path / "run.mcap")
+    frames = len(scan.recording.sensors)
+    assert frames > 0
+    counts = {c.topic: c.message_count for c in scan.channels}
+    assert counts["/estimate/shoulder"] == counts["/timing/stages"] == frames
+    assert counts["/robot/nao"] == frames
+    from mcap.reader import make_reader  # the plain mcap library reads it too
+
+    with open(tmp_path / "run.mcap", "rb") as fh:
+        assert sum(1 for _ in make_reader(fh).iter_messages()) == 4 * frames
+
+
+def test_the_same_suite_runs_as_plain_pytest(tmp_path, fast_profile):
+    code = pytest.main(["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
+                        "--exohil-target", f"emulator:{HELDOUT}", "--exohil-model", str(ENNET),
+                        "--exohil-profile", str(fast_profile), "-k", "heldout or conversions",
+                        "--exohil-out", str(tmp_path)])
+    assert code == 0
+    report = json.loads((tmp_path / "conformance.json").read_text())
+    assert verdicts(report)["heldout"] == "pass"
+
+
+def test_a_baseline_enables_the_regression_check(tmp_path, fast_profile):
+    code, output, report = conform(tmp_path, fast_profile, "--baseline", str(ENNET),
+                                   "-k", "regression")
+    regression = next(c for c in report["checks"] if c["name"] == "regression")
+    assert regression["verdict"] == "pass", output
+    deltas = {m["name"]: m["value"] for m in regression["measurements"]}
+    assert deltas["regression.accuracy.rmse.elv_angle"] == pytest.approx(0.0, abs=1e-9)
+
+
+# ---- mutations: the gate fails, on the right check -------------------------------------------
+def test_the_ann_in_place_of_ennet_fails_accuracy(tmp_path, fast_profile):
+    code, output, report = conform(tmp_path, fast_profile, "-k", "accuracy", model=ANN)
+    assert code != 0 and verdicts(report)["accuracy"] == "fail"
+    assert last_line(output).startswith("FAIL: accuracy: accuracy.rmse.")
+
+
+def test_ennet_with_perturbed_weights_fails_accuracy(tmp_path, fast_profile):
+    import torch
+
+    est = load_checkpoint(ENNET)
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for p in est.network.parameters():
+            p.add_(0.05 * p.std() * torch.randn(p.shape, generator=gen))
+    perturbed = tmp_path / "perturbed.npz"
+    save_checkpoint(perturbed, est)
+    code, output, report = conform(tmp_path / "out", fast_profile, "-k", "accuracy",
+                                   model=perturbed)
+    assert code != 0 and verdicts(report)["accuracy"] == "fail"
+    assert last_line(output).startswith("FAIL: accuracy:")
+
+
+def test_a_slow_estimator_fails_latency(tmp_path, fast_profile, monkeypatch):
+    import time
+
+    from exohil.estimator.inference import StreamingEstimator
+
+    push = StreamingEstimator.push
+
+    def slow_push(self, values):
+        time.sleep(0.020)
+        return push(self, values)
+
+    monkeypatch.setattr(StreamingEstimator, "push", slow_push)
+    profile = tmp_path / "latency.toml"
+    profile.write_text(FAST_PROFILE.replace("[checks.latency]",
+                                            '[checks.latency]\n"latency.end_to_end.max" = '
+                                            '"< 12 ms"'), encoding="utf-8")
+    code, output, report = conform(tmp_path / "out", profile, "-k", "latency")
+    assert code != 0 and verdicts(report)["latency"] == "fail"
+    assert last_line(output).startswith("FAIL: latency: latency.end_to_end.max")
+
+
+def test_a_sign_error_in_the_elevation_conversion_fails_conversions(tmp_path, fast_profile,
+                                                                   monkeypatch):
+    from exohil.kinematics import shoulder
+
+    ms_to_isb, isb_to_ms = shoulder.ms_to_isb, shoulder.isb_to_ms
+
+    def wrong_ms_to_isb(theta, phi=None, psi=None, convention="coupled"):
+        isb = ms_to_isb(theta, phi, psi, convention)
+        return isb * np.array([1.0, -1.0, 1.0])  # β = +φ instead of −φ
+
+    def wrong_isb_to_ms(alpha, beta=None, gamma=None, convention="coupled"):
+        isb = shoulder.as_angles(alpha, beta, gamma) * np.array([1.0, -1.0, 1.0])
+        return isb_to_ms(isb, convention=convention)
+
+    monkeypatch.setattr(shoulder, "ms_to_isb", wrong_ms_to_isb)
+    monkeypatch.setattr(shoulder, "isb_to_ms", wrong_isb_to_ms)
+    code, output, report = conform(tmp_path, fast_profile, "-k", "conversions")
+    assert code != 0 and verdicts(report)["conversions"] == "fail"
+    assert last_line(output).startswith("FAIL: conversions: conversions.failures")
+    assert "humerus_axis_oracle" in last_line(output)
+
+
+def test_a_decoder_that_accepts_bad_crcs_fails_link(tmp_path, fast_profile, monkeypatch):
+    from exohil.formats import wire
+    from exohil.harness import link_decoder
+
+    def lenient(packet, expected_sensors=None):
+        body = bytearray(wire.cobs_decode(packet))
+        if len(body) >= wire.CRC_SIZE:
+            crc = wire.crc16_ccitt_false(bytes(body[:-wire.CRC_SIZE]))
+            body[-wire.CRC_SIZE:] = crc.to_bytes(2, "little")
+        return wire.unpack_body(bytes(body), expected_sensors)
+
+    monkeypatch.setattr(link_decoder, "decode_packet", lenient)
+    code, output, report = conform(tmp_path, fast_profile, "-k", "link")
+    assert code != 0 and verdicts(report)["link"] == "fail"
+    assert last_line(output).startswith("FAIL: link:")
+    link = next(c for c in report["checks"] if c["name"] == "link")
+    bad = {m["name"]: m["value"] for m in link["measurements"]}
+    assert bad["link.bad_frames_delivered"] > 0
+
+
+def test_a_recording_the_model_was_trained_on_fails_heldout(tmp_path, fast_profile):
+    code, output, report = conform(tmp_path, fast_profile, "-k", "heldout", target=TRAINED_ON)
+    assert code != 0 and verdicts(report)["heldout"] == "fail"
+    assert "paper_protocol.mcap was used to train the model" in last_line(output)
+
+
+def test_a_device_with_another_sensor_count_fails_compatibility(tmp_path, fast_profile):
+    from estimator_synth import shoulder_recording
+
+    five = tmp_path / "five_sensors.mcap"
+    write_recording(five, shoulder_recording(seconds=10.0, n_sensors=5))
+    code, output, report = conform(tmp_path / "out", fast_profile, target=five)
+    assert code != 0 and verdicts(report)["compatibility"] == "fail"
+    assert last_line(output).startswith("FAIL: compatibility:")
+    assert "expects 4 sensors" in output or "model ['F', 'SF', 'SR', 'R']" in output
+    # the checks that need a compatible model are skipped, never passed
+    assert verdicts(report)["accuracy"] == "skip" and verdicts(report)["latency"] == "skip"
