@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.machine import machine
-from exohil.formats.mcap_io import RecordingWriter, read_recording, write_recording
 from exohil.formats.recording import AngleStream, Recording, SensorStream
+from exohil.formats.recording_reader import read_recording
+from exohil.formats.recording_writer import RecordingWriter, write_recording
 
 SECONDS = 246.0
 SHOULDER_ANGLES = ("elv_angle", "shoulder_elv", "shoulder_rot")

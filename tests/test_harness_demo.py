@@ -21,7 +21,7 @@ def test_demo_streams_the_fixture_through_the_whole_chain(tmp_path):
     assert all(np.isfinite(v) for v in s["rmse_deg"].values())
     assert "accuracy" in result.output and "end to end" in result.output
 
-    from exohil.formats.mcap_io import read_recording
+    from exohil.formats.recording_reader import read_recording
 
     assert len(read_recording(record_path).sensors) == s["frames"]
 
