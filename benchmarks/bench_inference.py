@@ -13,25 +13,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import time
 
 import numpy as np
 
-
-def machine() -> str:
-    """Platform, CPU model and core count."""
-    model = platform.processor() or "unknown CPU"
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return (f"{platform.platform()}; {model}; {os.cpu_count()} cores; "
-            f"python {platform.python_version()}")
+from exohil.harness.machine import machine
 
 
 def load_average() -> str:

@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from exohil.formats.mcap_io import RecordingWriter, read_recording, write_recording
 from exohil.formats.recording import AngleStream, Recording, SensorStream
+from exohil.formats.recording_reader import read_recording
+from exohil.formats.recording_writer import RecordingWriter, write_recording
 from exohil.harness.machine import machine
 
 SECONDS = 246.0

@@ -19,12 +19,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import zlib
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
+
+from exohil.emulators.seeding import keyed_rng
 
 PerSensor = float | list[float]
 
@@ -417,17 +418,11 @@ def effect_to_dict(e: Effect) -> dict:
     return out
 
 
-def effect_rng(seed: int, kind: str, occurrence: int) -> np.random.Generator:
-    """The random generator an effect gets in a chain: a child of ``seed`` keyed by the effect's
-    kind and its occurrence among effects of that kind (0 for the first)."""
-    key = zlib.crc32(kind.encode("utf-8"))
-    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(key, occurrence)))
-
-
 @dataclass
 class EffectChain:
-    """Effects applied in order; each draws from its own generator (see :func:`effect_rng`),
-    so adding or removing one effect leaves the others' random streams unchanged."""
+    """Effects applied in order; each draws from its own generator
+    (:func:`~exohil.emulators.seeding.keyed_rng`), so adding or removing one effect leaves the
+    others' random streams unchanged."""
 
     effects: list[Effect] = field(default_factory=list)
 
@@ -436,7 +431,7 @@ class EffectChain:
         for effect in self.effects:
             occurrence = seen.get(effect.name, 0)
             seen[effect.name] = occurrence + 1
-            signal = effect.apply(signal, effect_rng(seed, effect.name, occurrence))
+            signal = effect.apply(signal, keyed_rng(seed, effect.name, occurrence))
         return signal
 
     def to_dicts(self) -> list[dict]:

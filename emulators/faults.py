@@ -18,12 +18,12 @@ one fault never reseeds another.
 from __future__ import annotations
 
 import math
-import zlib
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from exohil.emulators.seeding import keyed_rng
 from exohil.formats.wire import DELIMITER, WireError, decode_packet
 
 # Fault kinds whose frames never reach the host intact (the reconciliation set).
@@ -45,12 +45,6 @@ class FaultRecord:
     seq: int
     kind: str
     details: dict[str, Any] = field(default_factory=dict)
-
-
-def fault_rng(seed: int, kind: str, occurrence: int) -> np.random.Generator:
-    """The generator of the ``occurrence``-th fault of ``kind`` under ``seed``."""
-    key = zlib.crc32(kind.encode("utf-8"))
-    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(key, occurrence)))
 
 
 def _check(condition: bool, message: str) -> None:
@@ -161,8 +155,8 @@ class FrameFaultInjector:
         for fault in faults:
             n = occurrences.get(fault.kind, 0)
             occurrences[fault.kind] = n + 1
-            decide = fault_rng(seed, fault.kind, 2 * n)
-            detail = fault_rng(seed, fault.kind, 2 * n + 1)
+            decide = keyed_rng(seed, fault.kind, 2 * n)
+            detail = keyed_rng(seed, fault.kind, 2 * n + 1)
             self._faults.append((fault, decide, detail))
         self._burst_left = [0] * len(self._faults)
 

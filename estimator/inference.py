@@ -86,23 +86,19 @@ class StreamingEstimator:
 
 
 class _Normaliser:
-    """z = (x − mean)/std in, angle = y·std + mean out, into preallocated buffers."""
+    """The checkpoint's :class:`~exohil.estimator.trained.Normalisation` (z in, angles out)
+    into preallocated buffers, so a frame allocates nothing."""
 
     def __init__(self, est: TrainedEstimator) -> None:
-        self.x_mean, self.x_std = est.norm.x_mean, est.norm.x_std
-        self.y_mean, self.y_std = est.norm.y_mean, est.norm.y_std
+        self.norm = est.norm
         self.z = np.zeros(est.config.n_sensors)
         self.out = np.zeros(est.config.n_angles)
 
     def inputs(self, x: np.ndarray) -> np.ndarray:
-        np.subtract(x, self.x_mean, out=self.z)
-        self.z /= self.x_std
-        return self.z
+        return self.norm.x(x, out=self.z)
 
     def outputs(self, y: np.ndarray) -> np.ndarray:
-        np.multiply(y, self.y_std, out=self.out)
-        self.out += self.y_mean
-        return self.out
+        return self.norm.y_inverse(y, out=self.out)
 
 
 class _Ring:

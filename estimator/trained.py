@@ -38,11 +38,23 @@ class Normalisation:
         y = np.concatenate([b.y for b in blocks])
         return cls(x.mean(0), _safe_std(x), y.mean(0), _safe_std(y))
 
-    def x(self, x: np.ndarray) -> np.ndarray:
-        return (x - self.x_mean) / self.x_std
+    def x(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Normalised sensors z = (x − x_mean) / x_std (into ``out`` when given: no allocation,
+        for per-frame streaming)."""
+        z = np.subtract(x, self.x_mean, out=out)
+        z /= self.x_std
+        return z
 
-    def y_inverse(self, y: np.ndarray) -> np.ndarray:
-        return y * self.y_std + self.y_mean
+    def y(self, y: np.ndarray) -> np.ndarray:
+        """Normalised angles (y − y_mean) / y_std, the training targets."""
+        return (y - self.y_mean) / self.y_std
+
+    def y_inverse(self, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Angles (degrees) from normalised outputs: y · y_std + y_mean (into ``out`` when
+        given)."""
+        angles = np.multiply(y, self.y_std, out=out)
+        angles += self.y_mean
+        return angles
 
 
 @dataclass

@@ -98,15 +98,11 @@ def train(
 def _fit_classical(est: TrainedEstimator, split: Split) -> dict:
     model = ClassicalModel.create(est.sensor_rate_hz)
     fit = model.fit(
-        [est.norm.x(b.x) for b in split.train], [_norm_y(est, b.y) for b in split.train],
-        [est.norm.x(b.x) for b in split.val], [_norm_y(est, b.y) for b in split.val],
+        [est.norm.x(b.x) for b in split.train], [est.norm.y(b.y) for b in split.train],
+        [est.norm.x(b.x) for b in split.val], [est.norm.y(b.y) for b in split.val],
     )
     est.classical = model
     return {"ridge": fit["ridge"], "best_val_mse": fit["val_mse"]}
-
-
-def _norm_y(est: TrainedEstimator, y: np.ndarray) -> np.ndarray:
-    return (y - est.norm.y_mean) / est.norm.y_std
 
 
 def _fit_network(
@@ -125,7 +121,7 @@ def _fit_network(
     def table(blocks):  # normalised frames of a split part
         t = FrameTable.from_blocks(blocks)
         t.x = est.norm.x(t.x).astype(np.float32)
-        t.y = ((t.y - est.norm.y_mean) / est.norm.y_std).astype(np.float32)
+        t.y = est.norm.y(t.y).astype(np.float32)
         return t
 
     tr = table(split.train)

@@ -71,7 +71,7 @@ def load_recordings(
 
     Raises RecordingError (unreadable file) or DatasetError (mismatch), both one-line.
     """
-    from exohil.formats.mcap_io import read_recording
+    from exohil.formats.recording_reader import read_recording
 
     recs = [read_recording(p) for p in paths]
     for p, r in zip(paths, recs, strict=True):

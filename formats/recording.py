@@ -6,7 +6,8 @@ motion-capture streams (``/mocap/<joint>``: joint angles in degrees, ~120 Hz), p
 ``exohil.recording`` metadata record. Times are seconds; both clocks are assumed to share
 an origin unless a lag/clock-offset effect says otherwise.
 
-Reading and writing MCAP files lives in :mod:`exohil.formats.mcap_io`.
+Writing MCAP files lives in :mod:`exohil.formats.recording_writer`, reading them in
+:mod:`exohil.formats.recording_reader`.
 """
 
 from __future__ import annotations

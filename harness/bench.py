@@ -184,7 +184,7 @@ def open_device(device: Device, expected_sensors: int | None, *, realtime: bool 
             yield OpenDevice(source, None)
         return
     from exohil.emulators.arduino import ArduinoEmulator
-    from exohil.formats.mcap_io import read_recording
+    from exohil.formats.recording_reader import read_recording
 
     recording = read_recording(device.recording)
     with ArduinoEmulator.from_recording(recording, faults=device.faults, seed=device.seed,

@@ -16,7 +16,7 @@ from exohil.harness.cli_types import OutputFile
 
 def _load_values(path: Path):
     from exohil.formats.errors import RecordingError
-    from exohil.formats.mcap_io import read_recording
+    from exohil.formats.recording_reader import read_recording
 
     try:
         recording = read_recording(path)

@@ -141,7 +141,7 @@ def import_csv(
         recording_from_table,
     )
     from exohil.formats.errors import RecordingError
-    from exohil.formats.mcap_io import write_recording
+    from exohil.formats.recording_writer import write_recording
 
     chosen = PRESETS[preset] if preset else None
     rate = rate if rate is not None else (chosen.rate_hz if chosen else None)
@@ -209,9 +209,9 @@ def import_mot(input_file: Path, out: Path, license_note: str | None) -> None:
         exohil import mot ABD01.mot --out abd01.mcap --license "CC BY 4.0, rmr-solver"
     """
     from exohil.formats.errors import RecordingError
-    from exohil.formats.mcap_io import write_recording
     from exohil.formats.mot_import import shoulder_recording_from_mot
     from exohil.formats.opensim_mot import MotError, read_mot
+    from exohil.formats.recording_writer import write_recording
 
     try:
         mot = read_mot(input_file)

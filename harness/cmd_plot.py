@@ -45,7 +45,7 @@ def plot_command(
         exohil plot rec.mcap --kind timeseries --t0 10 --t1 30 --out ts.png
     """
     from exohil.formats.errors import RecordingError
-    from exohil.formats.mcap_io import read_recording
+    from exohil.formats.recording_reader import read_recording
     from exohil.harness.recording_plots import plot_hysteresis, plot_timeseries, time_window
 
     if t0 is not None and t1 is not None and t1 <= t0:

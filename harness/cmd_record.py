@@ -22,7 +22,7 @@ def info_command(file: Path, as_json: bool) -> None:
     """Summarise FILE: duration, channels (topic, schema, messages, mean rate), sequence gaps,
     sensors, mocap joints, metadata, segments and reader notes (e.g. ignored channels)."""
     from exohil.formats.errors import RecordingError
-    from exohil.formats.mcap_io import scan_recording
+    from exohil.formats.recording_reader import scan_recording
 
     try:
         scan = scan_recording(file)
@@ -36,7 +36,7 @@ def info_command(file: Path, as_json: bool) -> None:
 
 
 def recording_summary(file: Path, scan: Any) -> dict[str, Any]:
-    """A JSON-ready summary of a :class:`~exohil.formats.mcap_io.RecordingScan`.
+    """A JSON-ready summary of a :class:`~exohil.formats.recording_reader.RecordingScan`.
 
     Times are seconds, rates Hz; NaN (undefined) becomes None.
     """

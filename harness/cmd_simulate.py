@@ -56,7 +56,7 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
     from exohil.emulators.simulate import simulate
     from exohil.emulators.suit_profile import ProfileError, load_default_profile, load_profile
     from exohil.formats.errors import RecordingError
-    from exohil.formats.mcap_io import write_recording
+    from exohil.formats.recording_writer import write_recording
 
     unknown = sorted(set(without) - set(EFFECT_TYPES))
     if unknown:

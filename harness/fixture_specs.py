@@ -16,7 +16,7 @@ from pathlib import Path
 from exohil.emulators.protocols import Trajectory, mot_trajectory, paper_protocol
 from exohil.emulators.simulate import simulate
 from exohil.emulators.suit_profile import load_default_profile
-from exohil.formats.mcap_io import write_recording
+from exohil.formats.recording_writer import write_recording
 
 PAPER_SEED = 20201
 REAL_MOTION_SEED = 20202

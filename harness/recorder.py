@@ -12,7 +12,7 @@ import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from exohil.formats.mcap_io import RecordingWriter
+from exohil.formats.recording_writer import RecordingWriter
 from exohil.harness.pipeline import Sample
 
 _STOP = object()

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from exohil.formats.mcap_io import RecordingWriter
+from exohil.formats.recording_writer import RecordingWriter
 from exohil.harness.pipeline import NOT_STAMPED, STAGES, PipelineRun
 from exohil.kinematics import NAO_JOINTS
 

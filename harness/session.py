@@ -93,7 +93,7 @@ def load_model(path: Path, backend: str = "auto") -> LoadedModel:
 
 def read_reference(path: Path) -> Recording:
     """A recording holding ground truth; SessionError if it cannot be read."""
-    from exohil.formats.mcap_io import read_recording
+    from exohil.formats.recording_reader import read_recording
 
     try:
         return read_recording(path)

@@ -1,4 +1,4 @@
-"""Arm geometry: where the humerus points, for the suit's tendon routing.
+"""Arm geometry: where the humerus points (the elbow direction), independent of axial rotation.
 
 Thorax frame (ISB): X anterior, Y superior, Z lateral-right; radians; right arm.
 """

@@ -20,7 +20,7 @@ from click.testing import CliRunner
 
 from exohil.conformance.profile import ProfileError, load_profile, parse_limit
 from exohil.estimator.checkpoint import load_checkpoint, save_checkpoint
-from exohil.formats.mcap_io import write_recording
+from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
 
@@ -132,7 +132,7 @@ def test_the_reference_ennet_passes_and_writes_every_report(tmp_path, fast_profi
     assert float(props["accuracy.rmse.elv_angle[deg]"]) < 3.0
     summary = (tmp_path / "summary.md").read_text()
     assert "| accuracy | pass | accuracy.rmse.elv_angle |" in summary
-    from exohil.formats.mcap_io import scan_recording
+    from exohil.formats.recording_reader import scan_recording
 
     scan = scan_recording(tmp_path / "run.mcap")
     frames = len(scan.recording.sensors)

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from exohil.formats.mcap_io import read_recording, write_recording
 from exohil.formats.recording import Recording, SensorStream
+from exohil.formats.recording_reader import read_recording
+from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 
 REPO = Path(__file__).resolve().parents[1]

@@ -6,7 +6,7 @@ import pytest
 from click.testing import CliRunner
 from estimator_synth import shoulder_recording
 
-from exohil.formats.mcap_io import write_recording
+from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 
 

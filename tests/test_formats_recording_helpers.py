@@ -12,10 +12,11 @@ from hypothesis import strategies as st
 from exohil.formats.alignment import angles_at_sensor_times
 from exohil.formats.column_table import TableError, parse_columns, read_table
 from exohil.formats.errors import RecordingError
-from exohil.formats.mcap_io import read_recording, write_recording
 from exohil.formats.mot_import import shoulder_recording_from_mot
 from exohil.formats.opensim_mot import MotData
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
+from exohil.formats.recording_reader import read_recording
+from exohil.formats.recording_writer import write_recording
 from exohil.formats.sequence import sequence_gaps
 
 

@@ -36,8 +36,8 @@ def test_an_os_error_inside_a_command_is_one_line():
 
 
 def test_training_on_a_mocap_only_recording_is_one_line(tmp_path):
-    from exohil.formats.mcap_io import write_recording
     from exohil.formats.recording import AngleStream, Recording, SensorStream
+    from exohil.formats.recording_writer import write_recording
 
     path = tmp_path / "mocap_only.mcap"
     t = np.arange(50) / 100.0

@@ -31,7 +31,7 @@ def test_demo_streams_the_fixture_through_the_whole_chain(tmp_path):
     assert set(s["latency_ms"]) >= {"device_to_host", "end_to_end", "estimator"}
     assert "accuracy" in result.output and "end_to_end" in result.output
 
-    from exohil.formats.mcap_io import read_recording
+    from exohil.formats.recording_reader import read_recording
 
     assert len(read_recording(record_path).sensors) == received
 

@@ -108,7 +108,7 @@ def test_run_ends_when_the_source_goes_quiet_or_stop_is_set():
 
 
 def test_recorder_sink_writes_every_frame_it_was_given(tmp_path):
-    from exohil.formats.mcap_io import read_recording
+    from exohil.formats.recording_reader import read_recording
     from exohil.harness.recorder import RecorderSink
 
     path = tmp_path / "session.mcap"

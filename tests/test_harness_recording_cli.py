@@ -12,8 +12,9 @@ from click.testing import CliRunner, Result
 from mcap.writer import CompressionType
 from recording_raw_mcap import BAD_FILE_CASES, write_bad_file, write_raw_recording
 
-from exohil.formats.mcap_io import read_recording, write_recording
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
+from exohil.formats.recording_reader import read_recording
+from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"

@@ -13,6 +13,7 @@ from exohil.emulators.protocols import (
     mot_trajectory,
     paper_protocol,
 )
+from exohil.kinematics import humerus_direction
 
 SHOULDER_IK = Path(__file__).resolve().parents[1].parent / "shared" / "realdata" / "shoulder-ik"
 
@@ -72,16 +73,10 @@ def test_angle_ranges_per_movement(protocol, mocap):
     assert len(set(np.round(phi[el][moving_theta & (phi[el] > 1.0)]))) == 5
 
 
-def humerus_direction(deg: np.ndarray) -> np.ndarray:
-    theta, phi = np.deg2rad(deg[:, 0]), np.deg2rad(deg[:, 1])
-    return np.column_stack([np.sin(phi) * np.sin(theta), -np.cos(phi),
-                            np.sin(phi) * np.cos(theta)])
-
-
 def test_motion_is_smooth_and_human_paced(protocol):
     rate = 250.0
     deg = protocol.sample(protocol.frame_times(rate))
-    d = humerus_direction(deg)
+    d = humerus_direction(np.deg2rad(deg[:, 0]), np.deg2rad(deg[:, 1]))  # elbow direction
     step = np.arccos(np.clip(np.sum(d[1:] * d[:-1], axis=1), -1.0, 1.0))
     speed = np.rad2deg(step) * rate  # deg/s of the arm itself
     assert speed.max() < 300.0

@@ -15,7 +15,8 @@ from exohil.emulators.suit_profile import (
     load_default_profile,
     load_profile,
 )
-from exohil.formats.mcap_io import read_recording, write_recording
+from exohil.formats.recording_reader import read_recording
+from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 
 SHOULDER_IK = Path(__file__).resolve().parents[1].parent / "shared" / "realdata" / "shoulder-ik"

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_wire_protocol import VECTORS
+from test_wire_protocol import VECTORS, frames
 
-from exohil.formats.wire import MAX_SENSORS, WireFrame, cobs_encode, encode_frame
+from exohil.formats.wire import WireFrame, cobs_encode, encode_frame
 
 REPO = Path(__file__).resolve().parents[1]
 HEADER_DIR = REPO / "firmware" / "exohil_due"
@@ -58,14 +58,6 @@ int main(void) {
     return 0;
 }
 """
-
-frames = st.builds(
-    WireFrame,
-    seq=st.integers(0, 0xFFFF),
-    t_us=st.integers(0, 0xFFFFFFFF),
-    raw=st.lists(st.integers(0, 0xFFFF), min_size=1, max_size=MAX_SENSORS).map(tuple),
-)
-
 
 @pytest.fixture(scope="module")
 def driver(tmp_path_factory: pytest.TempPathFactory) -> Path:

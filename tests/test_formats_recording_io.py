@@ -1,4 +1,5 @@
-"""Recording format v1 MCAP I/O: round trip, determinism, foreign writers, bad files."""
+"""Recording format v1 file I/O (recording_writer, recording_reader): round trip, determinism,
+foreign writers, bad files."""
 
 from __future__ import annotations
 
@@ -21,8 +22,9 @@ from recording_raw_mcap import (
 )
 
 from exohil.formats.errors import RecordingError
-from exohil.formats.mcap_io import RecordingWriter, read_recording, scan_recording, write_recording
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
+from exohil.formats.recording_reader import read_recording, scan_recording
+from exohil.formats.recording_writer import RecordingWriter, write_recording
 from exohil.formats.schemas import joint_angles_schema, sensor_frame_schema
 from exohil.formats.sequence import sequence_gaps
 

@@ -1,0 +1,174 @@
+"""The ``exohil.recording`` metadata record of recording format v1: its defaults, the record a
+writer builds, and the checked, defaulted reading of it (see docs/recording-format.md).
+
+Metadata is str → str. The reserved keys (format, version, sensors, units, rates, segments)
+are computed by the writer; on reading, a missing ``sensors``, ``units`` or rate falls back to
+a default with a note, and a wrong format or version raises
+:class:`~exohil.formats.errors.RecordingError` naming the file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from mcap.records import Metadata
+
+from exohil.formats.errors import RecordingError
+from exohil.formats.recording import FORMAT_NAME, FORMAT_VERSION, SENSOR_TOPIC, Segment
+
+METADATA_NAME = "exohil.recording"
+ANGLE_UNIT = "deg"
+DEFAULT_SUIT_SENSORS = ("F", "SF", "SR", "R")
+DEFAULT_SENSOR_RATE_HZ = 250.0
+DEFAULT_MOCAP_RATE_HZ = 120.0
+RESERVED_KEYS = frozenset(
+    {"format", "version", "sensors", "units", "sensor_rate_hz", "mocap_rate_hz", "segments"}
+)
+
+
+def format_number(value: float) -> str:
+    """Metadata text of a rate or other number: integers without '.0', at most 12 digits."""
+    return format(float(value), ".12g")
+
+
+# ----------------------------------------------------------------------------- writing
+
+
+def metadata_record(
+    path: Path,
+    sensor_names: tuple[str, ...],
+    sensor_units: str,
+    sensor_rate_hz: float,
+    mocap_rate_hz: float,
+    extra: Mapping[str, str] | None,
+) -> dict[str, str]:
+    """The record a writer stores: ``extra`` (str → str, reserved keys dropped) plus the
+    reserved keys computed from the arguments (segments are added at close)."""
+    record: dict[str, str] = {}
+    for key, value in (extra or {}).items():
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise RecordingError(f"{path}: metadata must be str → str, got {key!r}: {value!r}")
+        if key not in RESERVED_KEYS:
+            record[key] = value
+    record.update(
+        {
+            "format": FORMAT_NAME,
+            "version": str(FORMAT_VERSION),
+            "sensors": ",".join(sensor_names),
+            "units": f"{sensor_units},{ANGLE_UNIT}",
+            "sensor_rate_hz": format_number(sensor_rate_hz),
+            "mocap_rate_hz": format_number(mocap_rate_hz),
+        }
+    )
+    return record
+
+
+def segments_text(segments: Sequence[Segment]) -> str:
+    """The ``segments`` metadata value: compact JSON list of {name, t0, t1}."""
+    return json.dumps(
+        [{"name": s.name, "t0": s.t0, "t1": s.t1} for s in segments],
+        separators=(",", ":"),
+    )
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+def merged_metadata(path: Path, records: list[Metadata], notes: list[str]) -> dict[str, str]:
+    """The ``exohil.recording`` records merged in file order, format and version checked;
+    other metadata records are ignored with a note."""
+    ours = [record for record in records if record.name == METADATA_NAME]
+    for record in records:
+        if record.name != METADATA_NAME:
+            notes.append(f"ignored metadata record {record.name!r}")
+    if not ours:
+        raise RecordingError(
+            f"{path}: no '{METADATA_NAME}' metadata record; not an exohil recording"
+        )
+    if len(ours) > 1:
+        notes.append(f"{len(ours)} '{METADATA_NAME}' records; merged in file order")
+    metadata: dict[str, str] = {}
+    for record in ours:
+        metadata.update(record.metadata)
+    found_format = metadata.get("format")
+    if found_format != FORMAT_NAME:
+        raise RecordingError(
+            f"{path}: metadata format is {found_format!r}, expected {FORMAT_NAME!r}"
+        )
+    found_version = metadata.get("version")
+    if found_version != str(FORMAT_VERSION):
+        raise RecordingError(
+            f"{path}: unsupported recording format version {found_version!r} "
+            f"(this reader supports {FORMAT_VERSION})"
+        )
+    return metadata
+
+
+def sensor_names(
+    path: Path, metadata: dict[str, str], messages: list[tuple[int, bytes]], notes: list[str]
+) -> tuple[str, ...]:
+    """Sensor names from ``sensors``; without it, the suit's four names for four values per
+    frame, else ``ch0, ch1, ...`` (counted in the first message)."""
+    text = metadata.get("sensors")
+    if text is not None:
+        return tuple(name.strip() for name in text.split(",") if name.strip())
+    if not messages:
+        return ()
+    try:
+        count = len(json.loads(messages[0][1])["values"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise RecordingError(f"{path}: {SENSOR_TOPIC} message 0 is not a sensor frame") from exc
+    names = DEFAULT_SUIT_SENSORS if count == 4 else tuple(f"ch{k}" for k in range(count))
+    notes.append(f"metadata has no 'sensors'; using {','.join(names)}")
+    return names
+
+
+def sensor_units(path: Path, metadata: dict[str, str]) -> str:
+    """The sensor unit from ``units`` ("<sensor unit>,deg"; default mm)."""
+    text = metadata.get("units", f"mm,{ANGLE_UNIT}")
+    sensor_unit, _, angle_unit = text.rpartition(",")
+    if not sensor_unit:
+        return text or "mm"
+    if angle_unit.strip().lower() not in ("deg", "degree", "degrees"):
+        raise RecordingError(f"{path}: angle unit {angle_unit!r} unsupported (v1 uses deg)")
+    return sensor_unit.strip()
+
+
+def rate(
+    path: Path, metadata: dict[str, str], key: str, estimate: float, notes: list[str]
+) -> float:
+    """The metadata rate ``key``; when absent, ``estimate`` (or the v1 default if NaN)."""
+    text = metadata.get(key)
+    if text is not None:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise RecordingError(f"{path}: metadata {key}={text!r} is not a positive number")
+        return value
+    default = DEFAULT_SENSOR_RATE_HZ if key == "sensor_rate_hz" else DEFAULT_MOCAP_RATE_HZ
+    value = estimate if math.isfinite(estimate) and estimate > 0 else default
+    notes.append(f"metadata has no {key}; using {format_number(value)} Hz")
+    return value
+
+
+def segments(path: Path, metadata: dict[str, str]) -> list[Segment]:
+    """The labelled spans in ``segments`` (none when absent)."""
+    text = metadata.get("segments")
+    if not text:
+        return []
+    try:
+        items = json.loads(text)
+        found = [Segment(str(s["name"]), float(s["t0"]), float(s["t1"])) for s in items]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise RecordingError(
+            f"{path}: metadata 'segments' is not a JSON list of {{name, t0, t1}}: {exc}"
+        ) from exc
+    for segment in found:
+        if not (math.isfinite(segment.t0) and math.isfinite(segment.t1)):
+            raise RecordingError(f"{path}: segment {segment.name!r} has a non-finite time")
+    return found
