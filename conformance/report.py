@@ -72,7 +72,9 @@ def report_dict(run: Any, results: list[Any]) -> dict[str, Any]:
 
 
 def _fmt(value: float) -> str:
-    return "—" if math.isnan(value) else f"{value:.4g}"
+    if math.isnan(value):
+        return "—"
+    return str(int(value)) if value.is_integer() and abs(value) < 1e15 else f"{value:.4g}"
 
 
 def summary_markdown(run: Any, results: list[Any]) -> str:

@@ -41,13 +41,14 @@ def _register() -> None:
         cmd_import,
         cmd_plot,
         cmd_record,
+        cmd_run,
         cmd_simulate,
         cmd_train,
     )
 
     for module in (
         cmd_demo, cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import,
-        cmd_plot, cmd_train,
+        cmd_plot, cmd_train, cmd_run,
     ):
         for command in module.COMMANDS:
             main.add_command(command)

@@ -10,11 +10,9 @@ error. The fixture is one the reference models never saw in training.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
-import numpy as np
 
 from exohil.harness.cli_types import OutputFile
 from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
@@ -23,13 +21,6 @@ DEFAULT_RECORDING = FIXTURES_DIR / "paper_protocol_heldout.mcap"
 DEFAULT_MODEL = MODELS_DIR / "ennet.npz"
 #: Realistic link faults: rare drops and corrupted frames, a short USB stall every 5 s.
 DEFAULT_FAULTS = "drop:rate=0.002;corrupt:rate=0.001;stall:every_s=5,duration_ms=20"
-
-
-def status_line(frames: int, link, last: np.ndarray | None) -> None:
-    """The live status line (stderr): frames, link counters, the latest estimate."""
-    angles = "" if last is None else "  " + " ".join(f"{v:7.1f}°" for v in last)
-    click.echo(f"  {frames:6d} frames  dropped {link.dropped}  crc errors {link.crc_errors}"
-               f"{angles}", err=True)
 
 
 @click.command("demo")
@@ -78,37 +69,9 @@ def demo(bench_file: Path | None, recording: Path | None, model: Path | None, se
         device=EmulatorDevice(recording or base.recording, fault_spec,
                               base.seed if seed is None else seed),
         model=model or config.model or DEFAULT_MODEL, backend=backend, record=record_path)
+    from exohil.harness.cmd_run import run_and_report
+
     run_and_report(config, seconds, json_out, title="exohil demo")
-
-
-def run_and_report(config, seconds: float, json_out: Path | None, title: str) -> dict:
-    """Run one session on ``config``, print the report, write the JSON; returns the summary."""
-    from exohil.harness.session import SessionError, run_session
-    from exohil.harness.session_report import session_measurements, summary, summary_lines
-
-    click.echo(f"{title}: {config.device.describe()} → acquisition → {config.model.name} → "
-               f"NAO, {seconds:g} s", err=True)
-    try:
-        result = run_session(config, seconds, progress=status_line)
-    except SessionError as err:
-        raise click.ClickException(str(err)) from None
-    measurements = session_measurements(result)
-    s = summary(result, measurements)
-    if json_out is not None:
-        _write_json(json_out, s)
-    lines = summary_lines(s)
-    if config.record is not None:
-        lines.append(f"recorded    {config.record}")
-    if json_out is not None:
-        lines.append(f"summary     {json_out}")
-    click.echo("\n".join(lines))
-    return s
-
-
-def _write_json(path: Path, data: dict) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    tmp.replace(path)
 
 
 COMMANDS = [demo]

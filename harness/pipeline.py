@@ -159,9 +159,11 @@ class Pipeline:
         progress: Callable[[int, LinkStats, np.ndarray | None], None] | None = None,
         progress_every_s: float = 1.0,
         idle_timeout_s: float | None = None,
+        until_device_time_s: float | None = None,
     ) -> PipelineRun:
         """Process frames until ``duration_s`` (wall clock) or ``max_frames`` or ``stop`` is set,
-        or, once frames have started to arrive, none arrived for ``idle_timeout_s``.
+        or, once frames have started to arrive, none arrived for ``idle_timeout_s``, or a frame
+        stamped at or after ``until_device_time_s`` (device clock, s) was processed.
         ``progress(frames, link, last)`` is called about every ``progress_every_s``. The sinks
         are not closed (their owner does)."""
         log = _Log()
@@ -188,6 +190,8 @@ class Pipeline:
             last_frame_at = time.perf_counter()
             sample = self._process(frame, log)
             last = sample.angles
+            if until_device_time_s is not None and frame.device_time_s >= until_device_time_s:
+                break
         return self._result(log, time.perf_counter() - start)
 
     def _process(self, frame: Frame, log: _Log) -> Sample:

@@ -150,14 +150,18 @@ class SessionResult:
         return dict(Counter(record.kind for record in self.fault_log))
 
 
-def run_session(config: BenchConfig, seconds: float, *, progress: Progress | None = None,
+def run_session(config: BenchConfig, seconds: float | None, *,
+                progress: Progress | None = None,
                 stop: threading.Event | None = None, extra_sinks: Sequence[Sink] = (),
                 realtime: bool = False) -> SessionResult:
     """Stream ``seconds`` of the bench's device through its model into its sinks.
 
     An emulator streams exactly ``seconds`` of device time and the run ends once every frame
     it sent has been processed, so its fault log and the host's counters cover the same
-    frames; a serial device is read for ``seconds`` of wall time (or until ``stop``).
+    frames; a serial device is read for ``seconds`` of wall time. ``seconds=None`` runs until
+    ``stop`` is set (or, for the emulator, to the end of its recording; for a serial device with
+    a reference, until the device's clock passes the reference's end). Setting ``stop`` ends
+    any run early, and the result covers what was processed.
     """
     if config.device is None:
         raise SessionError("no device: give a target (emulator:RECORDING or a serial URL)")
@@ -194,10 +198,17 @@ def run_session(config: BenchConfig, seconds: float, *, progress: Progress | Non
                          duration_s=seconds) as opened:
             pipeline = Pipeline(opened.source, model.engine(), sinks, opened.device_clock)
             if opened.emulator is not None:
-                run = pipeline.run(duration_s=seconds + 30.0, idle_timeout_s=1.0, stop=stop,
+                limit = None if seconds is None else seconds + 30.0
+                run = pipeline.run(duration_s=limit, idle_timeout_s=1.0, stop=stop,
                                    progress=progress)
             else:
-                run = pipeline.run(duration_s=seconds, stop=stop, progress=progress)
+                end, wall = None, seconds
+                if seconds is None and reference is not None and len(reference.sensors):
+                    t = reference.sensors.t
+                    end = float(t[-1])
+                    wall = float(t[-1] - t[0]) + 60.0  # a device that never gets there
+                run = pipeline.run(duration_s=wall, stop=stop, progress=progress,
+                                   until_device_time_s=end)
             emulator = opened.emulator
             fault_log = None if emulator is None else emulator.fault_log
             seq0 = None if emulator is None else emulator.seq0

@@ -1,0 +1,121 @@
+"""``exohil run``: the pipeline against a real device (or any pyserial URL), with the demo's
+live status line and report. Ctrl-C (or SIGTERM) ends it cleanly: the report is printed and
+the recording finalised."""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import click
+import numpy as np
+
+from exohil.harness.bench import BenchConfig
+from exohil.harness.cli_types import OutputFile
+
+
+def status_line(frames: int, link, last: np.ndarray | None) -> None:
+    """The live status line (stderr): frames, link counters, the latest estimate."""
+    angles = "" if last is None else "  " + " ".join(f"{v:7.1f}°" for v in last)
+    click.echo(f"  {frames:6d} frames  dropped {link.dropped}  crc errors {link.crc_errors}"
+               f"{angles}", err=True)
+
+
+@contextmanager
+def stop_on_signals() -> Iterator[threading.Event]:
+    """An event set by SIGINT or SIGTERM while the block runs (previous handlers restored)."""
+    stop = threading.Event()
+
+    def handler(signum, frame) -> None:
+        if stop.is_set():  # a second Ctrl-C: give up on a clean end
+            raise KeyboardInterrupt
+        click.echo("\nstopping (again to abort) ...", err=True)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | None,
+                   title: str) -> dict:
+    """Run one session on ``config``, print the report, write the JSON; returns the summary."""
+    from exohil.harness.session import SessionError, run_session
+    from exohil.harness.session_report import session_measurements, summary, summary_lines
+
+    span = "until Ctrl-C" if seconds is None else f"{seconds:g} s"
+    model = config.model.name if config.model else "?"
+    device = config.device.describe() if config.device else "?"
+    click.echo(f"{title}: {device} → acquisition → {model} → NAO, {span}", err=True)
+    with stop_on_signals() as stop:
+        try:
+            result = run_session(config, seconds, progress=status_line, stop=stop)
+        except SessionError as err:
+            raise click.ClickException(str(err)) from None
+    measurements = session_measurements(result)
+    s = summary(result, measurements)
+    if json_out is not None:
+        tmp = json_out.with_name(f".{json_out.name}.tmp")
+        tmp.write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8")
+        tmp.replace(json_out)
+    lines = summary_lines(s)
+    if config.record is not None:
+        lines.append(f"recorded    {config.record}")
+    if json_out is not None:
+        lines.append(f"summary     {json_out}")
+    click.echo("\n".join(lines))
+    return s
+
+
+@click.command("run")
+@click.argument("url")
+@click.option("--model", type=click.Path(path_type=Path), default=None,
+              help="Estimator checkpoint [default: the bench's, else the reference ENNet].")
+@click.option("--bench", "bench_file", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path),
+              default=None, help="Bench configuration (TOML); URL and options override it.")
+@click.option("--sink", "sinks", multiple=True,
+              help="Robot the commands go to: simulated (default), or none (repeatable).")
+@click.option("--reference", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=None, help="Ground truth recording of this session (aligned by device "
+                                 "time); without it accuracy is not measured.")
+@click.option("--record", "record_path", type=OutputFile(), default=None,
+              help="Write the frames the host received to this recording (MCAP).")
+@click.option("--duration", type=click.FloatRange(min=0.1, max=86400.0), default=None,
+              help="Seconds to run [default: until Ctrl-C].")
+@click.option("--backend", type=click.Choice(["auto", "numpy", "torch", "torchscript",
+                                              "onnxruntime"]), default=None,
+              help="Streaming inference backend [auto].")
+@click.option("--json", "json_out", type=OutputFile(), default=None,
+              help="Write the summary JSON here.")
+def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str, ...],
+        reference: Path | None, record_path: Path | None, duration: float | None,
+        backend: str | None, json_out: Path | None) -> None:
+    """Run the pipeline on the device at URL (a serial port such as /dev/ttyACM0, a pty
+    printed by `exohil emulate`, or any pyserial URL such as socket://host:port)."""
+    from exohil.harness.bench import BenchError, SerialDevice, load_bench
+    from exohil.harness.paths import MODELS_DIR
+
+    if not url.strip():
+        raise click.BadParameter("the device URL is empty", param_hint="URL")
+    try:
+        config = load_bench(bench_file) if bench_file else BenchConfig()
+    except BenchError as err:
+        raise click.ClickException(str(err)) from None
+    robots = None
+    if sinks:
+        robots = tuple(s for s in sinks if s != "none")
+    config = config.with_overrides(
+        device=SerialDevice(url, reference), model=model or config.model or
+        MODELS_DIR / "ennet.npz", backend=backend, record=record_path, robots=robots)
+    run_and_report(config, duration, json_out, title="exohil run")
+
+
+COMMANDS = [run]
