@@ -119,16 +119,23 @@ class CoppeliaNao:
                     return
                 target, self._pending = self._pending, None
             began = time.perf_counter()
-            for handle, angle in zip(handles, target, strict=True):
-                sim.setJointTargetPosition(handle, float(angle))
+            try:
+                for handle, angle in zip(handles, target, strict=True):
+                    sim.setJointTargetPosition(handle, float(angle))
+            except Exception as err:  # the next command() reports it
+                self._error = err
+                return
             self._send_ms.add((time.perf_counter() - began) * 1e3)
             self.sent += 1
 
     def command(self, t: float, joints: np.ndarray, clamped: np.ndarray) -> None:
         """Queue ``joints`` (radians, NAO_JOINTS order) as the newest target. ValueError for a
-        wrong shape or non-finite angles; RuntimeError when not started or closed."""
+        wrong shape or non-finite angles; RuntimeError when not started, closed, or when an
+        earlier send failed (the sender thread then stopped)."""
         if self._closed or self._thread is None:
             raise RuntimeError("CoppeliaNao is not running (call start() first)")
+        if self._error is not None:
+            raise RuntimeError(f"CoppeliaSim sender stopped: {self._error}") from self._error
         angles = np.asarray(joints, dtype=float)
         if angles.shape != (3,) or not np.all(np.isfinite(angles)):
             raise ValueError(f"joints must be 3 finite angles, got {angles.tolist()}")

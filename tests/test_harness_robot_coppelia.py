@@ -96,3 +96,17 @@ def test_bad_arguments_and_commands():
     nao.close()  # idempotent
     with pytest.raises(RuntimeError, match="closed"):
         nao.start()
+
+
+def test_a_failed_send_is_reported_by_the_next_command():
+    class FailingSim(FakeSim):
+        def setJointTargetPosition(self, handle, position):  # noqa: N802
+            raise ConnectionError("server went away")
+
+    sim = FailingSim({f"/NAO/R{j}": k for k, j in enumerate(["ShoulderPitch", "ShoulderRoll",
+                                                             "ElbowYaw"])})
+    with CoppeliaNao(client_factory=lambda h, p: FakeClient(sim)) as nao:
+        nao.command(0.0, np.zeros(3), NO_CLAMP)
+        assert wait_for(lambda: not nao._thread.is_alive())
+        with pytest.raises(RuntimeError, match="server went away"):
+            nao.command(0.0, np.zeros(3), NO_CLAMP)
