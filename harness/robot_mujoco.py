@@ -34,6 +34,9 @@ from exohil.kinematics import NAO_JOINTS
 #: Bodies of the model, in the order of :meth:`MujocoNao.body_positions`.
 BODIES = ("torso", "RShoulder", "RBicep", "RElbow", "RForeArm", "r_wrist",
           "LShoulder", "LBicep", "LElbow", "LForeArm", "l_wrist")
+#: Commands within this much (rad) beyond a limit are clipped without counting as out of
+#: range: the URDF's limits are rounded to 6 decimals (e.g. −1.32645 rad for NAO's −76°).
+LIMIT_TOLERANCE = 1e-6
 #: When the physics thread is this far behind its schedule (s), it skips ahead instead of
 #: catching up in a burst (counted as skipped steps; simulated time then lags wall time).
 MAX_CATCH_UP_S = 0.1
@@ -152,8 +155,9 @@ class MujocoNao:
     def command(self, t: float, joints: np.ndarray, clamped: np.ndarray) -> None:
         """Take a command: ``joints`` (ShoulderPitch, ShoulderRoll, ElbowYaw), radians, for this
         side; ``clamped`` the mapping's per-joint clamp flags (counted). Angles outside the
-        model's limits are clipped to them and counted. ``t`` (s, the estimate's time) is
-        not used for timing: the delay is measured on this process's clock.
+        model's limits are clipped to them and counted (beyond ``LIMIT_TOLERANCE``). ``t``
+        (s, the estimate's time) is not used for timing: the delay is measured on this
+        process's clock.
 
         Raises ValueError for a wrong shape or non-finite angles, RuntimeError after close.
         Never blocks beyond a lock swap.
@@ -172,7 +176,7 @@ class MujocoNao:
                 self.superseded += 1
             self._pending = (target, received)
             self.commands += 1
-            self.out_of_range += int(np.any(target != angles))
+            self.out_of_range += int(np.any(np.abs(target - angles) > LIMIT_TOLERANCE))
             self.clamped_commands += int(np.any(clamped))
 
     # -- physics thread ----------------------------------------------------------------------

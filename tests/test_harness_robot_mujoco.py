@@ -90,6 +90,15 @@ def test_commands_outside_the_limits_are_clipped_and_counted():
     assert summary["out_of_range_commands"] == 1
 
 
+def test_the_mappings_limit_values_are_not_out_of_range():
+    # NAO_LIMITS (−76°) and the URDF (−1.32645 rad) differ by 2e-7 rad of rounding.
+    with MujocoNao() as nao:
+        nao.command(0.0, NAO_LIMITS["right"][:, 0], np.ones(3, dtype=bool))
+        nao.command(0.0, NAO_LIMITS["right"][:, 1], np.ones(3, dtype=bool))
+        summary = nao.summary()
+    assert summary["out_of_range_commands"] == 0 and summary["clamped_commands"] == 2
+
+
 def test_bad_commands_and_arguments_raise():
     nao = MujocoNao()
     with pytest.raises(ValueError, match="shape"):
