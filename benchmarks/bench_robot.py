@@ -33,9 +33,15 @@ from exohil.harness.robot_render import (
 )
 from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.teleop import TeleopSink
-from exohil.kinematics.robot import _nao_matrix
 
 RATE_HZ = 250.0
+
+
+def commanded_axis(joints: np.ndarray) -> np.ndarray:
+    """Right arm's upper-arm X axis for (pitch, roll, yaw): R_y(pitch) R_z(roll) e_x."""
+    pitch, roll = joints[0], joints[1]
+    return np.array([math.cos(pitch) * math.cos(roll), math.sin(roll),
+                     -math.sin(pitch) * math.cos(roll)])
 
 
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -63,7 +69,7 @@ def main() -> None:
             sleep_until(start + k / RATE_HZ)
             joints = sink.accept(float(t[k]), float(theta[k]), float(phi[k]))
             human = human_upper_arm_direction(theta[k], phi[k])
-            mapping_deg.add(angle_deg(_nao_matrix(joints)[:, 0], human))
+            mapping_deg.add(angle_deg(commanded_axis(joints), human))
             arm_deg.add(angle_deg(nao.upper_arm_axis("axis"), human))
             if args.gif and k % int(RATE_HZ / 5) == 0:
                 samples.append(sample_robot(nao, float(t[k]), theta[k], phi[k]))
