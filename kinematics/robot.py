@@ -121,11 +121,14 @@ def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
     limits = NAO_LIMITS[side]
     right_limits = np.sort(limits * mirror[:, None], axis=1)
     p_cmd, r_cmd = _nearest_reachable(direction, pitch, roll, pitch_hint, right_limits)
-    arm = np.swapaxes(_nao_matrix(np.stack([p_cmd, r_cmd, np.zeros_like(p_cmd)], axis=-1)),
-                      -1, -2) @ m  # = R_x(yaw) when the direction is reached
-    yaw_best = np.arctan2(arm[..., 2, 1] - arm[..., 1, 2], arm[..., 1, 1] + arm[..., 2, 2])
+    yaw = exact[..., 2]
     reached = (p_cmd == pitch) & (r_cmd == roll)
-    yaw = np.clip(np.where(reached, exact[..., 2], yaw_best), *right_limits[2])
+    if not np.all(reached):  # the yaw that brings R_y(p) R_z(r) R_x(yaw) closest to m
+        arm = np.swapaxes(_nao_matrix(np.stack([p_cmd, r_cmd, np.zeros_like(p_cmd)], axis=-1)),
+                          -1, -2) @ m
+        yaw_best = np.arctan2(arm[..., 2, 1] - arm[..., 1, 2], arm[..., 1, 1] + arm[..., 2, 2])
+        yaw = np.where(reached, yaw, yaw_best)
+    yaw = np.clip(yaw, *right_limits[2])
     command = np.stack([p_cmd, r_cmd, yaw], axis=-1) * mirror
     unclamped = exact * mirror
     outside = (unclamped < limits[:, 0]) | (unclamped > limits[:, 1])
@@ -138,38 +141,38 @@ def _nearest_reachable(direction, pitch, roll, pitch_hint, limits):
     ``direction`` ``(..., 3)`` is a unit vector in the NAO torso frame, ``pitch``/``roll`` its
     exact angles (roll in [−π/2, π/2]). Directions form a latitude (roll, about ±Y) / longitude
     (pitch) grid, and the reachable set is a rectangle in it. If the pitch is within its limits
-    the nearest point keeps it and clamps the roll; otherwise it lies on one of the two pitch
+    the nearest point keeps it and clamps the roll. Otherwise it lies on one of the two pitch
     limits (for any fixed roll, the nearer longitude is better since cos r ≥ 0), at the roll
-    that maximises sin r sin r* + cos r cos r* cos Δ on that meridian, or at a roll limit. All
-    candidates are compared; ties within 1e-12 rad go to the first in preference order: the
-    kept pitch (only where it is within the limits), then the pitch limit nearer the hint.
+    that maximises sin r sin r* + cos r cos r* cos Δ on that meridian, or at a roll limit; all
+    six candidates are compared, and ties within 1e-12 rad go to the pitch limit nearer the
+    hint, then to the order above.
     """
     (p_low, p_high), (r_low, r_high) = limits[0], limits[1]
-    keep = (pitch >= p_low) & (pitch <= p_high)
-    p_keep = np.clip(pitch, p_low, p_high)
-    near_first = (np.abs(wrap_angle(pitch_hint - p_high))
-                  <= np.abs(wrap_angle(pitch_hint - p_low)))
-    boundaries = (np.where(near_first, p_high, p_low), np.where(near_first, p_low, p_high))
-    candidates = [(p_keep, np.clip(roll, r_low, r_high))]
-    for p_b in boundaries:
-        delta = pitch - p_b
-        r_best = np.arctan2(np.sin(roll), np.cos(roll) * np.cos(delta))
-        for r in (np.clip(r_best, r_low, r_high), np.full_like(roll, r_low),
-                  np.full_like(roll, r_high)):
-            candidates.append((p_b, r))
-    errors = []
-    for p, r in candidates:
-        point = np.stack([np.cos(p) * np.cos(r), np.sin(r), -np.sin(p) * np.cos(r)], axis=-1)
-        errors.append(np.arctan2(np.linalg.norm(np.cross(point, direction), axis=-1),
-                                 np.sum(point * direction, axis=-1)))
-    errors[0] = np.where(keep, errors[0], np.inf)
-    errors = np.stack(errors, axis=-1)
-    best = np.argmax(errors <= np.min(errors, axis=-1, keepdims=True) + 1e-12, axis=-1)
-    p_all = np.stack(np.broadcast_arrays(*(p for p, _ in candidates)), axis=-1)
-    r_all = np.stack(np.broadcast_arrays(*(r for _, r in candidates)), axis=-1)
-    pick = best[..., None]
-    return (np.take_along_axis(p_all, pick, axis=-1)[..., 0],
-            np.take_along_axis(r_all, pick, axis=-1)[..., 0])
+    shape = np.shape(pitch)
+    p_cmd = np.clip(pitch, p_low, p_high).reshape(-1)
+    r_cmd = np.clip(roll, r_low, r_high).reshape(-1)
+    outside = ((pitch < p_low) | (pitch > p_high)).reshape(-1)
+    if np.any(outside):
+        d = direction.reshape(-1, 3)[outside]
+        p_star, r_star = pitch.reshape(-1)[outside], roll.reshape(-1)[outside]
+        hint = pitch_hint.reshape(-1)[outside]
+        high_first = (np.abs(wrap_angle(hint - p_high)) <= np.abs(wrap_angle(hint - p_low)))
+        p_cand, r_cand = [], []
+        for p_b in (np.where(high_first, p_high, p_low), np.where(high_first, p_low, p_high)):
+            r_best = np.arctan2(np.sin(r_star), np.cos(r_star) * np.cos(p_star - p_b))
+            for r in (np.clip(r_best, r_low, r_high), np.full_like(r_star, r_low),
+                      np.full_like(r_star, r_high)):
+                p_cand.append(p_b)
+                r_cand.append(r)
+        p_c, r_c = np.stack(p_cand, axis=-1), np.stack(r_cand, axis=-1)  # (n, 6)
+        points = np.stack([np.cos(p_c) * np.cos(r_c), np.sin(r_c), -np.sin(p_c) * np.cos(r_c)],
+                          axis=-1)
+        errors = np.arctan2(np.linalg.norm(np.cross(points, d[:, None, :]), axis=-1),
+                            np.einsum("nkj,nj->nk", points, d))
+        best = np.argmax(errors <= errors.min(axis=-1, keepdims=True) + 1e-12, axis=-1)
+        rows = np.arange(len(best))
+        p_cmd[outside], r_cmd[outside] = p_c[rows, best], r_c[rows, best]
+    return p_cmd.reshape(shape), r_cmd.reshape(shape)
 
 
 def _nao_matrix(angles: np.ndarray) -> np.ndarray:
