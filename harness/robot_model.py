@@ -26,6 +26,7 @@ from __future__ import annotations
 import hashlib
 import sys
 import xml.etree.ElementTree as ET
+from math import cos, sin
 from pathlib import Path
 
 from exohil.harness.paths import FIXTURES_DIR
@@ -74,8 +75,7 @@ def _fmt(values) -> str:
 
 
 def _rpy_quat(rpy: list[float]) -> list[float]:
-    """URDF fixed-axis roll-pitch-yaw → MuJoCo quaternion (w, x, y, z)."""
-    from math import cos, sin
+    """URDF fixed-axis roll-pitch-yaw (R = Rz(y) Ry(p) Rx(r)) → MuJoCo quaternion (w, x, y, z)."""
     r, p, y = (a / 2.0 for a in rpy)
     return [cos(r) * cos(p) * cos(y) + sin(r) * sin(p) * sin(y),
             sin(r) * cos(p) * cos(y) - cos(r) * sin(p) * sin(y),

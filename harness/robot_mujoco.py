@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 from typing import Literal
 
+import mujoco
 import numpy as np
 
 from exohil.emulators.pacing import sleep_until
@@ -60,13 +61,10 @@ class MujocoNao:
                  model_path: str | Path = NAO_ARMS_MJCF, rate_hz: float = 500.0,
                  elbow_roll: float = math.radians(2.0),
                  rest: tuple[float, float, float] = (math.pi / 2, 0.0, 0.0)) -> None:
-        import mujoco
-
         if side not in ("right", "left"):
             raise ValueError(f"side must be 'right' or 'left', got {side!r}")
         if not (math.isfinite(rate_hz) and rate_hz >= 500.0):
             raise ValueError(f"rate_hz must be a finite number >= 500, got {rate_hz!r}")
-        self._mj = mujoco
         self.side = side
         self.prefix = "R" if side == "right" else "L"
         self.rate_hz = float(rate_hz)
@@ -187,7 +185,7 @@ class MujocoNao:
             self._error = err
 
     def _loop(self) -> None:
-        mujoco, model, data = self._mj, self.model, self.data
+        model, data = self.model, self.data
         act = self._act[self.prefix][:3]
         qadr = self._qadr[self.prefix][:3]
         period = 1.0 / self.rate_hz

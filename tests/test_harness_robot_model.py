@@ -65,6 +65,29 @@ def test_mujoco_forward_kinematics_equals_urdf_forward_kinematics(fractions):
         assert np.allclose(data.body(body).xmat.reshape(3, 3), rot, atol=1e-12), body
 
 
+def test_rotated_joint_origins_are_converted(tmp_path):
+    # NAO's arm joints have rpy = 0; a URDF whose shoulder origin is rotated must still give
+    # MuJoCo kinematics equal to the URDF's.
+    text = NAO_URDF.read_text(encoding="utf-8")
+    marker = '<joint name="RShoulderPitch" type="revolute">'
+    head, tail = text.split(marker)
+    tail = tail.replace('rpy="0 0 0"', 'rpy="0.3 -0.2 0.5"', 1)
+    urdf = tmp_path / "rotated.urdf"
+    urdf.write_text(head + marker + tail, encoding="utf-8")
+    model = mujoco.MjModel.from_xml_string(build_nao_arms_mjcf(urdf))
+    data = mujoco.MjData(model)
+    q = {"RShoulderPitch": 0.4, "RShoulderRoll": -0.6, "RElbowYaw": 1.0, "RElbowRoll": 0.5}
+    for name, value in q.items():
+        data.joint(name).qpos[0] = value
+    mujoco.mj_kinematics(model, data)
+    joints = load_joints(urdf)
+    assert joints["RShoulder"].rpy.tolist() == [0.3, -0.2, 0.5]
+    for body in ("RShoulder", "RElbow", "r_wrist"):
+        rot, pos = link_pose(joints, body, {k: np.asarray(v) for k, v in q.items()})
+        assert np.allclose(data.body(body).xpos, pos, atol=1e-12), body
+        assert np.allclose(data.body(body).xmat.reshape(3, 3), rot, atol=1e-12), body
+
+
 def test_masses_come_from_the_urdf():
     assert MODEL.body("RBicep").mass[0] == pytest.approx(0.15777)
     assert MODEL.body("r_wrist").mass[0] == pytest.approx(0.18533)
