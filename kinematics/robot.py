@@ -83,43 +83,96 @@ class NaoArm:
 def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
     """Thorax ← humerus quaternion ``(..., 4)`` → NAO (ShoulderPitch, ShoulderRoll, ElbowYaw).
 
-    Known poses (right arm): arm hanging → pitch +π/2, roll 0; forward flexion 90° → pitch 0,
-    roll 0; abduction 90° → roll −π/2, outside the limit, so clamped to −76° and reported.
+    The upper-arm direction comes first. The matched line is the NAO upper arm's X axis (the
+    ElbowYaw axis; NAO's elbow sits 15 mm beside it, docs/conventions.md): it is set to the
+    humerus long axis (shoulder → elbow) whenever some (pitch, roll) within the limits reaches
+    that direction, and otherwise to the nearest reachable direction (smallest angle). Elbow
+    yaw is then the one that brings the arm frame closest to the wanted orientation, clamped.
+    When nothing is clamped the command is the exact orientation.
 
-    Every orientation has two Y-Z'-X'' solutions, (p, r, y) and (p + π, π − r, y + π). The NAO
-    cannot reach most of either (roll −76°..18°), so the one whose *clamped* angles come closest
-    to the wanted orientation is returned (the first, |roll| ≤ π/2, on a tie). This keeps the
-    arm near horizontal when it sweeps through pure abduction instead of flipping pitch by π.
-    At roll = ±π/2 (the chain's singularity) pitch is taken from ``hint`` (``(..., 3)`` previous
-    joint angles, or None for pitch 0) and elbow yaw absorbs the rest; pass the previous output
-    to keep a stream continuous. Never NaN, never raises for unit input.
+    Known poses (right arm): arm hanging → pitch +π/2, roll 0; forward flexion 90° → pitch 0,
+    roll 0; abduction 90° → roll −π/2, outside the limit, so the command is roll −76°.
+
+    Returns a :class:`NaoArm`: ``unclamped`` is the exact joint solution with |roll| ≤ π/2
+    (pitch in (−π, π]), ``clamped`` marks its joints outside the limits, and ``angles`` is the
+    command (within the limits; where a direction is unreachable it is the nearest reachable
+    one, not the clipped ``unclamped``). Where the nearest direction is not unique (the arm
+    pointing straight along ±Y, roll = ±π/2, or straight into the unreachable wedge behind the
+    shoulder), the pitch closest to ``hint`` is taken: ``hint`` is ``(..., 3)`` previous joint
+    angles (radians, the previous ``unclamped``), or None for pitch 0. Pass the previous output
+    to keep a stream continuous; away from these ties the command is a continuous function of
+    the wanted direction, but it moves fast near them (docs/conventions.md). Never NaN, never
+    raises for unit input.
     """
     if side not in NAO_LIMITS:
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
     m = NAO_FROM_ISB @ quat_to_matrix(q) @ HUMERUS_FROM_NAO_ARM
     # Arm direction = first column = (cos p cos r, sin r, −sin p cos r).
-    cos_r = np.hypot(m[..., 0, 0], m[..., 2, 0])
-    roll = np.arctan2(m[..., 1, 0], cos_r)
-    pitch_regular = np.arctan2(-m[..., 2, 0], m[..., 0, 0])
-    pitch_hint = 0.0 if hint is None else np.asarray(hint, dtype=float)[..., 0]
-    pitch = np.where(cos_r < SINGULAR_EPS, np.broadcast_to(pitch_hint, roll.shape), pitch_regular)
-    first = intrinsic_euler_from_first_two(m, (Y, Z, X), pitch, roll)
-    second = wrap_angle(np.stack([first[..., 0] + np.pi, np.pi - first[..., 1],
-                                  first[..., 2] + np.pi], axis=-1))
+    direction = m[..., :, 0]
+    cos_r = np.hypot(direction[..., 0], direction[..., 2])
+    roll = np.arctan2(direction[..., 1], cos_r)
+    pitch_hint = np.broadcast_to(
+        0.0 if hint is None else np.asarray(hint, dtype=float)[..., 0], roll.shape)
+    pitch = np.where(cos_r < SINGULAR_EPS, pitch_hint,
+                     np.arctan2(-direction[..., 2], direction[..., 0]))
+    exact = intrinsic_euler_from_first_two(m, (Y, Z, X), pitch, roll)
+    # The left arm is the mirror image: solve in right-arm angles with mirrored limits.
     mirror = np.array([1.0, -1.0, -1.0]) if side == "left" else np.ones(3)
     limits = NAO_LIMITS[side]
-    candidates = []
-    for angles in (first * mirror, second * mirror):  # left arm: mirror image
-        clamped = np.clip(angles, limits[:, 0], limits[:, 1])
-        reached = _nao_matrix(clamped * mirror)
-        error = np.arccos(np.clip(0.5 * (np.trace(np.swapaxes(reached, -1, -2) @ m,
-                                                  axis1=-2, axis2=-1) - 1.0), -1.0, 1.0))
-        candidates.append((angles, clamped, error))
-    (a1, c1, e1), (a2, c2, e2) = candidates
-    use_second = (e2 < e1 - 1e-9)[..., None]
-    angles = np.where(use_second, a2, a1)
-    clamped_angles = np.where(use_second, c2, c1)
-    return NaoArm(angles=clamped_angles, clamped=clamped_angles != angles, unclamped=angles)
+    right_limits = np.sort(limits * mirror[:, None], axis=1)
+    p_cmd, r_cmd = _nearest_reachable(direction, pitch, roll, pitch_hint, right_limits)
+    yaw = exact[..., 2]
+    reached = (p_cmd == pitch) & (r_cmd == roll)
+    if not np.all(reached):  # the yaw that brings R_y(p) R_z(r) R_x(yaw) closest to m
+        arm = np.swapaxes(_nao_matrix(np.stack([p_cmd, r_cmd, np.zeros_like(p_cmd)], axis=-1)),
+                          -1, -2) @ m
+        yaw_best = np.arctan2(arm[..., 2, 1] - arm[..., 1, 2], arm[..., 1, 1] + arm[..., 2, 2])
+        yaw = np.where(reached, yaw, yaw_best)
+    yaw = np.clip(yaw, *right_limits[2])
+    command = np.stack([p_cmd, r_cmd, yaw], axis=-1) * mirror
+    unclamped = exact * mirror
+    outside = (unclamped < limits[:, 0]) | (unclamped > limits[:, 1])
+    return NaoArm(angles=command, clamped=outside, unclamped=unclamped)
+
+
+def _nearest_reachable(direction, pitch, roll, pitch_hint, limits):
+    """Right-arm (pitch, roll) within ``limits`` whose arm X axis is closest to ``direction``.
+
+    ``direction`` ``(..., 3)`` is a unit vector in the NAO torso frame, ``pitch``/``roll`` its
+    exact angles (roll in [−π/2, π/2]). Directions form a latitude (roll, about ±Y) / longitude
+    (pitch) grid, and the reachable set is a rectangle in it. If the pitch is within its limits
+    the nearest point keeps it and clamps the roll. Otherwise it lies on one of the two pitch
+    limits (for any fixed roll, the nearer longitude is better since cos r ≥ 0), at the roll
+    that maximises sin r sin r* + cos r cos r* cos Δ on that meridian, or at a roll limit; all
+    six candidates are compared, and ties within 1e-12 rad go to the pitch limit nearer the
+    hint, then to the order above.
+    """
+    (p_low, p_high), (r_low, r_high) = limits[0], limits[1]
+    shape = np.shape(pitch)
+    p_cmd = np.clip(pitch, p_low, p_high).reshape(-1)
+    r_cmd = np.clip(roll, r_low, r_high).reshape(-1)
+    outside = ((pitch < p_low) | (pitch > p_high)).reshape(-1)
+    if np.any(outside):
+        d = direction.reshape(-1, 3)[outside]
+        p_star, r_star = pitch.reshape(-1)[outside], roll.reshape(-1)[outside]
+        hint = pitch_hint.reshape(-1)[outside]
+        high_first = (np.abs(wrap_angle(hint - p_high)) <= np.abs(wrap_angle(hint - p_low)))
+        p_cand, r_cand = [], []
+        for p_b in (np.where(high_first, p_high, p_low), np.where(high_first, p_low, p_high)):
+            r_best = np.arctan2(np.sin(r_star), np.cos(r_star) * np.cos(p_star - p_b))
+            for r in (np.clip(r_best, r_low, r_high), np.full_like(r_star, r_low),
+                      np.full_like(r_star, r_high)):
+                p_cand.append(p_b)
+                r_cand.append(r)
+        p_c, r_c = np.stack(p_cand, axis=-1), np.stack(r_cand, axis=-1)  # (n, 6)
+        points = np.stack([np.cos(p_c) * np.cos(r_c), np.sin(r_c), -np.sin(p_c) * np.cos(r_c)],
+                          axis=-1)
+        errors = np.arctan2(np.linalg.norm(np.cross(points, d[:, None, :]), axis=-1),
+                            np.einsum("nkj,nj->nk", points, d))
+        best = np.argmax(errors <= errors.min(axis=-1, keepdims=True) + 1e-12, axis=-1)
+        rows = np.arange(len(best))
+        p_cmd[outside], r_cmd[outside] = p_c[rows, best], r_c[rows, best]
+    return p_cmd.reshape(shape), r_cmd.reshape(shape)
 
 
 def _nao_matrix(angles: np.ndarray) -> np.ndarray:

@@ -45,10 +45,19 @@ def test_angle_columns_come_from_the_estimator_names():
         TeleopSink([a], ("knee_flexion",))
 
 
-def test_commands_stay_continuous_through_the_roll_singularity():
-    sink = TeleopSink([SimulatedNao()], NAMES)
-    pitches = []
-    for theta in np.linspace(-10.0, 10.0, 201):  # sweep through pure abduction at 90°
-        pitches.append(sink.command_for(theta, 90.0).joints[0])
-    assert np.all(np.isfinite(pitches))
-    assert np.max(np.abs(np.diff(pitches))) < np.deg2rad(2.0)
+def test_abduction_through_the_roll_limit_follows_the_nearest_direction():
+    # Pure abduction (θ = 0) from hanging to overhead. Below 76° and above 104° the direction
+    # is reachable; between, the roll stays at −76° and the pitch leans the arm toward the
+    # target (down below 90°, up above). At exactly 90° (roll singularity) every pitch is as
+    # near, and the sink's hint keeps the previous one. The direction comes first, so the
+    # pitch turns from +90° to −90° across 90° (docs/conventions.md).
+    nao = SimulatedNao()
+    sink = TeleopSink([nao], NAMES)
+    commands = {phi: np.rad2deg(sink.command_for(0.0, phi).joints)
+                for phi in np.arange(0.0, 181.0)}
+    assert all(np.all(np.isfinite(c)) for c in commands.values())
+    assert commands[60.0][:2] == pytest.approx([90.0, -60.0])
+    assert commands[85.0][:2] == pytest.approx([90.0, -76.0])
+    assert commands[90.0][:2] == pytest.approx([90.0, -76.0])  # pitch from the hint
+    assert commands[95.0][:2] == pytest.approx([-90.0, -76.0])
+    assert commands[120.0][:2] == pytest.approx([-90.0, -60.0])  # reachable: exact

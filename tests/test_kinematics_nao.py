@@ -89,3 +89,21 @@ def test_cli_convert_accepts_negative_values_and_rejects_bad_counts():
     assert json.loads(ok.output)["values"]["axial_rotation"] == pytest.approx(100.0)
     bad = CliRunner().invoke(main, ["convert", "--from", "ms", "--to", "isb", "1", "2"])
     assert bad.exit_code != 0 and "takes 3" in bad.output
+
+
+def test_straight_into_the_unreachable_wedge_takes_the_pitch_limit_nearer_the_hint():
+    # Abducted 90° and 5° behind the frontal plane: the exact pitch is 180°, outside ±119.5°,
+    # and both pitch limits are equally near; the hint picks one.
+    q = ms_to_quat(deg(-5.0), deg(90.0), 0.0)
+    for hint_pitch, expected in ((2.0, 119.5), (-2.0, -119.5)):
+        arm = humerus_to_nao(q, hint=np.array([hint_pitch, 0.0, 0.0]))
+        assert np.rad2deg(arm.angles[:2]) == pytest.approx([expected, -76.0])
+        assert arm.clamped.tolist() == [True, True, False]
+
+
+def test_reachable_direction_is_kept_even_when_elbow_yaw_clamps():
+    # (1.2°, 130.1°, 0°): the old branch choice gave pitch 91.5°, roll −76° (28° off).
+    arm = nao(1.2, 130.1)
+    assert np.rad2deg(arm.angles[:2]) == pytest.approx(np.rad2deg(arm.unclamped[:2]))
+    assert np.rad2deg(arm.angles) == pytest.approx([-88.58, -49.89, -119.5], abs=0.01)
+    assert arm.clamped.tolist() == [False, False, True]

@@ -1,0 +1,68 @@
+"""Stick-figure pictures of the simulated arm beside the human arm (PNG frames, GIF)."""
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from exohil.harness.robot_mujoco import MujocoNao
+from exohil.harness.robot_render import (
+    ArmSample,
+    human_upper_arm_direction,
+    render_arm_frames,
+    sample_robot,
+    write_arm_animation,
+)
+
+
+@pytest.mark.parametrize(("pose", "side", "expected"), [
+    ((0.0, 0.0), "right", [0.0, 0.0, -1.0]),    # hanging
+    ((90.0, 90.0), "right", [1.0, 0.0, 0.0]),   # forward flexion
+    ((0.0, 90.0), "right", [0.0, -1.0, 0.0]),   # abduction: out to the right (−Y)
+    ((0.0, 90.0), "left", [0.0, 1.0, 0.0]),
+])
+def test_human_direction_in_the_nao_torso_frame(pose, side, expected):
+    assert human_upper_arm_direction(*pose, side=side) == pytest.approx(expected, abs=1e-12)
+
+
+@pytest.fixture(scope="module")
+def samples():
+    nao = MujocoNao()  # not started: the hanging start pose, as MuJoCo computes it
+    out = [sample_robot(nao, 0.1 * k, 30.0, 20.0 * k) for k in range(3)]
+    nao.close()
+    return out
+
+
+def test_frames_are_readable_pngs(samples, tmp_path):
+    paths = render_arm_frames(samples, tmp_path / "frames", dpi=40)
+    assert [p.name for p in paths] == ["arm_00000.png", "arm_00001.png", "arm_00002.png"]
+    for path in paths:
+        with Image.open(path) as image:
+            assert image.format == "PNG" and image.size == (256, 144)
+            image.load()
+    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == [p.name for p in paths]
+    # different poses draw different pictures
+    assert paths[0].read_bytes() != paths[2].read_bytes()
+
+
+def test_animation_is_a_gif_with_one_frame_per_sample(samples, tmp_path):
+    path = write_arm_animation(samples, tmp_path / "arm.gif", fps=5, dpi=40)
+    with Image.open(path) as image:
+        assert image.format == "GIF" and image.n_frames == 3
+    assert [p.name for p in tmp_path.iterdir()] == ["arm.gif"]  # no partial file left
+
+
+def test_bad_input_is_a_clear_error(samples, tmp_path):
+    with pytest.raises(ValueError, match="no samples"):
+        render_arm_frames([], tmp_path)
+    with pytest.raises(ValueError, match="no samples"):
+        write_arm_animation([], tmp_path / "x.gif")
+    with pytest.raises(ValueError, match="fps"):
+        write_arm_animation(samples, tmp_path / "x.gif", fps=0.0)
+    broken = ArmSample(t=0.0, bodies={"torso": np.zeros(3)}, humerus=np.array([1.0, 0, 0]))
+    with pytest.raises(ValueError, match="missing"):
+        render_arm_frames([broken], tmp_path)
+    not_unit = ArmSample(t=0.0, bodies=samples[0].bodies, humerus=np.array([2.0, 0, 0]))
+    with pytest.raises(ValueError, match="unit"):
+        render_arm_frames([not_unit], tmp_path)
+    with pytest.raises(ValueError, match="side"):
+        human_upper_arm_direction(0.0, 0.0, side="up")
