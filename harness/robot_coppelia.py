@@ -118,6 +118,7 @@ class CoppeliaNao:
                 if self._stop:
                     return
                 target, self._pending = self._pending, None
+            assert target is not None  # the wait above ends with a target or on stop
             began = time.perf_counter()
             try:
                 for handle, angle in zip(handles, target, strict=True):

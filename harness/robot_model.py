@@ -95,8 +95,8 @@ def build_nao_arms_mjcf(urdf_path: str | Path) -> str:
         robot = ET.fromstring(data)
     except ET.ParseError as err:
         raise UrdfError(f"{urdf_path}: not XML: {err}") from None
-    links = {link.get("name"): link for link in robot.findall("link")}
-    joints = {joint.get("name"): joint for joint in robot.findall("joint")}
+    links = {str(link.get("name")): link for link in robot.findall("link")}
+    joints = {str(joint.get("name")): joint for joint in robot.findall("joint")}
 
     root = ET.Element("mujoco", model="nao_v50_arms")
     root.append(ET.Comment(
@@ -123,7 +123,8 @@ def build_nao_arms_mjcf(urdf_path: str | Path) -> str:
             joint = joints.get(joint_name)
             if joint is None:
                 raise UrdfError(f"{urdf_path}: joint {joint_name} missing")
-            if joint.find("child") is None or joint.find("child").get("link") != link_name:
+            child = joint.find("child")
+            if child is None or child.get("link") != link_name:
                 raise UrdfError(f"{urdf_path}: joint {joint_name} does not lead to {link_name}")
             origin = joint.find("origin")
             xyz = _floats(origin.get("xyz", "0 0 0") if origin is not None else "0 0 0", 3,
@@ -172,7 +173,7 @@ def _inertial(body: ET.Element, links: dict[str, ET.Element], link_name: str) ->
     pos = _floats(origin.get("xyz", "0 0 0") if origin is not None else "0 0 0", 3,
                   f"{link_name} inertial xyz")
     try:
-        tensor = [float(inertia.get(k)) for k in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")]
+        tensor = [float(inertia.get(k, "")) for k in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")]
     except (TypeError, ValueError):
         raise UrdfError(f"link {link_name}: malformed inertia {inertia.attrib}") from None
     ET.SubElement(body, "inertial", pos=_fmt(pos),

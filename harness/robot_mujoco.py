@@ -262,7 +262,9 @@ class MujocoNao:
         took), tracking error (degrees, per step: the largest |reached − commanded| of the
         three commanded joints, from the first command on) and command → stepped delay (ms:
         from ``command()`` to the end of the first physics step that used it)."""
-        span = (self._t_last - self._t_first) if self.steps > 1 else 0.0
+        span = 0.0
+        if self.steps > 1 and self._t_first is not None and self._t_last is not None:
+            span = self._t_last - self._t_first
         names = [f"{self.prefix}{j}" for j in NAO_JOINTS]
         return {
             "side": self.side,

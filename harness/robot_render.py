@@ -67,7 +67,7 @@ class ArmSample:
 
 
 class _Robot(Protocol):
-    side: str
+    side: Literal["right", "left"]
 
     def body_positions(self) -> dict[str, np.ndarray]: ...
 
@@ -178,7 +178,7 @@ def write_arm_animation(samples: Sequence[ArmSample], path_gif: str | Path, *,
     path = Path(path_gif)
     tmp = path.with_name(path.stem + ".partial.gif")
     figure = _Figure(dpi)
-    writer = PillowWriter(fps=fps)
+    writer = PillowWriter(fps=fps)  # type: ignore[arg-type]  # Pillow takes a float fps
     with writer.saving(figure.fig, str(tmp), dpi):
         for sample in samples:
             figure.draw(sample)

@@ -74,7 +74,7 @@ class UdpJointTarget:
             raise ValueError(f"cannot resolve UDP host {host!r}: {err}") from None
         self.host, self.port, self.side = host, port, side
         self._address = address
-        self._sock = socket.socket(family, socket.SOCK_DGRAM)
+        self._sock: socket.socket | None = socket.socket(family, socket.SOCK_DGRAM)
         self._sock.setblocking(False)
         self._names = [("R" if side == "right" else "L") + name for name in NAO_JOINTS]
         self._seq = 0
