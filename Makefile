@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 STAMP   = $(VENV)/.installed
 
-.PHONY: demo test lint bench install clean
+.PHONY: demo test lint conform bench install clean
 
 install: $(STAMP)
 
@@ -25,8 +25,13 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 
+# The conformance gate CI runs: reference ENNet, held-out fixture on the emulator, ci profile.
+conform: $(STAMP)
+	$(BIN)/exohil conform --target emulator:fixtures/paper_protocol_heldout.mcap \
+		--model fixtures/models/ennet.npz --profile ci --out conformance-report
+
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info conformance-report demo-report

@@ -13,12 +13,16 @@ import click
 
 
 @click.command("conform")
-@click.option("--target", required=True,
+@click.option("--target", default=None,
               help="emulator:RECORDING[?faults=SPEC&seed=N] (the emulator on a pty, in "
                    "process) or a pyserial URL / device path (/dev/ttyACM0, a pty printed by "
                    "`exohil emulate`, socket://host:port).")
-@click.option("--model", required=True, type=click.Path(path_type=Path),
+@click.option("--model", default=None, type=click.Path(path_type=Path),
               help="Checkpoint under test (.npz).")
+@click.option("--bench", "bench_file", default=None,
+              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Bench file (TOML, docs/architecture.md) naming the device and the model; "
+                   "--target and --model override it.")
 @click.option("--profile", default="default", show_default=True,
               help="Profile: default, bench, ci, or a .toml file (docs/conformance.md).")
 @click.option("--baseline", type=click.Path(path_type=Path), default=None,
@@ -27,30 +31,33 @@ import click
 @click.option("--reference", type=click.Path(path_type=Path), default=None,
               help="Ground truth recording for a serial device (aligned by device time); "
                    "without it the accuracy checks are skipped, never passed.")
-@click.option("--backend", default="auto", show_default=True,
+@click.option("--backend", default=None,
               type=click.Choice(["auto", "numpy", "torch", "torchscript", "onnxruntime"]),
-              help="Streaming inference backend.")
+              help="Streaming inference backend [the bench's, else auto].")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               default=Path("conformance-report"), show_default=True,
               help="Folder for junit.xml, conformance.json, summary.md, run.mcap.")
 @click.option("-k", "select", default=None,
               help="Run only the checks matching this pytest -k expression.")
-def conform(target: str, model: Path, profile: str, baseline: Path | None,
-            reference: Path | None, backend: str, out_dir: Path, select: str | None) -> None:
+def conform(target: str | None, model: Path | None, bench_file: Path | None, profile: str,
+            baseline: Path | None, reference: Path | None, backend: str | None, out_dir: Path,
+            select: str | None) -> None:
     """Run the conformance suite on MODEL against TARGET; exit 0 only when every required
     check passed. The last line names the verdict (and the first failing check)."""
     import json
 
     import pytest
 
+    if bench_file is None and (target is None or model is None):
+        raise click.UsageError("give --target and --model, or a --bench file naming them")
     out_dir.mkdir(parents=True, exist_ok=True)
     args = ["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
             "-o", "junit_family=xunit1", "-W", "ignore::pytest.PytestAssertRewriteWarning",
-            f"--junitxml={out_dir / 'junit.xml'}",
-            "--exohil-target", target, "--exohil-model", str(model),
-            "--exohil-profile", profile, "--exohil-backend", backend,
+            f"--junitxml={out_dir / 'junit.xml'}", "--exohil-profile", profile,
             "--exohil-out", str(out_dir)]
-    for option, value in (("--exohil-baseline", baseline), ("--exohil-reference", reference)):
+    for option, value in (("--exohil-target", target), ("--exohil-model", model),
+                          ("--exohil-bench", bench_file), ("--exohil-backend", backend),
+                          ("--exohil-baseline", baseline), ("--exohil-reference", reference)):
         if value is not None:
             args += [option, str(value)]
     if select:

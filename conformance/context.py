@@ -29,6 +29,7 @@ from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.formats.recording import Recording
 from exohil.harness.bench import (
     BenchConfig,
+    Device,
     EmulatorDevice,
     SerialDevice,
     parse_target,
@@ -65,16 +66,16 @@ class Replay:
 class ConformanceRun:
     """One target × model × profile (see module doc)."""
 
-    def __init__(self, target: str, model: Path, profile: Profile, *,
+    def __init__(self, target: str | Device, model: Path, profile: Profile, *,
                  reference: Path | None = None, baseline: Path | None = None,
                  backend: str = "auto") -> None:
-        device = parse_target(target)
+        device = parse_target(target) if isinstance(target, str) else target
         if isinstance(device, EmulatorDevice) and device.faults is None:
             device = EmulatorDevice(device.recording, profile.setting("faults") or None,
                                     profile.setting("seed"))
         if isinstance(device, SerialDevice) and reference is not None:
             device = SerialDevice(device.url, reference)
-        self.target = target
+        self.target = target if isinstance(target, str) else device.describe()
         self.device = device
         self.profile = profile
         self.model_path = Path(model)

@@ -46,13 +46,17 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--exohil-target", default=None,
                     help="emulator:RECORDING[?faults=SPEC&seed=N] or a pyserial URL.")
     group.addoption("--exohil-model", default=None, help="Checkpoint under test (.npz).")
+    group.addoption("--exohil-bench", default=None,
+                    help="Bench file (TOML) naming the device and model; the options above "
+                         "override it.")
     group.addoption("--exohil-profile", default="default",
                     help="Profile name (default, bench, ci) or a .toml file.")
     group.addoption("--exohil-baseline", default=None,
                     help="Baseline checkpoint for the regression check.")
     group.addoption("--exohil-reference", default=None,
                     help="Ground truth recording for a serial device (aligned by device time).")
-    group.addoption("--exohil-backend", default="auto", help="Streaming inference backend.")
+    group.addoption("--exohil-backend", default=None,
+                    help="Streaming inference backend [the bench's, else auto].")
     group.addoption("--exohil-out", default=None,
                     help="Folder for conformance.json, summary.md and run.mcap.")
 
@@ -66,23 +70,25 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
                                   items: list[pytest.Item]) -> None:
     if not any(_is_check(item) for item in items):
         return
-    missing = [opt for opt in ("--exohil-target", "--exohil-model")
-               if not config.getoption(opt.lstrip("-").replace("-", "_"))]
-    if missing:
-        raise pytest.UsageError(f"the conformance suite needs {' and '.join(missing)}")
     from exohil.conformance.context import ConformanceRun
     from exohil.conformance.profile import ProfileError, load_profile
-    from exohil.harness.bench import BenchError
+    from exohil.harness.bench import BenchConfig, BenchError, load_bench
 
     try:
+        bench_file = config.getoption("exohil_bench")
+        bench = load_bench(Path(bench_file)) if bench_file else BenchConfig()
+        target = config.getoption("exohil_target") or bench.device
+        model = config.getoption("exohil_model") or bench.model
+        if not target or not model:
+            raise pytest.UsageError("the conformance suite needs --exohil-target and "
+                                    "--exohil-model, or a --exohil-bench file naming them")
         profile = load_profile(config.getoption("exohil_profile"))
         reference = config.getoption("exohil_reference")
         baseline = config.getoption("exohil_baseline")
-        run = ConformanceRun(config.getoption("exohil_target"),
-                             Path(config.getoption("exohil_model")), profile,
+        run = ConformanceRun(target, Path(model), profile,
                              reference=None if reference is None else Path(reference),
                              baseline=None if baseline is None else Path(baseline),
-                             backend=config.getoption("exohil_backend"))
+                             backend=config.getoption("exohil_backend") or bench.backend)
     except (ProfileError, BenchError) as err:
         raise pytest.UsageError(str(err)) from None
     config.stash[_RUN] = run

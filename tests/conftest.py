@@ -6,7 +6,9 @@ writes) set their own lower ``max_examples``. The default ``dev`` profile runs f
 """
 
 import os
+import threading
 
+import pytest
 from hypothesis import HealthCheck, settings
 
 settings.register_profile(
@@ -14,3 +16,26 @@ settings.register_profile(
 )
 settings.register_profile("dev", max_examples=200, deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+
+def _realtime_refusal() -> str | None:
+    """Why SCHED_FIFO is refused here, or None; asked from a short-lived thread, whose
+    scheduling policy ends with it."""
+    from exohil.realtime import request_realtime
+
+    answer: list[str | None] = []
+    probe = threading.Thread(target=lambda: answer.append(request_realtime()))
+    probe.start()
+    probe.join()
+    return answer[0]
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Tests select on the bench's features with markers: ``device`` runs only with a real
+    device named by EXOHIL_DEVICE, ``realtime`` only where SCHED_FIFO is granted."""
+    if item.get_closest_marker("device") and not os.environ.get("EXOHIL_DEVICE"):
+        pytest.skip("no real device: set EXOHIL_DEVICE=/dev/ttyACM0 (a URL pyserial opens)")
+    if item.get_closest_marker("realtime"):
+        refusal = _realtime_refusal()
+        if refusal:
+            pytest.skip(refusal)

@@ -268,3 +268,20 @@ def test_a_device_with_another_sensor_count_fails_compatibility(tmp_path, fast_p
     assert "expects 4 sensors" in output or "model ['F', 'SF', 'SR', 'R']" in output
     # the checks that need a compatible model are skipped, never passed
     assert verdicts(report)["accuracy"] == "skip" and verdicts(report)["latency"] == "skip"
+
+
+def test_conform_reads_its_target_and_model_from_a_bench_file(tmp_path, fast_profile):
+    bench = tmp_path / "bench.toml"
+    bench.write_text(f'[device]\nemulator = "{HELDOUT}"\n[model]\ncheckpoint = "{ENNET}"\n',
+                     encoding="utf-8")
+    result = CliRunner().invoke(main, ["conform", "--bench", str(bench), "--profile",
+                                       str(fast_profile), "--out", str(tmp_path / "out"),
+                                       "-k", "heldout"])
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "out" / "conformance.json").read_text())
+    assert report["model"]["path"] == str(ENNET) and "emulator replaying" in report["target"]
+
+
+def test_conform_without_target_or_bench_is_a_usage_error(tmp_path):
+    result = CliRunner().invoke(main, ["conform", "--model", str(ENNET), "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "--target and --model, or a --bench" in result.output

@@ -1,0 +1,94 @@
+"""Bench configuration: targets, TOML files, and tests that select on the bench's features."""
+
+import os
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from exohil.harness.bench import (
+    BenchError,
+    EmulatorDevice,
+    SerialDevice,
+    load_bench,
+    open_device,
+    parse_target,
+)
+from exohil.harness.cli import main
+from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
+
+HELDOUT = FIXTURES_DIR / "paper_protocol_heldout.mcap"
+
+
+def test_targets_parse():
+    dev = parse_target("emulator:rec.mcap?faults=drop:rate=0.01;corrupt:rate=0.001&seed=3")
+    assert dev == EmulatorDevice(Path("rec.mcap"), "drop:rate=0.01;corrupt:rate=0.001", 3)
+    assert parse_target("emulator:rec.mcap") == EmulatorDevice(Path("rec.mcap"))
+    assert parse_target("/dev/ttyACM0") == SerialDevice("/dev/ttyACM0")
+    assert parse_target("socket://127.0.0.1:7000") == SerialDevice("socket://127.0.0.1:7000")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("emulator:", "without a recording"),
+    ("emulator:r.mcap?speed=2", "unknown emulator option"),
+    ("emulator:r.mcap?seed=x", "seed must be an integer"),
+    ("", "empty target"),
+])
+def test_bad_targets_are_one_clear_error(text, message):
+    with pytest.raises(BenchError, match=message):
+        parse_target(text)
+
+
+def test_a_bench_file_names_device_model_sensors_robots(tmp_path):
+    path = tmp_path / "bench.toml"
+    path.write_text('[device]\nemulator = "rec.mcap"\nfaults = "drop:rate=0.01"\nseed = 2\n'
+                    '[sensors]\nnames = ["F", "SF", "SR", "R"]\nrate_hz = 250\n'
+                    '[model]\ncheckpoint = "m.npz"\n[teleop]\nrobots = ["simulated"]\n'
+                    '[record]\npath = "out.mcap"\n', encoding="utf-8")
+    bench = load_bench(path)
+    assert bench.device == EmulatorDevice(tmp_path / "rec.mcap", "drop:rate=0.01", 2)
+    assert bench.model == tmp_path / "m.npz" and bench.record == tmp_path / "out.mcap"
+    assert bench.sensor_names == ("F", "SF", "SR", "R") and bench.robots == ("simulated",)
+    assert bench.with_overrides(model=None, backend="numpy").model == tmp_path / "m.npz"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[devise]\n", "unknown section"),
+    ("[device]\nport = 'x'\n", "unknown key"),
+    ("[device]\nemulator = 'a.mcap'\nurl = '/dev/x'\n", "pick one"),
+    ("[device\n", "bench.toml"),
+])
+def test_bad_bench_files_are_one_clear_error(tmp_path, text, message):
+    path = tmp_path / "bench.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(BenchError, match=message):
+        load_bench(path)
+
+
+def test_the_demo_reads_a_bench_file(tmp_path):
+    bench = tmp_path / "bench.toml"
+    bench.write_text(f'[device]\nemulator = "{HELDOUT}"\nfaults = "corrupt:rate=0.05"\n'
+                     f'[model]\ncheckpoint = "{MODELS_DIR / "ennet.npz"}"\n', encoding="utf-8")
+    out = tmp_path / "s.json"
+    result = CliRunner().invoke(main, ["demo", "--bench", str(bench), "--seconds", "2",
+                                       "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "corrupt" in out.read_text()
+
+
+@pytest.mark.realtime
+def test_acquisition_runs_under_sched_fifo():
+    with open_device(EmulatorDevice(HELDOUT), 4, realtime=True, duration_s=1.0) as opened:
+        frame = opened.source.get(timeout=5.0)
+        assert frame is not None
+        assert opened.source.realtime_error is None
+
+
+@pytest.mark.device
+def test_the_real_device_passes_the_bench_profile(tmp_path):
+    args = ["conform", "--target", os.environ["EXOHIL_DEVICE"], "--model",
+            str(MODELS_DIR / "ennet.npz"), "--profile", "bench", "--out", str(tmp_path)]
+    if os.environ.get("EXOHIL_DEVICE_REFERENCE"):
+        args += ["--reference", os.environ["EXOHIL_DEVICE_REFERENCE"]]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
