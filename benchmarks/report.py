@@ -70,19 +70,19 @@ def load_average() -> str:
     return "/".join(f"{v:.2f}" for v in os.getloadavg())
 
 
-def _value(value: float) -> str:
-    """Whole numbers (counts, sizes) in full, others to 6 significant digits."""
-    if math.isnan(value):
+def _value(m: Measurement) -> str:
+    """Whole counts (frames, bytes) in full, other values to 6 significant digits."""
+    if math.isnan(m.value):
         return "—"
-    if value.is_integer() and abs(value) < 1e15:
-        return f"{value:.0f}"
-    return f"{value:.6g}"
+    if m.unit == "count" and m.value.is_integer():
+        return f"{m.value:.0f}"
+    return f"{m.value:.6g}"
 
 
 def table(measurements: Sequence[Measurement]) -> list[str]:
     """The measurements as aligned lines: name, value, unit, limit, verdict, note."""
     rows = [("measurement", "value", "unit", "limit", "verdict", "note")]
-    rows += [(m.name, _value(m.value), m.unit, m.limit.describe() if m.limit else "",
+    rows += [(m.name, _value(m), m.unit, m.limit.describe() if m.limit else "",
               m.verdict.value.upper(), m.note) for m in measurements]
     widths = [max(len(row[i]) for row in rows) for i in range(5)]
     return [f"{name:<{widths[0]}}  {value:>{widths[1]}}  {unit:<{widths[2]}}  "
