@@ -1,15 +1,20 @@
 """Emulator pacing and link latency (``python -m benchmarks.bench_emulator [--seconds 60]``).
 
 The emulator runs in its own process (as ``exohil emulate`` would), streaming 250 Hz frames
-over its pty; this process reads them with the harness's acquisition thread. Reported, as
-p50/p99/max with the machine and its load average:
+over its pty; this process reads them with the harness's acquisition thread. Reported as
+measurements through :mod:`benchmarks.report`, after the options and the load average, with
+the targets of docs/emulator.md ("Benchmarks") as limits:
 
-* mean frame rate (1 / least-squares slope of time against sequence number) and its error
-  against the nominal rate, at the send side (the emulator's ``perf_counter_ns`` right after
-  each write) and at the host side (receive time);
-* period jitter |period − 1/rate| between consecutive frames, both sides, ms;
-* emulator write → frame delivered to the host buffer, ms (same CLOCK_MONOTONIC in both
-  processes).
+* ``frames.*`` and ``link.*``: frames generated, written and delivered, the emulator's fault
+  log and the link's dropped / CRC error / overflow counts;
+* ``rate.send|host`` (Hz): mean frame rate, 1 / least-squares slope of time against sequence
+  number, at the send side (the emulator's ``perf_counter_ns`` right after each write) and at
+  the host side (receive time); ``rate_error.send|host`` (%): its error against the nominal
+  rate, target within ±0.05 %;
+* ``period_jitter.send|host`` p50/p99/max (ms): |period − 1/rate| between consecutive frames,
+  target p99 ≤ 0.5 ms;
+* ``write_to_delivered`` p50/p99/max (ms): emulator write → frame delivered to the host buffer
+  (same CLOCK_MONOTONIC in both processes), target p99 ≤ 1 ms.
 
 ``--realtime`` puts the emulator and reader threads under SCHED_FIFO (opt-in, needs
 CAP_SYS_NICE), which is what keeps the timing on a machine shared with other work.
@@ -17,20 +22,26 @@ CAP_SYS_NICE), which is what keeps the timing on a machine shared with other wor
 
 from __future__ import annotations
 
-import argparse
 import multiprocessing as mp
-import os
 from collections import Counter
+from multiprocessing.connection import Connection
 
 import numpy as np
 
+from benchmarks.report import load_average, parser, positive_float, report
+from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.harness.acquisition import SerialFrameSource
-from exohil.harness.machine import machine
 
 SENSORS = 4
 
+#: docs/emulator.md, "Benchmarks": the targets of the figures this benchmark reports
+RATE_ERROR_LIMIT = Limit(low=-0.05, high=0.05, unit="%", inclusive=True)
+JITTER_LIMITS = {"p99": Limit(high=0.5, unit="ms", inclusive=True)}
+LATENCY_LIMITS = {"p99": Limit(high=1.0, unit="ms", inclusive=True)}
 
-def run_emulator(rate_hz: float, seconds: float, realtime: bool, spin_s: float, conn) -> None:
+
+def run_emulator(rate_hz: float, seconds: float, realtime: bool, spin_s: float,
+                 conn: Connection) -> None:
     """Child process: stream for ``seconds``, then report the send times and the fault log."""
     from exohil.emulators.arduino import ArduinoEmulator
 
@@ -48,39 +59,39 @@ def run_emulator(rate_hz: float, seconds: float, realtime: bool, spin_s: float, 
                    emulator.frames_generated, emulator.realtime_error))
 
 
-def stats_ms(samples_ms: np.ndarray) -> str:
-    p50, p99 = np.percentile(samples_ms, [50, 99])
-    return f"p50 {p50:.3f}  p99 {p99:.3f}  max {samples_ms.max():.3f} ms  (n={samples_ms.size})"
-
-
-def rate_line(seq: np.ndarray, t_ns: np.ndarray, nominal_hz: float) -> str:
-    """Mean rate as 1 / (least-squares slope of time against sequence number)."""
+def rate_measurements(side: str, seq: np.ndarray, t_ns: np.ndarray,
+                      nominal_hz: float) -> list[Measurement]:
+    """Mean rate (Hz) as 1 / (least-squares slope of time against sequence number), and its
+    error against ``nominal_hz`` (%, judged against :data:`RATE_ERROR_LIMIT`)."""
     slope_s = np.polyfit(seq - seq[0], (t_ns - t_ns[0]) / 1e9, 1)[0]
     rate = 1.0 / slope_s
-    return f"{rate:.4f} Hz ({(rate / nominal_hz - 1) * 100:+.4f} % vs {nominal_hz:g} Hz)"
+    return [Measurement.judge(f"rate.{side}", rate, "Hz", note=f"{seq.size} frames"),
+            Measurement.judge(f"rate_error.{side}", (rate / nominal_hz - 1) * 100, "%",
+                              RATE_ERROR_LIMIT, note=f"vs {nominal_hz:g} Hz")]
 
 
 def jitter_ms(seq: np.ndarray, t_ns: np.ndarray, nominal_hz: float) -> np.ndarray:
+    """|period − 1/nominal_hz| between frames of consecutive sequence numbers, ms."""
     consecutive = np.diff(seq) == 1
     periods_ms = np.diff(t_ns)[consecutive] / 1e6
     return np.abs(periods_ms - 1000.0 / nominal_hz)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=60.0, help="streaming time (s)")
-    parser.add_argument("--rate", type=float, default=250.0, help="frame rate (Hz)")
-    parser.add_argument("--spin-ms", type=float, default=0.3,
-                        help="emulator's spin before each deadline (ms)")
-    parser.add_argument("--read-timeout-ms", type=float, default=1.0,
-                        help="reader's longest blocking read (ms); each return re-polls the tty")
-    parser.add_argument("--realtime", action="store_true",
-                        help="emulator and reader threads under SCHED_FIFO (CAP_SYS_NICE)")
-    args = parser.parse_args()
-    print(f"machine: {machine()}")
-    print(f"options: rate {args.rate:g} Hz, spin {args.spin_ms:g} ms, read timeout "
-          f"{args.read_timeout_ms:g} ms, SCHED_FIFO {'requested' if args.realtime else 'no'}")
-    print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    ap = parser(__doc__)
+    ap.add_argument("--seconds", type=positive_float, default=60.0, help="streaming time (s)")
+    ap.add_argument("--rate", type=positive_float, default=250.0, help="frame rate (Hz)")
+    ap.add_argument("--spin-ms", type=float, default=0.3,
+                    help="emulator's spin before each deadline (ms)")
+    ap.add_argument("--read-timeout-ms", type=float, default=1.0,
+                    help="reader's longest blocking read (ms); each return re-polls the tty")
+    ap.add_argument("--realtime", action="store_true",
+                    help="emulator and reader threads under SCHED_FIFO (CAP_SYS_NICE)")
+    args = ap.parse_args()
+    print(f"options: {args.seconds:g} s at {args.rate:g} Hz, spin {args.spin_ms:g} ms, read "
+          f"timeout {args.read_timeout_ms:g} ms, SCHED_FIFO "
+          f"{'requested' if args.realtime else 'no'}")
+    print(f"load average before: {load_average()}")
 
     parent, child = mp.get_context("spawn").Pipe()
     process = mp.get_context("spawn").Process(target=run_emulator,
@@ -105,21 +116,30 @@ def main() -> None:
     if args.realtime:
         print(f"SCHED_FIFO: emulator {emulator_rt_error or 'yes'}, "
               f"reader {reader_rt_error or 'yes'}")
+    print(f"load average after: {load_average()}")
 
     sent = np.array(send_times, dtype=np.int64)
     got = np.array(received, dtype=np.int64)
-    print(f"streamed {args.seconds:g} s at {args.rate:g} Hz: {generated} frames generated, "
-          f"{len(sent)} written, {len(got)} delivered; emulator log {dict(faults)}; "
-          f"link dropped {link.dropped}, crc {link.crc_errors}, overflow {link.overflow}")
-    print(f"send-side mean rate:  {rate_line(sent[:, 0], sent[:, 1], args.rate)}")
-    print(f"host-side mean rate:  {rate_line(got[:, 0], got[:, 1], args.rate)}")
-    print(f"send-side period jitter: {stats_ms(jitter_ms(sent[:, 0], sent[:, 1], args.rate))}")
-    print(f"host-side period jitter: {stats_ms(jitter_ms(got[:, 0], got[:, 1], args.rate))}")
+    measurements = [
+        Measurement.judge("frames.generated", generated, "count"),
+        Measurement.judge("frames.written", len(sent), "count"),
+        Measurement.judge("frames.delivered", len(got), "count"),
+        *(Measurement.judge(f"emulator_log.{kind}", n, "count")
+          for kind, n in sorted(faults.items())),
+        Measurement.judge("link.dropped", link.dropped, "count"),
+        Measurement.judge("link.crc_errors", link.crc_errors, "count"),
+        Measurement.judge("link.overflow", link.overflow, "count"),
+        *rate_measurements("send", sent[:, 0], sent[:, 1], args.rate),
+        *rate_measurements("host", got[:, 0], got[:, 1], args.rate),
+        *distribution("period_jitter.send", jitter_ms(sent[:, 0], sent[:, 1], args.rate), "ms",
+                      JITTER_LIMITS),
+        *distribution("period_jitter.host", jitter_ms(got[:, 0], got[:, 1], args.rate), "ms",
+                      JITTER_LIMITS),
+    ]
     send_ns = dict(zip(sent[:, 0].tolist(), sent[:, 1].tolist(), strict=True))
-    latency_ms = np.array([(ns - send_ns[seq]) / 1e6 for seq, ns in got.tolist()
-                           if seq in send_ns])
-    print(f"write -> delivered latency: {stats_ms(latency_ms)}")
-    print(f"load average after: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    latency_ms = [(ns - send_ns[seq]) / 1e6 for seq, ns in got.tolist() if seq in send_ns]
+    measurements += distribution("write_to_delivered", latency_ms, "ms", LATENCY_LIMITS)
+    report("bench_emulator", measurements, args.json)
 
 
 if __name__ == "__main__":

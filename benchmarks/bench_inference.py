@@ -2,27 +2,41 @@
 
 Builds ENNet (hidden 64, window 10, dense 512-256-128-64-32, 4 sensors → 2 angles; random
 weights: latency does not depend on their values) — or loads ``--checkpoint`` — then times
-``StreamingEstimator.push`` for each backend over many frames and prints p50/p99/max in µs and
-the machine, library versions and load average. Warm-up frames are excluded. A last
-"fixed work" row times constant NumPy work of about the same duration: its p99 shows how much
-of the tail is the machine rather than the engine. ``--pace-hz 250`` spaces the calls like the
-live 250 Hz stream instead of calling back to back (caches go cold between frames).
+``StreamingEstimator.push`` for each backend over many frames and reports p50/p99/max in µs
+(``push.<backend>``, judged against the goal p99 ≤ 100 µs of docs/estimator.md) through
+:mod:`benchmarks.report`, after the library versions and load average. Warm-up frames are
+excluded. A last "fixed work" row times constant NumPy work of about the same duration: its p99
+shows how much of the tail is the machine rather than the engine. ``--pace-hz 250`` spaces the
+calls like the live 250 Hz stream instead of calling back to back (caches go cold between
+frames).
 """
 
 from __future__ import annotations
 
-import argparse
-import os
 import time
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from exohil.harness.machine import machine
+from benchmarks.report import load_average, parser, positive_int, report
+from exohil.formats.measurement import (
+    DISTRIBUTION_STATS,
+    Limit,
+    Measurement,
+    distribution,
+)
+
+if TYPE_CHECKING:
+    from exohil.estimator.trained import TrainedEstimator
+
+#: docs/estimator.md, "Benchmark": goal p99 ≤ 100 µs per pushed frame, for every backend
+PUSH_LIMITS = {"p99": Limit(high=100.0, unit="us", inclusive=True)}
 
 
-def load_average() -> str:
-    """The 1/5/15-minute load averages (the machine is shared; the tail depends on them)."""
-    return "/".join(f"{v:.2f}" for v in os.getloadavg())
+class Pushable(Protocol):
+    """What :func:`time_push` times: a streaming estimator or the fixed-work baseline."""
+
+    def push(self, row: np.ndarray) -> object: ...
 
 
 def library_versions() -> str:
@@ -38,7 +52,7 @@ def library_versions() -> str:
     return ", ".join(found)
 
 
-def random_estimator(kind: str = "ennet", hidden: int = 64, window: int = 10):
+def random_estimator(kind: str = "ennet", hidden: int = 64, window: int = 10) -> TrainedEstimator:
     """A TrainedEstimator with random weights (for timing only)."""
     import torch
 
@@ -69,7 +83,8 @@ class FixedWork:
         return self.out
 
 
-def time_push(engine, frames: np.ndarray, warmup: int = 200, pace_hz: float = 0.0) -> np.ndarray:
+def time_push(engine: Pushable, frames: np.ndarray, warmup: int = 200,
+              pace_hz: float = 0.0) -> np.ndarray:
     """Per-call latencies in µs (after ``warmup`` calls).
 
     ``pace_hz`` > 0 starts one call every 1/pace_hz s, as a live stream does (sleep, then spin
@@ -98,8 +113,9 @@ def main() -> None:
     from exohil.estimator.checkpoint import load_checkpoint
     from exohil.estimator.inference import BACKENDS, StreamingEstimator
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=20_000, help="timed frames per backend")
+    ap = parser(__doc__)
+    ap.add_argument("--frames", type=positive_int, default=20_000,
+                    help="timed frames per backend")
     ap.add_argument("--checkpoint", help="time this checkpoint instead of a random ENNet")
     ap.add_argument("--pace-hz", type=float, default=0.0,
                     help="one push every 1/HZ s like a live stream (e.g. 250); default: back "
@@ -109,26 +125,29 @@ def main() -> None:
     rng = np.random.default_rng(0)
     frames = est.norm.x_mean + est.norm.x_std * rng.standard_normal((args.frames + 200,
                                                                       est.config.n_sensors))
-    print(f"machine: {machine()}")
+    pace_hz = args.pace_hz
+    pacing = f"paced at {pace_hz:g} Hz" if pace_hz > 0 else "back to back"
     print(f"libraries: {library_versions()}")
     print(f"load average before: {load_average()}")
     print(f"model: {est.kind} hidden {est.config.hidden} window {est.config.window} "
           f"sensors {est.config.n_sensors} angles {est.config.n_angles}; {args.frames} frames; "
-          + (f"paced at {args.pace_hz:g} Hz" if args.pace_hz > 0 else "back to back"))
-    print(f"{'backend':<12} {'p50 µs':>8} {'p99 µs':>8} {'max µs':>9}")
+          f"{pacing}")
+    measurements: list[Measurement] = []
     for backend in BACKENDS:
+        name = f"push.{backend}"
         try:
             engine = StreamingEstimator(est, backend)
         except ValueError as exc:
-            print(f"{backend:<12} skipped: {exc}")
+            measurements += [Measurement.skipped(f"{name}.{stat}", "us", str(exc),
+                                                 PUSH_LIMITS.get(stat))
+                             for stat in DISTRIBUTION_STATS]
             continue
-        lat = time_push(engine, frames, pace_hz=args.pace_hz)
-        p50, p99 = np.percentile(lat, [50, 99])
-        print(f"{backend:<12} {p50:8.1f} {p99:8.1f} {lat.max():9.1f}")
-    lat = time_push(FixedWork(), frames, pace_hz=args.pace_hz)
-    p50, p99 = np.percentile(lat, [50, 99])
-    print(f"{'fixed work':<12} {p50:8.1f} {p99:8.1f} {lat.max():9.1f}  (noise baseline)")
+        measurements += distribution(name, time_push(engine, frames, pace_hz=pace_hz), "us",
+                                     PUSH_LIMITS, note=pacing)
+    measurements += distribution("fixed_work", time_push(FixedWork(), frames, pace_hz=pace_hz),
+                                 "us", note=f"{pacing}; noise baseline")
     print(f"load average after: {load_average()}")
+    report("bench_inference", measurements, args.json)
 
 
 if __name__ == "__main__":

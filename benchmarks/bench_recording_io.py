@@ -1,24 +1,25 @@
 """Recording format v1 I/O speed and size (``python -m benchmarks.bench_recording_io``).
 
 A paper-length recording (246 s: 61,500 frames × 4 sensors at 250 Hz, 29,520 shoulder samples at
-120 Hz) is written with each compression and read back several times; prints p50/p99/max
-seconds, the file size, the per-frame cost of the streaming writer (µs, what a live session pays
-at 250 Hz), and the machine.
+120 Hz) is written with each compression and read back several times. Reports, through
+:mod:`benchmarks.report` with the machine: p50/p99/max write and read time (s) and the file
+size (bytes) per compression, and p50/p99/max per-frame cost of the streaming writer (µs, what a
+live session pays at 250 Hz). No goal is stated for these figures, so all are INFO.
 """
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.report import parser, positive_int, report
+from exohil.formats.measurement import Measurement, distribution
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import RecordingWriter, write_recording
-from exohil.harness.machine import machine
 
 SECONDS = 246.0
 SHOULDER_ANGLES = ("elv_angle", "shoulder_elv", "shoulder_rot")
@@ -43,19 +44,15 @@ def paper_length_recording(seconds: float = SECONDS) -> Recording:
     )
 
 
-def percentiles(samples: list[float]) -> str:
-    p50, p99 = np.percentile(samples, [50, 99])
-    return f"p50 {p50:.3f}  p99 {p99:.3f}  max {max(samples):.3f}"
-
-
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=5, help="timed runs per measurement")
-    args = parser.parse_args()
+    ap = parser(__doc__)
+    ap.add_argument("--repeats", type=positive_int, default=5,
+                    help="timed runs per measurement")
+    args = ap.parse_args()
     rec = paper_length_recording()
-    print(f"machine: {machine()}")
     samples = len(rec.mocap["shoulder"])
     print(f"recording: {len(rec.sensors)} sensor frames, {samples} mocap samples")
+    measurements: list[Measurement] = []
     with tempfile.TemporaryDirectory() as folder:
         for compression in ("lz4", "zstd", "none"):
             path = Path(folder) / f"{compression}.mcap"
@@ -67,9 +64,10 @@ def main() -> None:
                 start = time.perf_counter()
                 read_recording(path)
                 reads.append(time.perf_counter() - start)
-            size = path.stat().st_size
-            print(f"{compression:>5}: {size / 1e6:6.2f} MB  write s {percentiles(writes)}")
-            print(f"{'':>5}  {'':>9}  read  s {percentiles(reads)}")
+            measurements.append(Measurement.judge(f"{compression}.size", path.stat().st_size,
+                                                  "count", note="bytes"))
+            measurements += distribution(f"{compression}.write", writes, "s")
+            measurements += distribution(f"{compression}.read", reads, "s")
         per_frame = []
         seq, t, values = rec.sensors.seq, rec.sensors.t, rec.sensors.values
         with RecordingWriter(Path(folder) / "live.mcap", rec.sensor_names) as writer:
@@ -77,9 +75,9 @@ def main() -> None:
                 start = time.perf_counter()
                 writer.add_sensor_frame(int(seq[k]), t[k], values[k])
                 per_frame.append((time.perf_counter() - start) * 1e6)
-        p50, p99 = np.percentile(per_frame, [50, 99])
-        worst = max(per_frame)
-        print(f"streaming add_sensor_frame µs: p50 {p50:.1f}  p99 {p99:.1f}  max {worst:.1f}")
+    measurements += distribution("streaming.add_sensor_frame", per_frame, "us",
+                                 note="lz4, 1 MiB chunks")
+    report("bench_recording_io", measurements, args.json)
 
 
 if __name__ == "__main__":

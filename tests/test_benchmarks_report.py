@@ -1,0 +1,68 @@
+"""Benchmarks report through measurements: the table, the JSON document, --help and bad
+arguments. Nothing here runs a benchmark or asserts a timing."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from exohil.formats.measurement import Limit, Measurement, distribution
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCHMARKS = ("bench_sim", "bench_recording_io", "bench_inference", "bench_emulator")
+
+
+def run_module(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_report_prints_an_aligned_table_and_writes_the_json_document(tmp_path, capsys,
+                                                                    monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks.report import report
+
+    measurements = [
+        Measurement.judge("frames.delivered", 15000, "count"),
+        *distribution("push.numpy", [50.0, 60.0, 400.0], "us",
+                      {"p99": Limit(high=100.0, unit="us", inclusive=True)}),
+        Measurement.skipped("push.onnxruntime.p99", "us", "onnxruntime is not installed"),
+    ]
+    out = tmp_path / "bench.json"
+    report("bench_demo", measurements, out)
+
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("machine: ")
+    header, rows = lines[1], lines[2:-1]
+    assert len(rows) == len(measurements)
+    unit_column = header.index("unit")
+    assert all(row[unit_column - 2:unit_column] == "  " for row in rows)
+    assert "15000  count" in rows[0]
+    failing = next(r for r in rows if r.startswith("push.numpy.p99"))
+    assert "<= 100 us" in failing and "FAIL" in failing
+    assert lines[-1] == "verdicts: 3 info, 1 fail, 1 skip"
+
+    document = json.loads(out.read_text(encoding="utf-8"))
+    assert document["benchmark"] == "bench_demo" and document["machine"]
+    assert document["measurements"] == [m.to_dict() for m in measurements]
+    assert [p.name for p in tmp_path.iterdir()] == ["bench.json"]  # no temporary left behind
+
+
+@pytest.mark.parametrize("module", [f"benchmarks.{b}" for b in BENCHMARKS] + ["benchmarks"])
+def test_every_benchmark_documents_json_in_its_help(module):
+    result = run_module(module, "--help")
+    assert result.returncode == 0, result.stderr
+    assert "--json FILE" in result.stdout
+
+
+@pytest.mark.parametrize("args", [("benchmarks.bench_sim", "--repeats", "0"),
+                                  ("benchmarks.bench_emulator", "--seconds", "0"),
+                                  ("benchmarks.bench_inference", "--frames", "-5"),
+                                  ("benchmarks.bench_recording_io", "--json",
+                                   "/no/such/folder/out.json")])
+def test_bad_arguments_are_refused_before_anything_runs(args):
+    result = run_module(*args)
+    assert result.returncode == 2
+    assert result.stdout == "" and "error: argument" in result.stderr
