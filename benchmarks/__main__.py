@@ -19,7 +19,8 @@ from typing import Any
 from benchmarks.report import json_file, write_json
 from exohil.formats.measurement import Limit
 
-BENCHMARKS = ("bench_sim", "bench_recording_io", "bench_inference", "bench_emulator")
+BENCHMARKS = ("bench_sim", "bench_recording_io", "bench_inference", "bench_emulator",
+              "bench_robot")
 
 
 def missed(documents: list[dict[str, Any]]) -> list[str]:

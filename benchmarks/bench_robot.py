@@ -9,21 +9,21 @@ where reachable), and the simulated arm's axis against the human direction (mapp
 servo lag).
 
 Run from the repository root: ``python -m benchmarks.bench_robot [--seconds 30]
-[--start 25] [--gif out/arm.gif]``.
+[--start 25] [--gif out/arm.gif] [--json FILE]``; figures are reported through
+:mod:`benchmarks.report` (no goal is documented, so none is judged).
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import time
 
 import numpy as np
 
-from benchmarks.machine import machine
+from benchmarks.report import parser, positive_float, report
 from exohil.emulators.pacing import sleep_until
-from exohil.formats.mcap_io import read_recording
+from exohil.formats.measurement import Measurement
+from exohil.formats.recording_reader import read_recording
 from exohil.harness.paths import FIXTURES_DIR
 from exohil.harness.robot_mujoco import MujocoNao
 from exohil.harness.robot_render import (
@@ -32,7 +32,7 @@ from exohil.harness.robot_render import (
     write_arm_animation,
 )
 from exohil.harness.robot_stats import LogHistogram
-from exohil.harness.teleop import TeleopSink
+from exohil.harness.teleop import SHOULDER_ANGLES, TeleopSink
 
 RATE_HZ = 250.0
 
@@ -48,14 +48,20 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return math.degrees(math.atan2(float(np.linalg.norm(np.cross(a, b))), float(a @ b)))
 
 
+def _histogram(name: str, values: dict, unit: str, note: str = "") -> list[Measurement]:
+    """p50/p99/max of a robot histogram summary (``{"p50", "p99", "max"}``) as measurements."""
+    return [Measurement.judge(f"{name}.{stat}", math.nan if values.get(stat) is None
+                              else float(values[stat]), unit, note=note)
+            for stat in ("p50", "p99", "max")]
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=30.0)
-    parser.add_argument("--start", type=float, default=25.0,
-                        help="offset into the fixture, s (25: abduction, then the rest)")
-    parser.add_argument("--gif", default=None, help="also write an animation (5 frames/s)")
-    args = parser.parse_args()
-    print(f"machine: {machine()}")
+    ap = parser(__doc__)
+    ap.add_argument("--seconds", type=positive_float, default=30.0, help="replay length, s")
+    ap.add_argument("--start", type=float, default=25.0,
+                    help="offset into the fixture, s (25: abduction, then the rest)")
+    ap.add_argument("--gif", default=None, help="also write an animation (5 frames/s)")
+    args = ap.parse_args()
     stream = read_recording(FIXTURES_DIR / "paper_protocol.mcap").mocap["shoulder"]
     t = np.arange(args.start, args.start + args.seconds, 1.0 / RATE_HZ)
     theta = np.interp(t, stream.t, stream.column("elv_angle"))
@@ -63,24 +69,33 @@ def main() -> None:
     mapping_deg, arm_deg = LogHistogram(1e-9, 360.0), LogHistogram(1e-9, 360.0)
     samples = []
     with MujocoNao() as nao:
-        sink = TeleopSink(nao)
+        sink = TeleopSink([nao], SHOULDER_ANGLES)
         start = time.perf_counter()
         for k in range(len(t)):
             sleep_until(start + k / RATE_HZ)
-            joints = sink.accept(float(t[k]), float(theta[k]), float(phi[k]))
+            command = sink.command_for(float(theta[k]), float(phi[k]))
+            nao.command(float(t[k]), command.joints, command.clamped)
             human = human_upper_arm_direction(theta[k], phi[k])
-            mapping_deg.add(angle_deg(commanded_axis(joints), human))
+            mapping_deg.add(angle_deg(commanded_axis(command.joints), human))
             arm_deg.add(angle_deg(nao.upper_arm_axis("axis"), human))
             if args.gif and k % int(RATE_HZ / 5) == 0:
                 samples.append(sample_robot(nao, float(t[k]), theta[k], phi[k]))
         summary = nao.summary()
     print(f"replayed {len(t)} commands at {RATE_HZ:.0f} Hz, fixture t = {args.start:.1f}.."
           f"{args.start + args.seconds:.1f} s")
-    print(json.dumps(summary, indent=1))
-    for label, hist in (("commanded axis vs human arm", mapping_deg),
-                        ("simulated axis vs human arm", arm_deg)):
-        s = hist.summary()
-        print(f"{label:<30} p50 {s['p50']:8.4f}°  p99 {s['p99']:8.4f}°  max {s['max']:8.4f}°")
+    measurements = [
+        Measurement.judge("physics.rate", summary["physics_rate_hz"] or math.nan, "Hz",
+                          note=f"target {summary['target_rate_hz']} Hz; "
+                               f"{summary['late_steps']} late, {summary['skipped_steps']} "
+                               "skipped steps"),
+        Measurement.judge("commands", summary["commands"], "count"),
+        *_histogram("command_to_stepped", summary["command_delay_ms"], "ms"),
+        *_histogram("tracking_error", summary["tracking_error_deg"], "deg",
+                    "largest |reached - commanded| joint"),
+        *_histogram("axis.commanded_vs_human", mapping_deg.summary(), "deg", "the mapping"),
+        *_histogram("axis.simulated_vs_human", arm_deg.summary(), "deg", "mapping + servo"),
+    ]
+    report("bench_robot", measurements, args.json)
     if args.gif:
         print(f"wrote {write_arm_animation(samples, args.gif, fps=5.0)}")
 
