@@ -9,7 +9,7 @@ reference and the baseline, and computes each expensive piece once, on first use
   own rate, through the whole pipeline with teleoperation (latency, link, teleop checks).
 
 Each ``*_measurements`` method returns the measurements of one check with the profile's
-limits; the pytest checks (``test_checks.py``) record and judge them.
+limits; the pytest check (``test_checks.py``) records and judges them.
 """
 
 from __future__ import annotations
@@ -213,7 +213,7 @@ class ConformanceRun:
     def teleop_measurements(self) -> list[Measurement]:
         return teleop_measurements(self.session, self.profile.limits("teleop"))
 
-    def conversion_measurements(self) -> list[Measurement]:
+    def conversions_measurements(self) -> list[Measurement]:
         """How many conversion properties failed, how many examples ran, the largest error."""
         limits = self.profile.limits("conversions")
         results = run_properties(self.profile.setting("conversion_examples"),

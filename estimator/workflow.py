@@ -10,7 +10,6 @@ Splits (documented in docs/estimator.md):
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ from exohil.estimator.evaluation import evaluate
 from exohil.estimator.splits import Split, cut_at_segments, time_block_split, trial_split
 from exohil.estimator.trained import TrainedEstimator
 from exohil.estimator.training import TrainConfig, train
+from exohil.formats.digest import sha256_file
 from exohil.formats.recording import Recording
 
 #: Default temporal-encoder width per model kind (LSTM hidden size; CNN channels).
@@ -52,15 +52,6 @@ class LoadedData:
             out += recording_blocks(self.recordings[i], self.target,
                                     offset_frames=offset_frames, source=self.paths[i].name)
         return cut_at_segments(out)
-
-
-def sha256_file(path: Path) -> str:
-    """Hex sha256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def load_recordings(

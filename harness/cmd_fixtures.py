@@ -31,6 +31,7 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
     With --check nothing under fixtures/ changes: the fixtures are rebuilt in a temporary
     folder and their hashes compared with the recorded ones.
     """
+    from exohil.formats.digest import sha256_file
     from exohil.formats.opensim_mot import MotError
     from exohil.harness.fixture_specs import (
         FIXTURES,
@@ -39,7 +40,6 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
         build_fixture,
         format_sums,
         parse_sums,
-        sha256_file,
     )
 
     if not shoulder_ik_dir.is_dir():

@@ -8,7 +8,6 @@ so a rebuild on the same platform is bit-identical. ``exohil fixtures build`` re
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -79,11 +78,6 @@ FIXTURES: tuple[FixtureSpec, ...] = (
         needs_shoulder_ik=True,
     ),
 )
-
-
-def sha256_file(path: Path) -> str:
-    """Hex sha256 of a file's bytes."""
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def build_fixture(spec: FixtureSpec, out_dir: Path, shoulder_ik_dir: Path) -> Path:

@@ -15,7 +15,6 @@ define a figure differently:
 
 from __future__ import annotations
 
-import hashlib
 import threading
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
@@ -30,6 +29,7 @@ from exohil.estimator.evaluation import accuracy_measurements
 from exohil.estimator.inference import StreamingEstimator, default_backend
 from exohil.estimator.trained import TrainedEstimator
 from exohil.formats.alignment import angles_at
+from exohil.formats.digest import sha256_file
 from exohil.formats.errors import RecordingError
 from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.formats.recording import Recording
@@ -55,15 +55,6 @@ _LOST_KINDS = frozenset({"drop", "corrupt", "truncate", "disconnect", "not_read"
 
 class SessionError(Exception):
     """A session that cannot start or produced nothing; the message says why (one line)."""
-
-
-def sha256_file(path: Path) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 @dataclass

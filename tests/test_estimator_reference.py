@@ -11,7 +11,8 @@ import pytest
 
 from exohil.estimator.checkpoint import load_checkpoint
 from exohil.estimator.evaluation import evaluate
-from exohil.estimator.workflow import load_recordings, make_split, sha256_file
+from exohil.estimator.workflow import load_recordings, make_split
+from exohil.formats.digest import sha256_file
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "fixtures" / "paper_protocol.mcap"
