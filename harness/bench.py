@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs
 
+from exohil.formats.recording import Recording
 from exohil.harness.acquisition import SerialFrameSource
 from exohil.harness.pipeline import DeviceClock
 
@@ -171,12 +172,14 @@ class OpenDevice:
 
 @contextmanager
 def open_device(device: Device, expected_sensors: int | None, *, realtime: bool = False,
-                duration_s: float | None = None) -> Iterator[OpenDevice]:
+                duration_s: float | None = None,
+                recording: Recording | None = None) -> Iterator[OpenDevice]:
     """Start ``device`` and an acquisition thread on it; stops both on exit.
 
     The emulator runs in this process (its recording is read here) and streams ``duration_s``
     of device time (default: the whole recording); a serial device is opened by URL and
-    reconnected on loss by the acquisition thread.
+    reconnected on loss by the acquisition thread. ``recording`` is the emulator's recording
+    when the caller has already read it.
     """
     if isinstance(device, SerialDevice):
         with SerialFrameSource(device.url, expected_sensors=expected_sensors,
@@ -186,7 +189,8 @@ def open_device(device: Device, expected_sensors: int | None, *, realtime: bool 
     from exohil.emulators.arduino import ArduinoEmulator
     from exohil.formats.recording_reader import read_recording
 
-    recording = read_recording(device.recording)
+    if recording is None:
+        recording = read_recording(device.recording)
     with ArduinoEmulator.from_recording(recording, faults=device.faults, seed=device.seed,
                                         realtime=realtime, duration_s=duration_s) as emulator:
         with SerialFrameSource(emulator.port, expected_sensors=expected_sensors,

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from exohil.emulators.faults import LOSING_KINDS
 from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
 from exohil.estimator.evaluation import accuracy_measurements
 from exohil.estimator.inference import StreamingEstimator, default_backend
@@ -49,8 +50,6 @@ LATENCY_INTERVALS = {
     "latency.queue_and_estimate": ("decoded", "estimated"),
     "latency.command": ("estimated", "commanded"),
 }
-#: Kinds of emulator fault-log records that are frames the host can never receive intact.
-_LOST_KINDS = frozenset({"drop", "corrupt", "truncate", "disconnect", "not_read"})
 
 
 class SessionError(Exception):
@@ -173,20 +172,21 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     inputs = [p for p in (config.model, ref_path) if p is not None]
     if config.record is not None and any(_same_file(config.record, p) for p in inputs):
         raise SessionError(f"refusing to record onto an input: {config.record}")
-    robots = build_robots(config.robots) if _is_shoulder(est) else []
+    robots: list[Any] = []
     sinks: list[Sink] = []
-    if robots:
-        sinks.append(TeleopSink(robots, est.target.angles))
-    sinks.extend(extra_sinks)
-    if config.record is not None:
-        from exohil.harness.recorder import RecorderSink
+    try:  # every sink built is closed below, whatever fails after it
+        robots = build_robots(config.robots) if _is_shoulder(est) else []
+        if robots:
+            sinks.append(TeleopSink(robots, est.target.angles))
+        sinks.extend(extra_sinks)
+        if config.record is not None:
+            from exohil.harness.recorder import RecorderSink
 
-        sinks.append(RecorderSink(config.record, est.sensor_names, metadata={
-            "generator": "exohil", "source": config.device.describe(),
-            "model_sha256": model.sha256}))
-    try:
+            sinks.append(RecorderSink(config.record, est.sensor_names, metadata={
+                "generator": "exohil", "source": config.device.describe(),
+                "model_sha256": model.sha256}))
         with open_device(config.device, len(est.sensor_names), realtime=realtime,
-                         duration_s=seconds) as opened:
+                         duration_s=seconds, recording=reference) as opened:
             pipeline = Pipeline(opened.source, model.engine(), sinks, opened.device_clock)
             if opened.emulator is not None:
                 limit = None if seconds is None else seconds + 30.0
@@ -253,8 +253,8 @@ def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list
 def link_measurements(result: SessionResult, limits: Limits | None = None) -> list[Measurement]:
     """Host link counters and, for the emulator, their reconciliation with its fault log:
 
-    * ``link.lost_on_host``: frames the device delivered that the host lost (buffer overflow,
-      or a gap the device did not log), must be 0;
+    * ``link.lost_on_host``: frames the device handed over that never reached the pipeline
+      (buffer overflow, or a gap the device did not log), must be 0;
     * ``link.bad_frames_delivered``: frames whose values differ from what the device sent for
       that sequence number (a CRC that let corruption through), must be 0;
     * ``link.dropped_unexplained``: host-counted drops minus the device's logged losses
@@ -281,14 +281,14 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
             out.append(Measurement.skipped(name, "count", why, limits.get(name)))
         return out
     first, last = int(run.seq[0]), int(run.seq[-1])
-    lost = {r.seq for r in result.fault_log if r.kind in _LOST_KINDS and first <= r.seq <= last}
+    lost = {r.seq for r in result.fault_log if r.kind in LOSING_KINDS and first <= r.seq <= last}
     received = set(run.seq.tolist())
     expected = set(range(first, last + 1)) - lost
     wire = result.wire_values_mm
     rows = (run.seq - result.emulator_seq0) % wire.shape[0]
     bad = int(np.count_nonzero(np.any(np.abs(run.values - wire[rows]) > 1e-9, axis=1)))
     out += [
-        m("link.lost_on_host", len(expected - received) + link.overflow,
+        m("link.lost_on_host", len(expected - received),
           note=f"{len(expected)} frames the device delivered in seq {first}..{last}"),
         m("link.bad_frames_delivered", bad, note="values differ from what the device sent"),
         m("link.dropped_unexplained", link.dropped - len(lost),
