@@ -20,7 +20,7 @@ from benchmarks.report import json_file, write_json
 from exohil.formats.measurement import Limit
 
 BENCHMARKS = ("bench_sim", "bench_recording_io", "bench_inference", "bench_emulator",
-              "bench_robot")
+              "bench_robot", "bench_pipeline")
 
 
 def missed(documents: list[dict[str, Any]]) -> list[str]:

@@ -10,6 +10,7 @@ fill in or override it. Example (every key but ``model`` is optional)::
     emulator = "fixtures/paper_protocol_heldout.mcap"
     faults = "drop:rate=0.002;corrupt:rate=0.001"
     seed = 0
+    loop = false                # replay cyclically
     # url = "/dev/ttyACM0"        # ... or any pyserial URL of a real device
     # reference = "trial.mcap"    # ground truth for a real device (aligned by device time)
 
@@ -52,11 +53,13 @@ class BenchError(ValueError):
 
 @dataclass(frozen=True)
 class EmulatorDevice:
-    """The software Arduino on a pty, replaying ``recording`` with seeded ``faults``."""
+    """The software Arduino on a pty, replaying ``recording`` with seeded ``faults``
+    (cyclically with ``loop``: ground truth then ends with the recording's first pass)."""
 
     recording: Path
     faults: str | None = None
     seed: int = 0
+    loop: bool = False
 
     def describe(self) -> str:
         faults = f" with faults {self.faults!r}" if self.faults else ""
@@ -96,8 +99,8 @@ class BenchConfig:
 
 
 def parse_target(text: str) -> Device:
-    """``emulator:RECORDING[?faults=SPEC&seed=N]`` → :class:`EmulatorDevice`; anything else is
-    a pyserial URL or device path → :class:`SerialDevice`."""
+    """``emulator:RECORDING[?faults=SPEC&seed=N&loop=1]`` → :class:`EmulatorDevice`; anything
+    else is a pyserial URL or device path → :class:`SerialDevice`."""
     if not text:
         raise BenchError("empty target")
     if not text.startswith("emulator:"):
@@ -106,17 +109,21 @@ def parse_target(text: str) -> Device:
     if not path:
         raise BenchError("emulator target without a recording: emulator:RECORDING[?faults=...]")
     params = {k: v[-1] for k, v in parse_qs(query, keep_blank_values=True).items()}
-    unknown = sorted(set(params) - {"faults", "seed"})
+    unknown = sorted(set(params) - {"faults", "seed", "loop"})
     if unknown:
-        raise BenchError(f"unknown emulator option(s) {', '.join(unknown)}; allowed: faults, seed")
+        raise BenchError(f"unknown emulator option(s) {', '.join(unknown)}; "
+                         "allowed: faults, seed, loop")
+    if params.get("loop", "0") not in ("0", "1"):
+        raise BenchError(f"loop must be 0 or 1, got {params['loop']!r}")
     try:
         seed = int(params.get("seed", "0"))
     except ValueError:
         raise BenchError(f"seed must be an integer, got {params['seed']!r}") from None
-    return EmulatorDevice(Path(path), params.get("faults") or None, seed)
+    return EmulatorDevice(Path(path), params.get("faults") or None, seed,
+                          params.get("loop") == "1")
 
 
-_SECTIONS = {"device": {"emulator", "faults", "seed", "url", "reference"},
+_SECTIONS = {"device": {"emulator", "faults", "seed", "loop", "url", "reference"},
              "sensors": {"names", "rate_hz"}, "model": {"checkpoint", "backend"},
              "teleop": {"robots"}, "record": {"path"}}
 
@@ -143,7 +150,8 @@ def load_bench(path: Path) -> BenchConfig:
     if "emulator" in dev and "url" in dev:
         raise BenchError(f"{path}: [device] names both an emulator and a url; pick one")
     if "emulator" in dev:
-        device = EmulatorDevice(where / dev["emulator"], dev.get("faults"), int(dev.get("seed", 0)))
+        device = EmulatorDevice(where / dev["emulator"], dev.get("faults"),
+                                int(dev.get("seed", 0)), bool(dev.get("loop", False)))
     elif "url" in dev:
         device = SerialDevice(str(dev["url"]), rel(dev.get("reference")))
     sensors = data.get("sensors", {})
@@ -192,7 +200,8 @@ def open_device(device: Device, expected_sensors: int | None, *, realtime: bool 
     if recording is None:
         recording = read_recording(device.recording)
     with ArduinoEmulator.from_recording(recording, faults=device.faults, seed=device.seed,
-                                        realtime=realtime, duration_s=duration_s) as emulator:
+                                        loop=device.loop, realtime=realtime,
+                                        duration_s=duration_s) as emulator:
         with SerialFrameSource(emulator.port, expected_sensors=expected_sensors,
                                realtime=realtime) as source:
             yield OpenDevice(source, emulator.write_time_ns, emulator)
