@@ -24,6 +24,7 @@ from exohil.formats.errors import RecordingError
 from exohil.formats.recording import MOCAP_PREFIX, SENSOR_TOPIC, Recording
 from exohil.formats.recording_messages import decode_angles, decode_sensors
 from exohil.formats.recording_metadata import (
+    METADATA_NAME,
     merged_metadata,
     rate,
     segments,
@@ -70,6 +71,9 @@ class RecordingScan:
     recording: Recording
     channels: list[ChannelSummary]
     notes: list[str] = field(default_factory=list)
+    #: bytes after the last complete record of a file that was never closed (no footer), which
+    #: are lost; None for a complete file
+    lost_bytes: int | None = None
 
 
 def read_recording(path: str | Path) -> Recording:
@@ -88,6 +92,14 @@ def scan_recording(path: str | Path) -> RecordingScan:
         raise RecordingError(f"{path}: not an MCAP file (missing MCAP magic bytes)")
     raw = _read_records(path, data)
     notes: list[str] = []
+    if raw.cut_at is not None:
+        if not any(record.name == METADATA_NAME for record in raw.metadata):
+            raise RecordingError(f"{path}: truncated MCAP file (cut at byte {len(data)}, last "
+                                 f"complete record at {raw.cut_at}) before any "
+                                 f"'{METADATA_NAME}' metadata; nothing to recover")
+        notes.append(f"cut short: a recording that was never closed (no footer); "
+                     f"{len(data) - raw.cut_at} bytes after the last complete record at byte "
+                     f"{raw.cut_at} are lost; `exohil record recover` writes a clean copy")
     metadata = merged_metadata(path, raw.metadata, notes)
     channels: list[ChannelSummary] = []
     sensor_messages: list[tuple[int, bytes]] = []
@@ -151,7 +163,8 @@ def scan_recording(path: str | Path) -> RecordingScan:
         segments=segments(path, metadata),
         metadata=metadata,
     )
-    return RecordingScan(recording=recording, channels=channels, notes=notes)
+    lost = None if raw.cut_at is None else len(data) - raw.cut_at
+    return RecordingScan(recording=recording, channels=channels, notes=notes, lost_bytes=lost)
 
 
 @dataclass
@@ -160,11 +173,16 @@ class _RawFile:
     channels: dict[int, Channel] = field(default_factory=dict)
     messages: dict[int, list[tuple[int, bytes]]] = field(default_factory=dict)
     metadata: list[Metadata] = field(default_factory=list)
+    cut_at: int | None = None  #: byte offset where a cut-short file stops parsing
 
 
 def _read_records(path: Path, data: bytes) -> _RawFile:
+    """Every record of ``data``; a file that ends inside a record (a recording killed before
+    it was closed) keeps what came before, with ``cut_at`` set."""
     raw = _RawFile()
-    reader = StreamReader(io.BytesIO(data), validate_crcs=True)
+    stream = io.BytesIO(data)
+    reader = StreamReader(stream, validate_crcs=True)
+    complete = 0
     try:
         for record in reader.records:
             if isinstance(record, Message):
@@ -177,9 +195,10 @@ def _read_records(path: Path, data: bytes) -> _RawFile:
                 raw.schemas.setdefault(record.id, record)
             elif isinstance(record, Metadata):
                 raw.metadata.append(record)
-    except (EndOfFile, struct.error) as exc:
+            complete = stream.tell()
+    except (EndOfFile, struct.error):
         # A short read: the file stops inside a record (or a length field is corrupt).
-        raise RecordingError(f"{path}: truncated MCAP file (ends inside a record)") from exc
+        raw.cut_at = complete
     except Exception as exc:
         # Corrupt bytes surface as CRC, decompression (lz4, zstandard), UTF-8 and struct errors
         # from several libraries with no common base class; all mean the same to the caller.

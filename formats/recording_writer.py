@@ -6,10 +6,17 @@ all streams in time order. Output is deterministic: no wall-clock times, fixed c
 compression, canonical JSON, sensor values and angles rounded to 1e-4 (mm, deg) and times to
 1e-6 s (:mod:`exohil.formats.recording_messages`), the metadata record written at close
 (:mod:`exohil.formats.recording_metadata`).
+
+A *durable* :class:`RecordingWriter` (live recordings) trades that determinism for safety: the
+metadata record goes first, and at least every :data:`DURABLE_FLUSH_S` seconds the chunk in
+progress is written out and the file synced to disk, so a killed process or a power cut loses
+at most that last second; the reader then reads the file and notes that it was cut short.
 """
 
 from __future__ import annotations
 
+import os
+import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
@@ -45,6 +52,8 @@ from exohil.formats.schemas import (
 )
 
 CHUNK_SIZE = 1 << 20
+#: A durable writer closes a chunk and syncs the file at least this often (wall clock, s).
+DURABLE_FLUSH_S = 1.0
 WRITER_LIBRARY = "exohil recording writer, format v1"
 Compression = Literal["none", "lz4", "zstd"]
 _COMPRESSION = {
@@ -72,6 +81,8 @@ class RecordingWriter:
         compression: chunk compression, "lz4" (default), "zstd" or "none".
         decimals: decimal places kept for sensor values and angles (default 4: 1e-4 mm / deg;
             importers of finer data may keep more).
+        durable: write the metadata first and close a chunk and sync the file at least every
+            :data:`DURABLE_FLUSH_S` s, so a killed writer leaves a readable file (module doc).
     """
 
     def __init__(
@@ -86,8 +97,10 @@ class RecordingWriter:
         metadata: Mapping[str, str] | None = None,
         compression: Compression = "lz4",
         decimals: int = VALUE_DECIMALS,
+        durable: bool = False,
     ) -> None:
         self.path = Path(path)
+        self.durable = durable
         self.decimals = decimals
         self.sensor_names = tuple(sensor_names)
         self.mocap_joints = {joint: tuple(names) for joint, names in (mocap_joints or {}).items()}
@@ -119,6 +132,16 @@ class RecordingWriter:
             for joint, names in self.mocap_joints.items()
         }
         self._closed = False
+        self._next_sync = time.monotonic() + DURABLE_FLUSH_S
+        if durable:
+            self._writer.add_metadata(METADATA_NAME, dict(sorted(self._metadata.items())))
+            self._sync()
+
+    def _sync(self) -> None:
+        """Write out the chunk in progress and push the file to disk."""
+        self._writer.flush()
+        os.fsync(self._file.fileno())
+        self._next_sync = time.monotonic() + DURABLE_FLUSH_S
 
     def _register(self, topic: str, schema_name: str, schema: dict[str, Any]) -> int:
         schema_id = self._writer.register_schema(
@@ -220,6 +243,8 @@ class RecordingWriter:
             sequence=self._counts[channel] & 0xFFFFFFFF,
         )
         self._counts[channel] += 1
+        if self.durable and time.monotonic() >= self._next_sync:
+            self._sync()
 
     def _check_open(self) -> None:
         if self._closed:
@@ -234,8 +259,12 @@ class RecordingWriter:
             metadata = dict(self._metadata)
             if self._segments:
                 metadata["segments"] = segments_text(self._segments)
-            self._writer.add_metadata(METADATA_NAME, dict(sorted(metadata.items())))
+            if not self.durable or self._segments:  # a durable file has it already
+                self._writer.add_metadata(METADATA_NAME, dict(sorted(metadata.items())))
             self._writer.finish()
+            if self.durable:
+                self._file.flush()
+                os.fsync(self._file.fileno())
         finally:
             self._file.close()
 

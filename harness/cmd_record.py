@@ -1,4 +1,5 @@
-"""``exohil record info``: what is inside a recording (format v1 MCAP) file."""
+"""``exohil record info``: what is inside a recording (format v1 MCAP) file;
+``exohil record recover``: a clean, indexed copy of a recording that was never closed."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ from pathlib import Path
 from typing import Any
 
 import click
+
+from exohil.harness.cli_types import OutputFile
 
 
 @click.group("record")
@@ -134,6 +137,43 @@ def _as_text(summary: dict[str, Any]) -> str:
     for note in summary["notes"]:
         lines.append(f"note      {note}")
     return "\n".join(lines)
+
+
+@record_group.command("recover")
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", "out", type=OutputFile(), required=True,
+              help="The clean copy (must not be FILE).")
+def recover_command(file: Path, out: Path) -> None:
+    """Rewrite FILE, e.g. a recording left as NAME.mcap.partial by a killed run, as a clean,
+    indexed recording OUT, and say what was lost (what followed the last complete record:
+    at most the last second of a durable recording)."""
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.recording_reader import scan_recording
+    from exohil.formats.recording_writer import write_recording
+
+    if out.resolve() == file.resolve():
+        raise click.ClickException(f"refusing to overwrite the input {file}; choose another --out")
+    try:
+        scan = scan_recording(file)
+    except RecordingError as exc:
+        raise click.ClickException(str(exc)) from exc
+    rec = scan.recording
+    tmp = out.with_name(f".{out.name}.tmp")
+    try:
+        write_recording(tmp, rec)
+        tmp.replace(out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    span = (f", {rec.sensors.t[0]:.3f} → {rec.sensors.t[-1]:.3f} s" if len(rec.sensors)
+            else "")
+    mocap = sum(len(stream) for stream in rec.mocap.values())
+    click.echo(f"recovered {len(rec.sensors)} sensor frames{span} and {mocap} mocap samples "
+               f"into {out}")
+    if scan.lost_bytes is None:
+        click.echo("lost: nothing (the file was complete)")
+    else:
+        click.echo(f"lost: the {scan.lost_bytes} bytes after the last complete record (the file "
+                   "was never closed; a durable recording loses at most its last second)")
 
 
 COMMANDS: list[click.Command] = [record_group]

@@ -3,6 +3,12 @@
 The MCAP writer compresses a 1 MiB chunk now and then (tens of ms), far longer than the 4 ms
 frame period, so the pipeline only enqueues frames and a background thread writes them.
 Nothing is dropped: the queue is unbounded, and :meth:`close` drains it before closing the file.
+
+Nothing is lost either: the file is written as ``<path>.partial`` by a durable writer (metadata
+first, a chunk closed and synced to disk at least every second) and renamed to ``path`` when
+closed. A killed run leaves ``<path>.partial``, which the reader reads (noting it was cut
+short, at most the last second lost) and ``exohil record recover`` turns into a clean file;
+an existing file at ``path`` is only replaced by a complete recording.
 """
 
 from __future__ import annotations
@@ -18,13 +24,21 @@ from exohil.harness.pipeline import Sample
 _STOP = object()
 
 
+def partial_path(path: Path) -> Path:
+    """Where a recording to ``path`` is written until it is complete."""
+    return path.with_name(path.name + ".partial")
+
+
 class RecorderSink:
     """A pipeline sink that records the sensor frames the host received to ``path``."""
 
     def __init__(self, path: str | Path, sensor_names: Sequence[str], *,
                  sensor_units: str = "mm", metadata: Mapping[str, str] | None = None) -> None:
-        self._writer = RecordingWriter(path, sensor_names, sensor_units=sensor_units,
-                                       metadata=metadata)
+        self.path = Path(path)
+        self.partial_path = partial_path(self.path)
+        self._writer = RecordingWriter(self.partial_path, sensor_names,
+                                       sensor_units=sensor_units, metadata=metadata,
+                                       durable=True)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self.frames_written = 0
         self.error: BaseException | None = None
@@ -48,12 +62,14 @@ class RecorderSink:
                 self.error = err
 
     def close(self) -> None:
-        """Write everything queued, close the file; re-raises a write error."""
+        """Write everything queued, close the file and rename it into place; re-raises a
+        write error (the ``.partial`` file then stays, readable up to the error)."""
         self._queue.put(_STOP)
         self._thread.join()
         self._writer.close()
         if self.error is not None:
             raise self.error
+        self.partial_path.replace(self.path)
 
     def __enter__(self) -> RecorderSink:
         return self

@@ -153,9 +153,9 @@ def write_bad_file(path: Path, case: str) -> Path:
         path.write_text("seq,t,F\n0,0.0,1.0\n")
     elif case == "empty":
         path.write_bytes(b"")
-    elif case == "truncated":
+    elif case == "truncated":  # cut before its metadata record: nothing to recover
         write_raw_recording(path, duration_s=2.0)
-        path.write_bytes(path.read_bytes()[:5000])
+        path.write_bytes(path.read_bytes()[:40])
     else:
         bodies = {
             "bad_json": [frame(0), b"{seq: 1"],

@@ -303,3 +303,18 @@ def test_foreign_messages_follow_the_canonical_schemas() -> None:
                 validators[channel.topic].validate(json.loads(message.data))
             checked += 1
     assert checked == 14962 + 7200
+
+
+def test_a_file_cut_short_after_its_metadata_reads_what_is_complete(tmp_path: Path) -> None:
+    # another lab's writer, killed mid-file: the reader keeps every complete record and says so
+    path = tmp_path / "cut.mcap"
+    write_raw_recording(path, duration_s=4.0)
+    full = scan_recording(path)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    cut = scan_recording(path)
+    assert full.lost_bytes is None and cut.lost_bytes is not None and cut.lost_bytes > 0
+    assert any(note.startswith("cut short") for note in cut.notes)
+    kept = len(cut.recording.sensors)
+    assert 0 < kept < len(full.recording.sensors)
+    np.testing.assert_array_equal(cut.recording.sensors.seq, full.recording.sensors.seq[:kept])

@@ -1,0 +1,98 @@
+"""Live recordings survive their writer: a killed process leaves a readable file that says it
+was cut short, losing at most the last second, and `exohil record recover` makes it clean."""
+
+import multiprocessing as mp
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from exohil.formats.recording_reader import read_recording, scan_recording
+from exohil.formats.recording_writer import DURABLE_FLUSH_S, RecordingWriter
+from exohil.harness.cli import main
+
+RATE_HZ = 250.0
+SENSORS = ("F", "SF", "SR", "R")
+
+
+def _write_then_die(path: str, frames: int) -> None:
+    writer = RecordingWriter(path, SENSORS, durable=True, metadata={"generator": "test"})
+    start = time.monotonic()
+    for k in range(frames):
+        while time.monotonic() < start + k / RATE_HZ:  # a 250 Hz device
+            time.sleep(0.0005)
+        writer.add_sensor_frame(k, k / RATE_HZ, [100.0 + k, 200.0, 300.0, 400.0])
+    os._exit(9)  # no close(): as if killed
+
+
+def test_a_killed_durable_writer_loses_at_most_its_last_second(tmp_path):
+    path = tmp_path / "killed.mcap"
+    frames = int(3 * RATE_HZ)
+    child = mp.get_context("fork").Process(target=_write_then_die, args=(str(path), frames))
+    child.start()
+    child.join(60)
+    assert child.exitcode == 9
+    scan = scan_recording(path)
+    kept = len(scan.recording.sensors)
+    assert scan.lost_bytes is not None and any(n.startswith("cut short") for n in scan.notes)
+    assert frames - kept <= DURABLE_FLUSH_S * RATE_HZ + 5, f"kept {kept} of {frames}"
+    assert np.array_equal(scan.recording.sensors.seq, np.arange(kept))  # a clean prefix
+    assert scan.recording.metadata["generator"] == "test"
+
+
+def test_a_closed_durable_recording_is_complete(tmp_path):
+    path = tmp_path / "closed.mcap"
+    with RecordingWriter(path, SENSORS, durable=True) as writer:
+        writer.add_sensor_frames(np.arange(500), np.arange(500) / RATE_HZ,
+                                 np.ones((500, 4)))
+    scan = scan_recording(path)
+    assert scan.lost_bytes is None and len(scan.recording.sensors) == 500
+    assert not any("exohil.recording' records" in n for n in scan.notes)  # one metadata record
+
+
+def test_recover_writes_a_clean_copy_and_says_what_was_lost(tmp_path):
+    path = tmp_path / "killed.mcap"
+    child = mp.get_context("fork").Process(target=_write_then_die, args=(str(path), 600))
+    child.start()
+    child.join(60)
+    kept = len(read_recording(path).sensors)
+    out = tmp_path / "clean.mcap"
+    result = CliRunner().invoke(main, ["record", "recover", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert f"recovered {kept} sensor frames" in result.output and "lost: the" in result.output
+    clean = scan_recording(out)
+    assert clean.lost_bytes is None and len(clean.recording.sensors) == kept
+    again = CliRunner().invoke(main, ["record", "recover", str(out), "--out",
+                                      str(tmp_path / "again.mcap")])
+    assert "lost: nothing" in again.output
+    refused = CliRunner().invoke(main, ["record", "recover", str(out), "--out", str(out)])
+    assert refused.exit_code != 0 and "refusing to overwrite the input" in refused.output
+
+
+@pytest.mark.slow
+def test_sigkill_during_a_recorded_demo_leaves_a_readable_recording(tmp_path):
+    target = tmp_path / "k.mcap"
+    partial = tmp_path / "k.mcap.partial"
+    exohil = Path(sys.executable).with_name("exohil")
+    proc = subprocess.Popen([str(exohil), "demo", "--seconds", "60", "--no-faults",
+                             "--record", str(target)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and (not partial.exists()
+                                               or partial.stat().st_size < 50_000):
+            time.sleep(0.2)
+        assert partial.exists(), "the demo never started recording"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(30)
+    assert not target.exists()  # only a complete recording takes the real name
+    scan = scan_recording(partial)
+    assert len(scan.recording.sensors) > 0 and scan.lost_bytes is not None
+    assert scan.recording.metadata.get("generator") == "exohil"
