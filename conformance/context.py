@@ -15,6 +15,7 @@ limits; the pytest check (``test_checks.py``) records and judges them.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -34,6 +35,7 @@ from exohil.harness.bench import (
     SerialDevice,
     parse_target,
 )
+from exohil.harness.frame_source import LinkStats
 from exohil.harness.session import (
     LoadedModel,
     SessionError,
@@ -68,7 +70,7 @@ class ConformanceRun:
 
     def __init__(self, target: str | Device, model: Path, profile: Profile, *,
                  reference: Path | None = None, baseline: Path | None = None,
-                 backend: str = "auto") -> None:
+                 backend: str = "auto", say: Callable[[str], None] = lambda line: None) -> None:
         device = parse_target(target) if isinstance(target, str) else target
         if isinstance(device, EmulatorDevice) and device.faults is None:
             device = EmulatorDevice(device.recording, profile.setting("faults") or None,
@@ -82,6 +84,7 @@ class ConformanceRun:
         self.baseline_path = None if baseline is None else Path(baseline)
         self.backend = backend
         self.config = BenchConfig(device=device, model=self.model_path, backend=backend)
+        self.say = say  #: progress lines for long steps
         self.started = time.time()
 
     # ---- shared pieces ---------------------------------------------------------------
@@ -124,7 +127,11 @@ class ConformanceRun:
         rec = self.reference
         if rec is None:
             raise CheckBlocked("no reference recording (give --reference for a device)")
-        return self._replay(self.model, rec)
+        self.say(f"replaying {len(rec.sensors)} frames of {self.reference_file} through "
+                 f"{self.model_path.name} ...")
+        replay = self._replay(self.model, rec)
+        self.say(f"replayed in {replay.seconds:.1f} s")
+        return replay
 
     @staticmethod
     def _replay(model: LoadedModel, rec: Recording) -> Replay:
@@ -148,8 +155,14 @@ class ConformanceRun:
         seconds = self.profile.setting("realtime_seconds")
         if isinstance(self.device, SerialDevice) and self.reference is not None:
             seconds = None
+        span = "to the end of the reference" if seconds is None else f"{seconds:g} s"
+        self.say(f"real-time segment: {self.device.describe()}, {span} ...")
+
+        def progress(frames: int, link: LinkStats, last: object) -> None:
+            self.say(f"  {frames} frames, dropped {link.dropped}, crc errors {link.crc_errors}")
+
         try:
-            return run_session(self.config, seconds)
+            return run_session(self.config, seconds, progress=progress)
         except SessionError as err:
             raise CheckBlocked(f"the real-time segment could not run: {err}") from None
 

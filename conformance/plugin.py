@@ -15,6 +15,7 @@ writes ``conformance.json``, ``summary.md`` and ``run.mcap`` there (``exohil con
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -88,11 +89,31 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
         run = ConformanceRun(target, Path(model), profile,
                              reference=None if reference is None else Path(reference),
                              baseline=None if baseline is None else Path(baseline),
-                             backend=config.getoption("exohil_backend") or bench.backend)
+                             backend=config.getoption("exohil_backend") or bench.backend,
+                             say=_progress_writer(config))
     except (ProfileError, BenchError) as err:
         raise pytest.UsageError(str(err)) from None
     config.stash[_RUN] = run
     config.stash[_RESULTS] = []
+
+
+def _progress_writer(config: pytest.Config) -> Callable[[str], None]:
+    """Progress lines to the terminal, past pytest's output capture, every 5 s at most for
+    repeated lines."""
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    capture = config.pluginmanager.get_plugin("capturemanager")
+    last = [0.0]
+
+    def say(line: str) -> None:
+        now = time.monotonic()
+        if reporter is None or (line.startswith("  ") and now - last[0] < 5.0):
+            return
+        last[0] = now
+        with capture.global_and_fixture_disabled() if capture else contextlib.nullcontext():
+            reporter.ensure_newline()
+            reporter.write_line(f"[exohil] {line}")
+
+    return say
 
 
 @pytest.fixture(scope="session")
