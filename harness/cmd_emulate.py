@@ -14,7 +14,7 @@ import click
 from exohil.harness.cli_types import OutputFile
 
 
-def _load_values(path: Path):
+def _load_recording(path: Path):
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
 
@@ -27,7 +27,7 @@ def _load_values(path: Path):
                                    "the wire protocol carries mm")
     if len(recording.sensors) == 0:
         raise click.ClickException(f"{path}: the recording has no sensor frames")
-    return recording.sensors.values
+    return recording
 
 
 def _write_fault_log(path: Path, emulator) -> None:
@@ -83,13 +83,14 @@ def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None
     from exohil.emulators.arduino import ArduinoEmulator
     from exohil.emulators.fault_spec import fault_plan
 
-    values = _load_values(recording)
+    source = _load_recording(recording)
     try:
         plan = fault_plan(faults)
     except (ValueError, OSError) as exc:
         raise click.BadParameter(str(exc), param_hint="--faults") from exc
     try:
-        emulator = ArduinoEmulator(values, rate_hz=rate, loop=loop, duration_s=duration,
+        # from the recording: its own sequence numbers and clock, as the in-process emulator
+        emulator = ArduinoEmulator(source, rate_hz=rate, loop=loop, duration_s=duration,
                                    faults=plan, seed=seed, spin_s=spin_ms / 1000.0,
                                    realtime=realtime)
     except ValueError as exc:

@@ -193,13 +193,14 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 run = pipeline.run(duration_s=limit, idle_timeout_s=1.0, stop=stop,
                                    progress=progress)
             else:
-                end, wall = None, seconds
+                end, wall, idle = None, seconds, None
                 if seconds is None and reference is not None and len(reference.sensors):
                     t = reference.sensors.t
-                    end = float(t[-1])
+                    end = float(t[-1]) - 1.5 / reference.sensor_rate_hz  # its last frame
                     wall = float(t[-1] - t[0]) + 60.0  # a device that never gets there
+                    idle = 3.0  # or stops streaming first
                 run = pipeline.run(duration_s=wall, stop=stop, progress=progress,
-                                   until_device_time_s=end)
+                                   until_device_time_s=end, idle_timeout_s=idle)
             emulator = opened.emulator
             fault_log = None if emulator is None else emulator.fault_log
             seq0 = None if emulator is None else emulator.seq0
