@@ -51,6 +51,12 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
     from exohil.harness.session import SessionError, run_session
     from exohil.harness.session_report import session_measurements, summary, summary_lines
 
+    if out_dir is not None:  # refused before any work, like the output files
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise click.ClickException(f"cannot create the report folder {out_dir}: "
+                                       f"{err.strerror or err}") from None
     span = "until Ctrl-C" if seconds is None else f"{seconds:g} s"
     model = config.model.name if config.model else "?"
     device = config.device.describe() if config.device else "?"

@@ -110,14 +110,20 @@ class RobotTraceSink:
         self.period_s = 1.0 / rate_hz
         self._samples: deque[tuple[float, np.ndarray, dict[str, np.ndarray]]] = deque(
             maxlen=max_samples)
-        self._next_s: float | None = None
+        self._anchor_s: float | None = None  # sampling grid: anchor + k · period
+        self._next_s = -math.inf
 
     def accept(self, sample: Sample) -> None:
+        """Read the robot when the frame's device time reaches the next grid point (or went
+        back before the last one: the grid restarts there)."""
         t = sample.frame.device_time_s
-        if self._next_s is not None and self._next_s - self.period_s <= t < self._next_s:
+        if self._anchor_s is None or t < self._next_s - self.period_s:
+            self._anchor_s = t
+        elif t < self._next_s:
             return
         self._samples.append((t, self.robot.upper_arm_axis("axis"), self.robot.body_positions()))
-        self._next_s = t + self.period_s
+        periods = math.floor((t - self._anchor_s) / self.period_s + 1e-9) + 1
+        self._next_s = self._anchor_s + periods * self.period_s
 
     def close(self) -> None:
         """Nothing to release (the teleoperation sink closes the robot)."""
