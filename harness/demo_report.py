@@ -9,7 +9,10 @@
   deg), coloured by the elevation's direction of motion;
 * ``arm.gif``, ``arm_0000k.png``: the simulated NAO (MuJoCo) beside the true human upper arm,
   sampled over the run (only with a MuJoCo robot and a reference);
-* ``run.mcap``: the frames, estimates, commands and stage times (``run_recording``).
+* ``run.mcap``: the frames, estimates, commands and per-frame stage times
+  (``run_recording``); its metadata entry ``latency_ms`` holds the summary's p50/p99/max per
+  stage, ``robot_step`` included (the robot keeps only a histogram of its step times, so
+  they are not per frame).
 
 Every file is written under a temporary name and renamed when complete. Matplotlib draws
 with the Agg backend (files only).
@@ -178,13 +181,17 @@ def summary_markdown(s: dict[str, Any], files: Files) -> str:
     """``summary.md``: the session, every measurement, and where each file is."""
     lines = [f"# exohil session report ({s['finished_at']})", "",
              f"- target: {s['target']}", f"- model: {s['model']} ({s['model_kind']}, "
-             f"{s['backend']})", f"- frames: {s['frames']}", f"- wall time: {s['wall_s']} s",
+             f"{s['backend']})", "- frames: " + ", ".join(f"{k.replace('_', ' ')} {v}"
+                                              for k, v in s["frames"].items()),
+             f"- wall time: {s['wall_s']} s",
              "", "| measurement | value | unit | verdict | note |", "|---|---|---|---|---|"]
     for m in s["measurements"]:
         value = "–" if m["value"] is None else f"{m['value']:.4g}"
         lines.append(f"| {m['name']} | {value} | {m['unit']} | {m['verdict']} | "
                      f"{m['note'].replace('|', '/')} |")
     lines += ["", "## Files", ""] + [f"- {label}: `{path.name}`" for label, path in files]
+    lines += [""] + [f"![{label}]({path.name})" for label, path in files
+                     if path.suffix in (".png", ".gif") and not path.name.startswith("arm_")]
     return "\n".join(lines) + "\n"
 
 
@@ -199,8 +206,8 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     notes: list[str] = []
     files.append(("run recording", _atomic(out_dir / "run.mcap", lambda tmp: write_run_recording(
         tmp, result.run, est.sensor_names, est.target.joint, est.target.angles,
-        {"generator": "exohil", "source": s["target"] or "", "model_sha256": s["model_sha256"]}
-    ))))
+        {"generator": "exohil", "source": s["target"] or "", "model_sha256": s["model_sha256"],
+         "latency_ms": json.dumps(s["latency_ms"], separators=(",", ":"))}))))
     files.append(("angles over time", _save(plot_angles(result), out_dir / "angles.png")))
     files.append(("latency histograms", _save(plot_latency(result), out_dir / "latency.png")))
     hysteresis = plot_session_hysteresis(result)

@@ -34,7 +34,8 @@ def check_report(out: Path, output: str, received: int) -> dict:
 
     from exohil.formats.recording_reader import read_recording
 
-    assert len(read_recording(out / "run.mcap").sensors) == received
+    recording = read_recording(out / "run.mcap")
+    assert len(recording.sensors) == received
     with open(out / "run.mcap", "rb") as fh:
         topics = Counter(channel.topic for _, channel, _ in make_reader(fh).iter_messages())
     assert topics["/timing/stages"] == received and topics["/robot/nao"] == received
@@ -44,6 +45,7 @@ def check_report(out: Path, output: str, received: int) -> dict:
     for stats in s["latency_ms"].values():
         assert set(stats) == {"p50", "p99", "max"}
     assert "| latency.robot_step.p99 |" in (out / "summary.md").read_text()
+    assert json.loads(recording.metadata["latency_ms"]) == s["latency_ms"]
     return s
 
 
