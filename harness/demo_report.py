@@ -28,10 +28,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from exohil.harness.pipeline import STAGES
 from exohil.harness.recording_plots import motion_direction
 from exohil.harness.run_recording import write_run_recording
-from exohil.harness.session import LATENCY_INTERVALS, SessionResult
+from exohil.harness.session import SessionResult, latency_samples
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -91,24 +90,13 @@ def plot_angles(result: SessionResult) -> Figure:
     return figure
 
 
-def _stage_samples(result: SessionResult) -> dict[str, np.ndarray]:
-    run = result.run
-    out = {name.removeprefix("latency."): run.interval_ms(a, b)
-           for name, (a, b) in LATENCY_INTERVALS.items()}
-    out["estimator"] = run.compute_ns / 1e6
-    start = "device_write" if np.any(run.stamps[:, STAGES.index("device_write")] >= 0) \
-        else "host_receive"
-    out["end_to_end"] = run.interval_ms(start, "commanded" if np.any(
-        run.stamps[:, STAGES.index("commanded")] >= 0) else "done")
-    return {k: v for k, v in out.items() if v.size}
-
-
 def plot_latency(result: SessionResult) -> Figure:
     """One histogram per stage interval (ms, log x, one shared range), with p50/p99/max in
     the title; the robot's command → stepped delay from its own histogram when it ran."""
     from matplotlib.ticker import NullFormatter
 
-    stages = _stage_samples(result)
+    stages = {name.removeprefix("latency."): ms for name, (ms, _) in
+              latency_samples(result.run).items() if ms.size}
     robot = next((r.command_delay_ms for r in result.robots
                   if hasattr(r, "command_delay_ms") and r.command_delay_ms.count), None)
     panels = len(stages) + (robot is not None)

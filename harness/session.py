@@ -282,26 +282,34 @@ def _is_shoulder(est: TrainedEstimator) -> bool:
     return est.target.joint == "shoulder" and all(a in est.target.angles for a in SHOULDER_ANGLES)
 
 
-def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list[Measurement]:
-    """p50/p99/max of each stage interval and of end to end, ms. End to end runs from the
-    device's write (when known, else host receive) to the robot command (else the sinks done).
-    ``limits`` maps e.g. ``latency.end_to_end.max`` to its limit."""
-    limits = limits or {}
+def _stat_limits(limits: Limits, name: str) -> dict[str, Limit]:
+    """``limits`` entries ``name.p50`` etc. keyed by statistic."""
+    return {stat: limits[f"{name}.{stat}"] for stat in DISTRIBUTION_STATS
+            if f"{name}.{stat}" in limits}
 
-    def lim(name: str) -> dict[str, Limit]:
-        return {stat: limits[f"{name}.{stat}"] for stat in ("p50", "p99", "max")
-                if f"{name}.{stat}" in limits}
 
-    out: list[Measurement] = []
-    for name, (a, b) in LATENCY_INTERVALS.items():
-        out += distribution(name, run.interval_ms(a, b), "ms", lim(name), f"{a} → {b}")
-    out += distribution("latency.estimator", run.compute_ns / 1e6, "ms",
-                        lim("latency.estimator"), "estimator compute per frame")
+def latency_samples(run: PipelineRun) -> dict[str, tuple[np.ndarray, str]]:
+    """Per-frame samples (ms) of each latency measurement, by name, with what they span: the
+    stage intervals, the estimator's compute, and end to end from the device's write (when
+    known, else host receive) to the robot command (else the sinks done)."""
+    out = {name: (run.interval_ms(a, b), f"{a} → {b}")
+           for name, (a, b) in LATENCY_INTERVALS.items()}
+    out["latency.estimator"] = (run.compute_ns / 1e6, "estimator compute per frame")
     first = run.stamps[:, STAGES.index("device_write")]
     start_stage = "device_write" if np.any(first >= 0) else "host_receive"
     end_stage = "commanded" if np.any(run.stamps[:, STAGES.index("commanded")] >= 0) else "done"
-    out += distribution("latency.end_to_end", run.interval_ms(start_stage, end_stage), "ms",
-                        lim("latency.end_to_end"), f"{start_stage} → {end_stage}")
+    out["latency.end_to_end"] = (run.interval_ms(start_stage, end_stage),
+                                 f"{start_stage} → {end_stage}")
+    return out
+
+
+def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list[Measurement]:
+    """p50/p99/max, ms, of each of :func:`latency_samples`. ``limits`` maps e.g.
+    ``latency.end_to_end.max`` to its limit."""
+    limits = limits or {}
+    out: list[Measurement] = []
+    for name, (ms, note) in latency_samples(run).items():
+        out += distribution(name, ms, "ms", _stat_limits(limits, name), note)
     return out
 
 
@@ -404,10 +412,6 @@ def robot_measurements(result: SessionResult,
     """
     limits = limits or {}
 
-    def lim(name: str) -> dict[str, Limit]:
-        return {stat: limits[f"{name}.{stat}"] for stat in DISTRIBUTION_STATS
-                if f"{name}.{stat}" in limits}
-
     def from_histogram(name: str, stats: Mapping[str, Any] | None, unit: str,
                        note: str) -> list[Measurement]:
         if not stats or not stats.get("count"):
@@ -431,6 +435,6 @@ def robot_measurements(result: SessionResult,
         out += [Measurement.skipped(f"{name}.{s}", "deg", why, limits.get(f"{name}.{s}"))
                 for s in DISTRIBUTION_STATS]
     else:
-        out += distribution(name, trace.axis_error_deg(), "deg", lim(name),
+        out += distribution(name, trace.axis_error_deg(), "deg", _stat_limits(limits, name),
                             "robot upper-arm axis vs true humerus")
     return out
