@@ -2,10 +2,12 @@
 
 Software Arduino on a pty (wire protocol v1, paced at 250 Hz, realistic faults unless
 ``--no-faults``) → acquisition thread (pyserial, COBS, CRC) → streaming ENNet (reference
-model) → MoBL-ARMS → ISB → quaternion → NAO joints. It prints a live status line while it
-runs and, at the end, the link statistics reconciled with the emulator's fault log, per-stage
-latency (p50/p99/max), the accuracy against the fixture's motion capture and the teleoperation
-error. The fixture is one the reference models never saw in training.
+model) → MoBL-ARMS → ISB → quaternion → NAO joints → NAO's arms simulated in MuJoCo. It
+prints a live status line while it runs and, at the end, the link statistics reconciled with
+the emulator's fault log, per-stage latency (p50/p99/max), the accuracy against the fixture's
+motion capture and the teleoperation and robot errors, then writes the report folder
+(``--out``, :mod:`exohil.harness.demo_report`). The fixture is one the reference models never
+saw in training.
 """
 
 from __future__ import annotations
@@ -56,9 +58,9 @@ DEFAULT_ROBOTS = ("mujoco",)
               help="Report folder: summary.json, summary.md, angles/latency/hysteresis PNGs, "
                    "arm.gif and arm_*.png, run.mcap.")
 @click.option("--sink", "sinks", multiple=True,
-              help="Robot the commands go to (repeatable): mujoco (the default), simulated, "
-                   "udp:HOST:PORT, none [default: the bench's robots with --bench, else "
-                   "mujoco].")
+              help="Robot the commands go to (repeatable): mujoco (NAO's arms in MuJoCo), "
+                   "simulated, udp:HOST:PORT or none [default: the bench's robots with "
+                   "--bench, else mujoco].")
 def demo(bench_file: Path | None, recording: Path | None, model: Path | None, seconds: float,
          faults: str | None, no_faults: bool, seed: int | None, backend: str | None,
          record_path: Path | None, json_out: Path | None, out_dir: Path,
