@@ -2,10 +2,12 @@
 
 Software Arduino on a pty (wire protocol v1, paced at 250 Hz, realistic faults unless
 ``--no-faults``) → acquisition thread (pyserial, COBS, CRC) → streaming ENNet (reference
-model) → MoBL-ARMS → ISB → quaternion → NAO joints. It prints a live status line while it
-runs and, at the end, the link statistics reconciled with the emulator's fault log, per-stage
-latency (p50/p99/max), the accuracy against the fixture's motion capture and the teleoperation
-error. The fixture is one the reference models never saw in training.
+model) → MoBL-ARMS → ISB → quaternion → NAO joints → NAO's arms simulated in MuJoCo. It
+prints a live status line while it runs and, at the end, the link statistics reconciled with
+the emulator's fault log, per-stage latency (p50/p99/max), the accuracy against the fixture's
+motion capture and the teleoperation and robot errors, then writes the report folder
+(``--out``, :mod:`exohil.harness.demo_report`). The fixture is one the reference models never
+saw in training.
 """
 
 from __future__ import annotations
@@ -21,6 +23,10 @@ DEFAULT_RECORDING = FIXTURES_DIR / "paper_protocol_heldout.mcap"
 DEFAULT_MODEL = MODELS_DIR / "ennet.npz"
 #: Realistic link faults: rare drops and corrupted frames, a short USB stall every 5 s.
 DEFAULT_FAULTS = "drop:rate=0.002;corrupt:rate=0.001;stall:every_s=5,duration_ms=20"
+#: The report folder.
+DEFAULT_OUT = Path("demo-report")
+#: The robot the demo drives unless told otherwise: NAO's arms in MuJoCo.
+DEFAULT_ROBOTS = ("mujoco",)
 
 
 @click.command("demo")
@@ -46,10 +52,19 @@ DEFAULT_FAULTS = "drop:rate=0.002;corrupt:rate=0.001;stall:every_s=5,duration_ms
 @click.option("--record", "record_path", type=OutputFile(), default=None,
               help="Also write the frames the host received to this recording (MCAP).")
 @click.option("--json", "json_out", type=OutputFile(), default=None,
-              help="Write the summary (summary.json layout, docs/architecture.md) here.")
+              help="Also write the summary (summary.json layout) here.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=DEFAULT_OUT, show_default=True,
+              help="Report folder: summary.json, summary.md, angles/latency/hysteresis PNGs, "
+                   "arm.gif and arm_*.png, run.mcap.")
+@click.option("--sink", "sinks", multiple=True,
+              help="Robot the commands go to (repeatable): mujoco (NAO's arms in MuJoCo), "
+                   "simulated, udp:HOST:PORT or none [default: the bench's robots with "
+                   "--bench, else mujoco].")
 def demo(bench_file: Path | None, recording: Path | None, model: Path | None, seconds: float,
          faults: str | None, no_faults: bool, seed: int | None, backend: str | None,
-         record_path: Path | None, json_out: Path | None) -> None:
+         record_path: Path | None, json_out: Path | None, out_dir: Path,
+         sinks: tuple[str, ...]) -> None:
     """Run the full chain (emulated device → acquisition → ENNet → NAO) and report."""
     from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, load_bench
 
@@ -68,10 +83,12 @@ def demo(bench_file: Path | None, recording: Path | None, model: Path | None, se
     config = config.with_overrides(
         device=EmulatorDevice(recording or base.recording, fault_spec,
                               base.seed if seed is None else seed),
-        model=model or config.model or DEFAULT_MODEL, backend=backend, record=record_path)
+        model=model or config.model or DEFAULT_MODEL, backend=backend, record=record_path,
+        robots=(tuple(s for s in sinks if s != "none") if sinks
+                else None if bench_file else DEFAULT_ROBOTS))
     from exohil.harness.cmd_run import run_and_report
 
-    run_and_report(config, seconds, json_out, title="exohil demo")
+    run_and_report(config, seconds, json_out, title="exohil demo", out_dir=out_dir)
 
 
 COMMANDS = [demo]

@@ -45,11 +45,18 @@ def stop_on_signals() -> Iterator[threading.Event]:
 
 
 def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | None,
-                   title: str) -> dict:
-    """Run one session on ``config``, print the report, write the JSON; returns the summary."""
+                   title: str, out_dir: Path | None = None) -> dict:
+    """Run one session on ``config``, print the report, write the JSON and, with ``out_dir``,
+    the report folder (``demo_report``); returns the summary."""
     from exohil.harness.session import SessionError, run_session
     from exohil.harness.session_report import session_measurements, summary, summary_lines
 
+    if out_dir is not None:  # refused before any work, like the output files
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise click.ClickException(f"cannot create the report folder {out_dir}: "
+                                       f"{err.strerror or err}") from None
     span = "until Ctrl-C" if seconds is None else f"{seconds:g} s"
     model = config.model.name if config.model else "?"
     device = config.device.describe() if config.device else "?"
@@ -70,6 +77,16 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
         lines.append(f"recorded    {config.record}")
     if json_out is not None:
         lines.append(f"summary     {json_out}")
+    if out_dir is not None:
+        from exohil.harness.demo_report import write_report
+
+        try:
+            files, notes = write_report(result, s, out_dir)
+        except OSError as err:
+            raise click.ClickException(f"cannot write the report to {out_dir}: {err}") from None
+        lines += [f"note        {n}" for n in notes]
+        lines.append(f"report      {out_dir}/")
+        lines += [f"            {path}  ({label})" for label, path in files]
     click.echo("\n".join(lines))
     return s
 
@@ -82,7 +99,9 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
                                                        path_type=Path),
               default=None, help="Bench configuration (TOML); URL and options override it.")
 @click.option("--sink", "sinks", multiple=True,
-              help="Robot the commands go to: simulated (default), or none (repeatable).")
+              help="Robot the commands go to (repeatable): simulated (bookkeeping only, the "
+                   "default), mujoco (NAO's arms simulated in MuJoCo), udp:HOST:PORT (one JSON "
+                   "datagram per command, docs/robot.md), or none.")
 @click.option("--reference", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               default=None, help="Ground truth recording of this session (aligned by device "
                                  "time); without it accuracy is not measured.")
@@ -95,9 +114,12 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
               help="Streaming inference backend [auto].")
 @click.option("--json", "json_out", type=OutputFile(), default=None,
               help="Write the summary JSON here.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=None, help="Also write a report folder here (summary, plots, arm "
+                                 "pictures with --sink mujoco, run.mcap).")
 def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str, ...],
         reference: Path | None, record_path: Path | None, duration: float | None,
-        backend: str | None, json_out: Path | None) -> None:
+        backend: str | None, json_out: Path | None, out_dir: Path | None) -> None:
     """Run the pipeline on the device at URL (a serial port such as /dev/ttyACM0, a pty
     printed by `exohil emulate`, or any pyserial URL such as socket://host:port)."""
     from exohil.harness.bench import BenchError, SerialDevice, load_bench
@@ -115,7 +137,7 @@ def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str,
     config = config.with_overrides(
         device=SerialDevice(url, reference), model=model or config.model or
         MODELS_DIR / "ennet.npz", backend=backend, record=record_path, robots=robots)
-    run_and_report(config, duration, json_out, title="exohil run")
+    run_and_report(config, duration, json_out, title="exohil run", out_dir=out_dir)
 
 
 COMMANDS = [run]

@@ -257,6 +257,11 @@ class MujocoNao:
         v = xpos[BODIES.index(f"{p}Elbow")] - xpos[BODIES.index(f"{p}Shoulder")]
         return v / np.linalg.norm(v)
 
+    @property
+    def command_delay_ms(self) -> LogHistogram:
+        """The command → stepped delays so far (ms, see :meth:`summary`); read, do not add."""
+        return self._delay_ms
+
     def summary(self) -> dict:
         """JSON-able counts, the achieved physics rate (Hz, steps over the wall time they
         took), tracking error (degrees, per step: the largest |reached − commanded| of the

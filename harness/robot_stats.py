@@ -60,6 +60,16 @@ class LogHistogram:
             return self.max
         return min(10.0 ** (self._log_low + index / self._scale), self.max)
 
+    def bins(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The non-empty bins: (lower edges, upper edges, counts); the first bin's lower edge
+        is 0 and the last bin's upper edge the maximum."""
+        index = np.flatnonzero(self._counts)
+        upper = 10.0 ** (self._log_low + index / self._scale)
+        lower = np.where(index > 0, 10.0 ** (self._log_low + (index - 1) / self._scale), 0.0)
+        last = index == len(self._counts) - 1
+        upper[last] = self.max
+        return lower, upper, self._counts[index].copy()
+
     def summary(self, digits: int = 4) -> dict[str, float | int | None]:
         """JSON-able ``{"count", "p50", "p99", "max", "mean"}``, rounded; None when empty."""
         def r(v: float | None) -> float | None:

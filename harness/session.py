@@ -10,7 +10,9 @@ define a figure differently:
   its fault log;
 * :func:`accuracy_measurements` (from the estimator layer): against the reference's motion
   capture, aligned by device time;
-* :func:`teleop_measurements`: robot commands against those computed from the true angles.
+* :func:`teleop_measurements`: robot commands against those computed from the true angles;
+* :func:`robot_measurements`: what a simulated robot did: command → stepped delay
+  (``latency.robot_step``), joint tracking and its upper-arm axis against the true humerus.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from __future__ import annotations
 import threading
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,11 +34,12 @@ from exohil.estimator.trained import TrainedEstimator
 from exohil.formats.alignment import angles_at
 from exohil.formats.digest import sha256_file
 from exohil.formats.errors import RecordingError
-from exohil.formats.measurement import Limit, Measurement, distribution
+from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import Recording
 from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, SerialDevice, open_device
 from exohil.harness.frame_source import LinkStats
 from exohil.harness.pipeline import STAGES, Pipeline, PipelineRun, Sink
+from exohil.harness.robot_trace import RobotTrace, RobotTraceSink
 from exohil.harness.teleop import SHOULDER_ANGLES, SimulatedNao, TeleopSink
 from exohil.kinematics import NAO_JOINTS
 
@@ -108,15 +111,43 @@ def truth_at(reference: Recording, est: TrainedEstimator, device_time_s: np.ndar
 
 
 def build_robots(names: Sequence[str]) -> list[Any]:
-    """Robot targets by name: ``simulated`` (bookkeeping only), ``mujoco`` (physics),
-    ``udp:HOST:PORT`` (JSON datagrams)."""
+    """Robot targets by name: ``simulated`` (bookkeeping only), ``mujoco`` (NAO's arms in
+    MuJoCo, started here; closed by the teleoperation sink's close), ``udp:HOST:PORT`` (one
+    JSON datagram per command). BenchError (one line) for an unknown name or a bad address;
+    robots already started are closed then."""
     robots: list[Any] = []
-    for name in names:
-        if name == "simulated":
-            robots.append(SimulatedNao())
-        else:
-            raise BenchError(f"unknown robot {name!r}; available: simulated")
+    try:
+        for name in names:
+            robots.append(_build_robot(name))
+    except BenchError:
+        for robot in robots:
+            getattr(robot, "close", lambda: None)()
+        raise
     return robots
+
+
+def _build_robot(name: str) -> Any:
+    if name == "simulated":
+        return SimulatedNao()
+    if name == "mujoco":
+        from exohil.harness.robot_mujoco import MujocoNao
+
+        nao = MujocoNao()
+        nao.start()
+        return nao
+    if name.startswith("udp:"):
+        from exohil.harness.robot_udp import UdpJointTarget
+
+        host, _, port = name.removeprefix("udp:").rpartition(":")
+        host = host.removeprefix("[").removesuffix("]")
+        if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+            raise BenchError(f"bad robot address {name!r}: expected udp:HOST:PORT with a port "
+                             "1..65535, e.g. udp:127.0.0.1:9000")
+        try:
+            return UdpJointTarget(host, int(port))
+        except ValueError as err:
+            raise BenchError(f"robot {name!r}: {err}") from None
+    raise BenchError(f"unknown robot {name!r}; available: simulated, mujoco, udp:HOST:PORT")
 
 
 @dataclass
@@ -132,6 +163,7 @@ class SessionResult:
     wire_values_mm: np.ndarray | None
     clipped_values: int
     robots: list[Any] = field(default_factory=list)
+    robot_trace: RobotTrace | None = None
 
     @property
     def fault_counts(self) -> dict[str, int] | None:
@@ -174,10 +206,15 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         raise SessionError(f"refusing to record onto an input: {config.record}")
     robots: list[Any] = []
     sinks: list[Sink] = []
-    try:  # every sink built is closed below, whatever fails after it
+    tracer = None
+    try:  # every sink built is closed below; a bad robot name (BenchError) is a ValueError
         robots = build_robots(config.robots) if _is_shoulder(est) else []
         if robots:
             sinks.append(TeleopSink(robots, est.target.angles))
+            traced = [r for r in robots if hasattr(r, "upper_arm_axis")]
+            if traced:
+                tracer = RobotTraceSink(traced[0])
+                sinks.append(tracer)
         sinks.extend(extra_sinks)
         if config.record is not None:
             from exohil.harness.recorder import RecorderSink
@@ -217,7 +254,13 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 f"{len(est.sensor_names)} sensors?)" if stats.decode_errors else "")
         raise SessionError(f"no frame arrived from the {config.device.describe()}{hint}")
     truth = None if reference is None else truth_at(reference, est, run.device_time_s)
-    return SessionResult(config, model, run, truth, fault_log, seq0, wire, clipped, robots)
+    trace = None if tracer is None else tracer.trace()
+    if trace is not None and reference is not None:
+        angles = truth_at(reference, est, trace.device_time_s)
+        shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
+        trace = replace(trace, truth_deg=angles[:, shoulder])
+    return SessionResult(config, model, run, truth, fault_log, seq0, wire, clipped, robots,
+                         trace)
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -228,26 +271,34 @@ def _is_shoulder(est: TrainedEstimator) -> bool:
     return est.target.joint == "shoulder" and all(a in est.target.angles for a in SHOULDER_ANGLES)
 
 
-def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list[Measurement]:
-    """p50/p99/max of each stage interval and of end to end, ms. End to end runs from the
-    device's write (when known, else host receive) to the robot command (else the sinks done).
-    ``limits`` maps e.g. ``latency.end_to_end.max`` to its limit."""
-    limits = limits or {}
+def _stat_limits(limits: Limits, name: str) -> dict[str, Limit]:
+    """``limits`` entries ``name.p50`` etc. keyed by statistic."""
+    return {stat: limits[f"{name}.{stat}"] for stat in DISTRIBUTION_STATS
+            if f"{name}.{stat}" in limits}
 
-    def lim(name: str) -> dict[str, Limit]:
-        return {stat: limits[f"{name}.{stat}"] for stat in ("p50", "p99", "max")
-                if f"{name}.{stat}" in limits}
 
-    out: list[Measurement] = []
-    for name, (a, b) in LATENCY_INTERVALS.items():
-        out += distribution(name, run.interval_ms(a, b), "ms", lim(name), f"{a} → {b}")
-    out += distribution("latency.estimator", run.compute_ns / 1e6, "ms",
-                        lim("latency.estimator"), "estimator compute per frame")
+def latency_samples(run: PipelineRun) -> dict[str, tuple[np.ndarray, str]]:
+    """Per-frame samples (ms) of each latency measurement, by name, with what they span: the
+    stage intervals, the estimator's compute, and end to end from the device's write (when
+    known, else host receive) to the robot command (else the sinks done)."""
+    out = {name: (run.interval_ms(a, b), f"{a} → {b}")
+           for name, (a, b) in LATENCY_INTERVALS.items()}
+    out["latency.estimator"] = (run.compute_ns / 1e6, "estimator compute per frame")
     first = run.stamps[:, STAGES.index("device_write")]
     start_stage = "device_write" if np.any(first >= 0) else "host_receive"
     end_stage = "commanded" if np.any(run.stamps[:, STAGES.index("commanded")] >= 0) else "done"
-    out += distribution("latency.end_to_end", run.interval_ms(start_stage, end_stage), "ms",
-                        lim("latency.end_to_end"), f"{start_stage} → {end_stage}")
+    out["latency.end_to_end"] = (run.interval_ms(start_stage, end_stage),
+                                 f"{start_stage} → {end_stage}")
+    return out
+
+
+def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list[Measurement]:
+    """p50/p99/max, ms, of each of :func:`latency_samples`. ``limits`` maps e.g.
+    ``latency.end_to_end.max`` to its limit."""
+    limits = limits or {}
+    out: list[Measurement] = []
+    for name, (ms, note) in latency_samples(run).items():
+        out += distribution(name, ms, "ms", _stat_limits(limits, name), note)
     return out
 
 
@@ -335,3 +386,44 @@ def session_accuracy(result: SessionResult, limits: Limits | None = None) -> lis
         return [Measurement.skipped(n, "deg", "no reference recording", (limits or {}).get(n))
                 for n in names]
     return accuracy_measurements(result.run.estimates, result.truth, est.target.angles, limits)
+
+
+def robot_measurements(result: SessionResult,
+                       limits: Limits | None = None) -> list[Measurement]:
+    """What the simulated robot (MuJoCo) did, skipped without one:
+
+    * ``latency.robot_step``: command issued → end of the first physics step that used it, ms
+      (the robot's own histogram, quantiles to 1.2 %);
+    * ``teleop.robot_tracking``: per physics step the largest |reached − commanded| joint
+      angle, deg (histogram);
+    * ``teleop.robot_axis_error``: the robot's upper-arm axis against the true humerus at the
+      sampled frames' device times, deg (needs a reference).
+    """
+    limits = limits or {}
+
+    def from_histogram(name: str, stats: Mapping[str, Any] | None, unit: str,
+                       note: str) -> list[Measurement]:
+        if not stats or not stats.get("count"):
+            why = "no simulated robot" if stats is None else "no samples"
+            return [Measurement.skipped(f"{name}.{s}", unit, why, limits.get(f"{name}.{s}"))
+                    for s in DISTRIBUTION_STATS]
+        return [Measurement.judge(f"{name}.{s}", float(stats[s]), unit,
+                                  limits.get(f"{name}.{s}"), f"{stats['count']} {note}")
+                for s in DISTRIBUTION_STATS]
+
+    robot = next((r.summary() for r in result.robots if hasattr(r, "upper_arm_axis")), None)
+    out = from_histogram("latency.robot_step", None if robot is None else
+                         robot["command_delay_ms"], "ms", "commands; commanded → robot stepped")
+    out += from_histogram("teleop.robot_tracking", None if robot is None else
+                          robot["tracking_error_deg"], "deg",
+                          "physics steps; largest |reached − commanded| joint")
+    trace = result.robot_trace
+    name = "teleop.robot_axis_error"
+    if trace is None or trace.truth_deg is None:
+        why = "no simulated robot" if trace is None else "no reference"
+        out += [Measurement.skipped(f"{name}.{s}", "deg", why, limits.get(f"{name}.{s}"))
+                for s in DISTRIBUTION_STATS]
+    else:
+        out += distribution(name, trace.axis_error_deg(), "deg", _stat_limits(limits, name),
+                            "robot upper-arm axis vs true humerus")
+    return out

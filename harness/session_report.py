@@ -7,7 +7,9 @@ module lays them out as the summary JSON and the lines a person reads.
     {"rmse": {angle: deg}, "direction_rmse_deg": deg,
      "latency_ms": {stage: {"p50", "p99", "max"}},
      "frames": {"sent", "received", "dropped", "crc_errors"},
-     "teleop": {"rmse_deg": {joint: deg}, "clamped_share"},
+     "teleop": {"rmse_deg": {joint: deg}, "clamped_share",
+                "robot_tracking_deg": {"p50", "p99", "max"}, "robot_axis_error_deg": {...},
+                "robots": {class: summary}},
      "device_log": {kind: count}, "measurements": [Measurement.to_dict(), ...],
      "model", "model_sha256", "backend", "target", "machine", "finished_at"}
 """
@@ -24,6 +26,7 @@ from exohil.harness.session import (
     SessionResult,
     latency_measurements,
     link_measurements,
+    robot_measurements,
     session_accuracy,
     teleop_measurements,
 )
@@ -32,7 +35,8 @@ from exohil.harness.session import (
 def session_measurements(result: SessionResult) -> list[Measurement]:
     """Every measurement of a session, without limits (the demo and ``run`` report them)."""
     return (link_measurements(result) + latency_measurements(result.run)
-            + session_accuracy(result) + teleop_measurements(result))
+            + session_accuracy(result) + teleop_measurements(result)
+            + robot_measurements(result))
 
 
 def _value(measurements: list[Measurement], name: str) -> float | None:
@@ -73,6 +77,9 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
             "rmse_deg": {m.name.removeprefix("teleop.rmse."): _value(measurements, m.name)
                          for m in measurements if m.name.startswith("teleop.rmse.")},
             "clamped_share": _value(measurements, "teleop.clamped_share"),
+            **{f"{name}_deg": {stat: _value(measurements, f"teleop.{name}.{stat}")
+                               for stat in ("p50", "p99", "max")}
+               for name in ("robot_tracking", "robot_axis_error")},
             "robots": {type(r).__name__: r.summary() for r in result.robots
                        if hasattr(r, "summary")},
         },
@@ -115,6 +122,10 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
         joints = ", ".join(f"{k} {v:.2f}°" for k, v in teleop["rmse_deg"].items())
         lines.append(f"teleop      command RMSE vs true pose: {joints}; clamped "
                      f"{100 * (teleop['clamped_share'] or 0):.1f}% of commands")
+    axis = teleop["robot_axis_error_deg"]
+    if axis["p50"] is not None:
+        lines.append(f"robot       upper-arm axis vs true humerus p50 {axis['p50']:.1f}°  "
+                     f"p99 {axis['p99']:.1f}°  max {axis['max']:.1f}°")
     if s["values_clipped_to_wire_range"]:
         lines.append(f"warning     {s['values_clipped_to_wire_range']} sensor values were outside "
                      "the wire's 0..655.35 mm and were clipped")

@@ -1,18 +1,60 @@
-"""`exohil demo` end to end: emulator on a pty → acquisition → reference ENNet → NAO."""
+"""`exohil demo` end to end: emulator on a pty → acquisition → reference ENNet → NAO (MuJoCo),
+and its report folder; `exohil run --out` against a separately started `exohil emulate`."""
 
 import json
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
 
 import numpy as np
 from click.testing import CliRunner
+from PIL import Image
 
 from exohil.harness.cli import main
+from exohil.harness.paths import FIXTURES_DIR
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+REPORT_FILES = {"summary.json", "summary.md", "angles.png", "latency.png", "hysteresis.png",
+                "arm.gif", "run.mcap", *(f"arm_{k:05d}.png" for k in range(4))}
+
+
+def check_report(out: Path, output: str, received: int) -> dict:
+    """Every report file is there, complete and readable; returns summary.json."""
+    assert {p.name for p in out.iterdir()} == REPORT_FILES  # no temporary file left
+    for name in REPORT_FILES:
+        assert f"{out / name}" in output  # the report says where every file is
+        if name.endswith(".png"):
+            assert (out / name).read_bytes()[:8] == PNG_MAGIC, name
+    with Image.open(out / "arm.gif") as gif:
+        assert gif.format == "GIF" and gif.n_frames > 1
+        gif.seek(gif.n_frames - 1)
+        gif.load()
+    from mcap.reader import make_reader
+
+    from exohil.formats.recording_reader import read_recording
+
+    recording = read_recording(out / "run.mcap")
+    assert len(recording.sensors) == received
+    with open(out / "run.mcap", "rb") as fh:
+        topics = Counter(channel.topic for _, channel, _ in make_reader(fh).iter_messages())
+    assert topics["/timing/stages"] == received and topics["/robot/nao"] == received
+    s = json.loads((out / "summary.json").read_text())
+    assert {"rmse", "direction_rmse_deg", "latency_ms", "frames", "teleop"} <= set(s)
+    assert {"sent", "received", "dropped", "crc_errors"} <= set(s["frames"])
+    for stats in s["latency_ms"].values():
+        assert set(stats) == {"p50", "p99", "max"}
+    assert "| latency.robot_step.p99 |" in (out / "summary.md").read_text()
+    assert json.loads(recording.metadata["latency_ms"]) == s["latency_ms"]
+    return s
 
 
 def test_demo_streams_the_fixture_through_the_whole_chain(tmp_path):
     summary_path = tmp_path / "summary.json"
     record_path = tmp_path / "session.mcap"
+    out = tmp_path / "report"
     result = CliRunner().invoke(main, ["demo", "--seconds", "3", "--json", str(summary_path),
-                                       "--record", str(record_path),
+                                       "--record", str(record_path), "--out", str(out),
                                        "--faults", "corrupt:rate=0.02;drop:rate=0.01"])
     assert result.exit_code == 0, result.output
     s = json.loads(summary_path.read_text())
@@ -25,15 +67,25 @@ def test_demo_streams_the_fixture_through_the_whole_chain(tmp_path):
     measured = {m["name"]: m for m in s["measurements"]}
     for exact in ("link.lost_on_host", "link.bad_frames_delivered", "link.dropped_unexplained"):
         assert measured[exact]["value"] == 0, measured[exact]
-    assert s["teleop"]["robots"]["SimulatedNao"]["commands"] == received
+    assert s["teleop"]["robots"]["MujocoNao"]["commands"] == received  # the demo's robot
+    assert s["frames"]["sent"] >= received
     assert all(np.isfinite(v) for v in s["rmse"].values())
     assert np.isfinite(s["direction_rmse_deg"])
-    assert set(s["latency_ms"]) >= {"device_to_host", "end_to_end", "estimator"}
+    assert set(s["latency_ms"]) >= {"device_to_host", "end_to_end", "estimator", "robot_step"}
+    for stat in ("p50", "p99", "max"):
+        assert 0 < s["latency_ms"]["robot_step"][stat] < 1000
+        assert 0 <= s["teleop"]["robot_tracking_deg"][stat] < 180
+        assert 0 <= s["teleop"]["robot_axis_error_deg"][stat] <= 180
+    # the arm follows the true pose: half the time within 10° (out-of-reach poses aside)
+    assert s["teleop"]["robot_axis_error_deg"]["p50"] < 10
     assert "accuracy" in result.output and "end_to_end" in result.output
 
     from exohil.formats.recording_reader import read_recording
 
     assert len(read_recording(record_path).sensors) == received
+    report = check_report(out, result.output, received)
+    del report["finished_at"], s["finished_at"]
+    assert report == s  # --json and the folder's summary.json are the same summary
 
 
 def test_demo_refuses_to_record_onto_its_input(tmp_path):
@@ -54,4 +106,34 @@ def test_demo_rejects_a_missing_model_with_one_line(tmp_path):
     result = CliRunner().invoke(main, ["demo", "--model", str(tmp_path / "nope.npz")])
     assert result.exit_code != 0
     assert "checkpoint not found" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_run_against_a_separately_started_emulator_records_and_reports(tmp_path):
+    fixture = FIXTURES_DIR / "paper_protocol_heldout.mcap"
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "exohil"), "emulate",
+                             str(fixture), "--duration", "30"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        port = proc.stdout.readline().strip()
+        assert port, proc.stderr.read()
+        out = tmp_path / "report"
+        result = CliRunner().invoke(main, ["run", port, "--duration", "2", "--reference",
+                                           str(fixture), "--sink", "mujoco", "--out", str(out)])
+    finally:
+        proc.kill()
+        proc.wait()
+    assert result.exit_code == 0, result.output
+    s = check_report(out, result.output, json.loads((out / "summary.json").read_text())
+                     ["frames"]["received"])
+    assert s["frames"]["received"] > 250
+    assert s["teleop"]["robots"]["MujocoNao"]["commands"] == s["frames"]["received"]
+    assert all(np.isfinite(v) for v in s["rmse"].values())
+
+
+def test_run_rejects_a_bad_sink_with_one_line(tmp_path):
+    result = CliRunner().invoke(main, ["run", "loop://", "--duration", "1", "--sink",
+                                       "udp:localhost"])
+    assert result.exit_code != 0
+    assert "bad robot address 'udp:localhost'" in result.output
     assert "Traceback" not in result.output

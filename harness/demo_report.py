@@ -1,0 +1,235 @@
+"""The report folder of a bench session (``exohil demo --out``, ``exohil run --out``).
+
+* ``summary.json``: :func:`~exohil.harness.session_report.summary`;
+* ``summary.md``: every measurement as a table, and the list of files;
+* ``angles.png``: estimated and true angles (deg) over device time (s), shaded where the true
+  elevation is below 20° (θ undefined with the arm hanging), as in the paper's figure;
+* ``latency.png``: per-stage latency histograms (ms, log scale) on one monotonic clock;
+* ``hysteresis.png``: the sensor most correlated with the true elevation against it (mm vs
+  deg), coloured by the elevation's direction of motion;
+* ``arm.gif``, ``arm_0000k.png``: the simulated NAO (MuJoCo) beside the true human upper arm,
+  sampled over the run (only with a MuJoCo robot and a reference);
+* ``run.mcap``: the frames, estimates, commands and per-frame stage times
+  (``run_recording``); its metadata entry ``latency_ms`` holds the summary's p50/p99/max per
+  stage, ``robot_step`` included (the robot keeps only a histogram of its step times, so
+  they are not per frame).
+
+Every file is written under a temporary name and renamed when complete. Matplotlib draws
+with the Agg backend (files only).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from exohil.harness.recording_plots import motion_direction
+from exohil.harness.run_recording import write_run_recording
+from exohil.harness.session import SessionResult, latency_samples
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+#: Elevation below which the plane of elevation θ is undefined (shaded), deg.
+LOW_ELEVATION_DEG = 20.0
+#: Arm pictures: still frames, and at most this many GIF frames (played in device time).
+ARM_FRAMES = 4
+GIF_MAX_FRAMES = 120
+
+Files = list[tuple[str, Path]]
+
+
+def _atomic(path: Path, write: Callable[[Path], object]) -> Path:
+    """Run ``write(temporary path)``, then rename the file to ``path``."""
+    tmp = path.with_name(f".{path.name}.partial")
+    write(tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def _save(figure: Figure, path: Path) -> Path:
+    return _atomic(path, lambda tmp: figure.savefig(tmp, format="png"))
+
+
+def _figure(rows: int, cols: int = 1, height: float = 2.4) -> tuple[Figure, np.ndarray]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(8.0, height * rows), dpi=100, layout="constrained")
+    return figure, np.atleast_1d(figure.subplots(rows, cols, squeeze=False).ravel())
+
+
+def plot_angles(result: SessionResult) -> Figure:
+    """Estimated (solid) and true (dashed) angles over device time, one panel per angle."""
+    run, est = result.run, result.model.estimator
+    angles = est.target.angles
+    figure, axes = _figure(len(angles))
+    t = run.device_time_s
+    low = None
+    if result.truth is not None and "shoulder_elv" in angles:
+        low = result.truth[:, angles.index("shoulder_elv")] < LOW_ELEVATION_DEG
+    for k, (ax, name) in enumerate(zip(axes, angles, strict=True)):
+        if low is not None:
+            ax.fill_between(t, 0, 1, where=low, transform=ax.get_xaxis_transform(),
+                            color="0.88", lw=0, label=f"elevation < {LOW_ELEVATION_DEG:g}°")
+        if result.truth is not None:
+            ax.plot(t, result.truth[:, k], "--", color="black", lw=1.2, label="true (mocap)")
+        ax.plot(t, run.estimates[:, k], "-", color="tab:red", lw=1.0, label=f"{est.kind} estimate")
+        ax.set_ylabel(f"{name} (deg)")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("device time (s)")
+    axes[0].set_title(f"{est.target.joint}: estimated vs true angles")
+    return figure
+
+
+def plot_latency(result: SessionResult) -> Figure:
+    """One histogram per stage interval (ms, log x, one shared range), with p50/p99/max in
+    the title; the robot's command → stepped delay from its own histogram when it ran."""
+    from matplotlib.ticker import NullFormatter
+
+    stages = {name.removeprefix("latency."): ms for name, (ms, _) in
+              latency_samples(result.run).items() if ms.size}
+    robot = next((r.command_delay_ms for r in result.robots
+                  if hasattr(r, "command_delay_ms") and r.command_delay_ms.count), None)
+    panels = len(stages) + (robot is not None)
+    figure, axes = _figure((panels + 1) // 2, 2, height=2.2)
+    every = np.concatenate(list(stages.values()))
+    low = max(1e-3, float(np.min(every[every > 0]))) if np.any(every > 0) else 1e-3
+    high = float(np.max(every)) if every.size else 1.0
+    if robot is not None:
+        high = max(high, robot.max)
+    bins = np.logspace(np.log10(low) - 0.05, np.log10(max(high, low * 10)) + 0.05, 60)
+    for ax, (name, ms) in zip(axes, stages.items(), strict=False):
+        ms = np.clip(ms[np.isfinite(ms)], low, None)
+        ax.hist(ms, bins=bins, color="tab:blue")
+        p50, p99 = np.percentile(ms, [50, 99])
+        ax.set_title(f"{name}: p50 {p50:.3g}  p99 {p99:.3g}  max {ms.max():.3g} ms", fontsize=8)
+    if robot is not None:
+        ax = axes[len(stages)]
+        lower, upper, counts = robot.bins()
+        centre = np.sqrt(np.maximum(lower, low) * upper)  # rebinned onto the shared bins
+        ax.hist(centre, bins=bins, weights=counts, color="tab:green")
+        s = robot.summary(3)
+        ax.set_title(f"robot_step (to MuJoCo stepped): p50 {s['p50']:.3g}  "
+                     f"p99 {s['p99']:.3g}  max {s['max']:.3g} ms", fontsize=8)
+    for ax in axes[:panels]:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlim(bins[0], bins[-1])
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("ms", fontsize=8)
+        ax.set_ylabel("count", fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in axes[panels:]:
+        ax.set_visible(False)
+    figure.suptitle("per-stage latency, one monotonic clock (perf_counter)", fontsize=9)
+    return figure
+
+
+def plot_session_hysteresis(result: SessionResult) -> Figure | None:
+    """The sensor most correlated with the true elevation against it, coloured by motion
+    direction; None without a reference or an elevation angle."""
+    est = result.model.estimator
+    if result.truth is None or "shoulder_elv" not in est.target.angles:
+        return None
+    run = result.run
+    phi = result.truth[:, est.target.angles.index("shoulder_elv")]
+    ok = np.isfinite(phi)
+    if ok.sum() < 10:
+        return None
+    t, phi, values = run.device_time_s[ok], phi[ok], run.values[ok]
+    corr = [abs(np.corrcoef(values[:, j], phi)[0, 1]) if np.std(values[:, j]) > 0 else 0.0
+            for j in range(values.shape[1])]
+    j = int(np.argmax(corr))
+    direction = motion_direction(t, phi)
+    figure, (ax,) = _figure(1, height=5.0)
+    for value, colour, label in ((0, "#b0b0b0", "still"), (1, "#d62728", "rising"),
+                                 (-1, "#1f77b4", "falling")):
+        chosen = direction == value
+        if np.any(chosen):
+            ax.scatter(phi[chosen], values[chosen, j], s=3, color=colour, linewidths=0,
+                       alpha=0.6 if value else 0.3, label=f"elevation {label}", rasterized=True)
+    ax.set_xlabel("true shoulder_elv (deg)")
+    ax.set_ylabel(f"{est.sensor_names[j]} (mm, as received)")
+    ax.set_title(f"{est.sensor_names[j]} vs elevation: hysteresis over the session")
+    ax.grid(True, alpha=0.3)
+    ax.legend(markerscale=4)
+    return figure
+
+
+def summary_markdown(s: dict[str, Any], files: Files) -> str:
+    """``summary.md``: the session, every measurement, and where each file is."""
+    lines = [f"# exohil session report ({s['finished_at']})", "",
+             f"- target: {s['target']}", f"- model: {s['model']} ({s['model_kind']}, "
+             f"{s['backend']})", "- frames: " + ", ".join(f"{k.replace('_', ' ')} {v}"
+                                              for k, v in s["frames"].items()),
+             f"- wall time: {s['wall_s']} s",
+             "", "| measurement | value | unit | verdict | note |", "|---|---|---|---|---|"]
+    for m in s["measurements"]:
+        value = "–" if m["value"] is None else f"{m['value']:.4g}"
+        lines.append(f"| {m['name']} | {value} | {m['unit']} | {m['verdict']} | "
+                     f"{m['note'].replace('|', '/')} |")
+    lines += ["", "## Files", ""] + [f"- {label}: `{path.name}`" for label, path in files]
+    lines += [""] + [f"![{label}]({path.name})" for label, path in files
+                     if path.suffix in (".png", ".gif") and not path.name.startswith("arm_")]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tuple[Files,
+                                                                                    list[str]]:
+    """Write the report folder (module doc) into ``out_dir`` (created).
+
+    Returns (label, path) of every file written, in order, and notes on what was left out."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    est = result.model.estimator
+    files: Files = []
+    notes: list[str] = []
+    files.append(("run recording", _atomic(out_dir / "run.mcap", lambda tmp: write_run_recording(
+        tmp, result.run, est.sensor_names, est.target.joint, est.target.angles,
+        {"generator": "exohil", "source": s["target"] or "", "model_sha256": s["model_sha256"],
+         "latency_ms": json.dumps(s["latency_ms"], separators=(",", ":"))}))))
+    files.append(("angles over time", _save(plot_angles(result), out_dir / "angles.png")))
+    files.append(("latency histograms", _save(plot_latency(result), out_dir / "latency.png")))
+    hysteresis = plot_session_hysteresis(result)
+    if hysteresis is None:
+        notes.append("no hysteresis.png: needs a reference with the true elevation")
+    else:
+        files.append(("hysteresis loop", _save(hysteresis, out_dir / "hysteresis.png")))
+    files += _arm_pictures(result, out_dir, notes)
+    md = out_dir / "summary.md"
+    js = out_dir / "summary.json"
+    listed = [*files, ("summary table", md), ("summary JSON", js)]
+    _atomic(md, lambda tmp: tmp.write_text(summary_markdown(s, listed), encoding="utf-8"))
+    _atomic(js, lambda tmp: tmp.write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8"))
+    return listed, notes
+
+
+def _arm_pictures(result: SessionResult, out_dir: Path, notes: list[str]) -> Files:
+    from exohil.harness.robot_render import render_arm_frames, write_arm_animation
+
+    trace = result.robot_trace
+    if trace is None or trace.truth_deg is None:
+        why = "no MuJoCo robot (--sink mujoco)" if trace is None else "no reference"
+        notes.append(f"no arm.gif / arm_*.png: {why}")
+        return []
+    known = np.flatnonzero(np.all(np.isfinite(trace.truth_deg), axis=1))
+    if known.size == 0:
+        notes.append("no arm.gif / arm_*.png: no robot sample has a true pose")
+        return []
+    step = max(1, int(np.ceil(known.size / GIF_MAX_FRAMES)))
+    span = float(trace.device_time_s[known[-1]] - trace.device_time_s[known[0]])
+    fps = min(25.0, max(1.0, (known.size / step) / span)) if span > 0 else 1.0
+    gif = write_arm_animation(trace.arm_samples(known[::step]), out_dir / "arm.gif", fps=fps)
+    stills = known[np.linspace(0, known.size - 1, ARM_FRAMES).astype(int)]
+    for old in out_dir.glob("arm_*.png"):
+        old.unlink()
+    frames = render_arm_frames(trace.arm_samples(np.unique(stills)), out_dir)
+    return [("arm animation", gif)] + [("arm frame", p) for p in frames]
