@@ -35,7 +35,7 @@ from exohil.harness.bench import (
     SerialDevice,
     parse_target,
 )
-from exohil.harness.frame_source import LinkStats
+from exohil.harness.pipeline import Status
 from exohil.harness.session import (
     LoadedModel,
     SessionError,
@@ -158,8 +158,10 @@ class ConformanceRun:
         span = "to the end of the reference" if seconds is None else f"{seconds:g} s"
         self.say(f"real-time segment: {self.device.describe()}, {span} ...")
 
-        def progress(frames: int, link: LinkStats, last: object) -> None:
-            self.say(f"  {frames} frames, dropped {link.dropped}, crc errors {link.crc_errors}")
+        def progress(status: Status) -> None:
+            link = status.link
+            self.say(f"  {status.frames} frames, dropped {link.dropped}, crc errors "
+                     f"{link.crc_errors}")
 
         try:
             return run_session(self.config, seconds, progress=progress)

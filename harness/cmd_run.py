@@ -16,13 +16,20 @@ import numpy as np
 
 from exohil.harness.bench import BenchConfig
 from exohil.harness.cli_types import OutputFile
+from exohil.harness.pipeline import Status
 
 
-def status_line(frames: int, link, last: np.ndarray | None) -> None:
-    """The live status line (stderr): frames, link counters, the latest estimate."""
-    angles = "" if last is None else "  " + " ".join(f"{v:7.1f}°" for v in last)
-    click.echo(f"  {frames:6d} frames  dropped {link.dropped}  crc errors {link.crc_errors}"
-               f"{angles}", err=True)
+def status_line(status: Status) -> None:
+    """The live status line (stderr), about once a second: frames, drops, CRC errors, the
+    end-to-end latency p99 and the running error (arm direction, against the reference) of
+    the last second, and the latest estimate."""
+    link = status.link
+    latency = status.recent_latency_ms
+    p99 = f"  p99 {np.percentile(latency, 99):5.1f} ms" if latency.size else ""
+    error = "" if status.error_deg is None else f"  error {status.error_deg:5.1f}°"
+    angles = "" if status.last is None else "  " + " ".join(f"{v:6.1f}°" for v in status.last)
+    click.echo(f"  {status.frames:6d} frames  dropped {link.dropped}  crc errors "
+               f"{link.crc_errors}{p99}{error}{angles}", err=True)
 
 
 @contextmanager

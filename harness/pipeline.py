@@ -81,6 +81,31 @@ DeviceClock = Callable[[int], int | None]
 
 
 @dataclass
+class Status:
+    """What the pipeline did since the previous status, for a live status line.
+
+    Attributes:
+        frames: frames processed so far.
+        link: the link counters now.
+        last: the latest estimate (A,), degrees, or None before the first frame.
+        recent_latency_ms: end to end (device write, else host receive → robot command, else
+            all sinks done) of each frame since the previous status, ms.
+        recent_device_time_s / recent_estimates: those frames' device times (s) and
+            estimates (N, A), degrees.
+        error_deg: the running error against ground truth, when the caller knows it (the
+            session fills it in), degrees.
+    """
+
+    frames: int
+    link: LinkStats
+    last: np.ndarray | None
+    recent_latency_ms: np.ndarray
+    recent_device_time_s: np.ndarray
+    recent_estimates: np.ndarray
+    error_deg: float | None = None
+
+
+@dataclass
 class PipelineRun:
     """What one run produced.
 
@@ -156,7 +181,7 @@ class Pipeline:
         duration_s: float | None = None,
         max_frames: int | None = None,
         stop: threading.Event | None = None,
-        progress: Callable[[int, LinkStats, np.ndarray | None], None] | None = None,
+        progress: Callable[[Status], None] | None = None,
         progress_every_s: float = 1.0,
         idle_timeout_s: float | None = None,
         until_device_time_s: float | None = None,
@@ -164,14 +189,15 @@ class Pipeline:
         """Process frames until ``duration_s`` (wall clock) or ``max_frames`` or ``stop`` is set,
         or, once frames have started to arrive, none arrived for ``idle_timeout_s``, or a frame
         stamped at or after ``until_device_time_s`` (device clock, s) was processed.
-        ``progress(frames, link, last)`` is called about every ``progress_every_s``. The sinks
-        are not closed (their owner does)."""
+        ``progress(status)`` is called about every ``progress_every_s``. The sinks are not
+        closed (their owner does)."""
         log = _Log()
         start = time.perf_counter()
         deadline = None if duration_s is None else start + duration_s
         next_progress = start + progress_every_s
         last_frame_at: float | None = None
         last: np.ndarray | None = None
+        reported = 0
         while True:
             now = time.perf_counter()
             if (deadline is not None and now >= deadline) or (stop is not None and stop.is_set()):
@@ -182,7 +208,8 @@ class Pipeline:
                     and now - last_frame_at > idle_timeout_s):
                 break
             if progress is not None and now >= next_progress:
-                progress(len(log.seq), self.source.stats(), last)
+                progress(self._status(log, reported, last))
+                reported = len(log.seq)
                 next_progress += progress_every_s
             frame = self.source.get(timeout=0.05)
             if frame is None:
@@ -219,6 +246,18 @@ class Pipeline:
         log.commands.append(_NO_COMMAND if command is None else command.joints)
         log.clamped.append(bool(command is not None and command.clamped.any()))
         return sample
+
+    def _status(self, log: _Log, since: int, last: np.ndarray | None) -> Status:
+        stamps = np.asarray(log.stamps[since:], dtype=np.int64).reshape(-1, len(STAGES))
+        start = np.where(stamps[:, STAGES.index("device_write")] != NOT_STAMPED,
+                         stamps[:, STAGES.index("device_write")],
+                         stamps[:, STAGES.index("host_receive")])
+        end = np.where(stamps[:, STAGES.index("commanded")] != NOT_STAMPED,
+                       stamps[:, STAGES.index("commanded")], stamps[:, STAGES.index("done")])
+        n_angles = 0 if last is None else last.shape[0]
+        return Status(len(log.seq), self.source.stats(), last, (end - start) / 1e6,
+                      np.asarray(log.t[since:], dtype=np.float64),
+                      np.asarray(log.est[since:], dtype=np.float64).reshape(-1, n_angles))
 
     def _result(self, log: _Log, wall_s: float) -> PipelineRun:
         n = len(log.seq)

@@ -28,7 +28,7 @@ import numpy as np
 
 from exohil.emulators.faults import LOSING_KINDS
 from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
-from exohil.estimator.evaluation import accuracy_measurements
+from exohil.estimator.evaluation import accuracy_measurements, arm_direction_error_deg
 from exohil.estimator.inference import StreamingEstimator, default_backend
 from exohil.estimator.trained import TrainedEstimator
 from exohil.formats.alignment import angles_at
@@ -37,14 +37,13 @@ from exohil.formats.errors import RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import Recording
 from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, SerialDevice, open_device
-from exohil.harness.frame_source import LinkStats
-from exohil.harness.pipeline import STAGES, Pipeline, PipelineRun, Sink
+from exohil.harness.pipeline import STAGES, Pipeline, PipelineRun, Sink, Status
 from exohil.harness.robot_trace import RobotTrace, RobotTraceSink
 from exohil.harness.teleop import SHOULDER_ANGLES, SimulatedNao, TeleopSink
 from exohil.kinematics import NAO_JOINTS
 
 Limits = Mapping[str, Limit]
-Progress = Callable[[int, LinkStats, np.ndarray | None], None]
+Progress = Callable[[Status], None]
 
 #: Interval measurements: name → (from stage, to stage).
 LATENCY_INTERVALS = {
@@ -204,6 +203,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     inputs = [p for p in (config.model, ref_path) if p is not None]
     if config.record is not None and any(_same_file(config.record, p) for p in inputs):
         raise SessionError(f"refusing to record onto an input: {config.record}")
+    if progress is not None and reference is not None:
+        progress = _with_running_error(progress, reference, est)
     robots: list[Any] = []
     sinks: list[Sink] = []
     tracer = None
@@ -261,6 +262,28 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         trace = replace(trace, truth_deg=angles[:, shoulder])
     return SessionResult(config, model, run, truth, fault_log, seq0, wire, clipped, robots,
                          trace)
+
+
+def _with_running_error(progress: Progress, reference: Recording,
+                        est: TrainedEstimator) -> Progress:
+    """``progress`` with ``status.error_deg`` filled in: the RMSE since the previous status of
+    the arm-direction error (shoulder) or of every angle (other joints), degrees."""
+    def with_error(status: Status) -> None:
+        truth = truth_at(reference, est, status.recent_device_time_s)
+        ok = np.all(np.isfinite(truth), axis=1)
+        if ok.any():
+            est_ok, true_ok = status.recent_estimates[ok], truth[ok]
+            if _is_shoulder(est):
+                th = est.target.angles.index("elv_angle")
+                ph = est.target.angles.index("shoulder_elv")
+                err = arm_direction_error_deg(est_ok[:, th], est_ok[:, ph], true_ok[:, th],
+                                              true_ok[:, ph])
+            else:
+                err = (est_ok - true_ok).ravel()
+            status.error_deg = float(np.sqrt(np.mean(err**2)))
+        progress(status)
+
+    return with_error
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -118,3 +118,21 @@ def test_recorder_sink_writes_every_frame_it_was_given(tmp_path):
     assert run.frames == 300 and recorder.frames_written == 300
     assert np.array_equal(rec.sensors.seq, np.arange(300))
     assert np.allclose(rec.sensors.values[:, 0], np.arange(300))
+
+
+def test_progress_reports_the_frames_since_the_previous_status():
+    statuses = []
+
+    class SlowSource(FakeSource):
+        def get(self, timeout=None):
+            time.sleep(0.002)
+            return super().get(timeout)
+
+    Pipeline(SlowSource(frames(100)), SumEstimator()).run(
+        max_frames=100, progress=statuses.append, progress_every_s=0.05)
+    assert len(statuses) >= 2
+    assert sum(s.recent_estimates.shape[0] for s in statuses) <= 100
+    assert statuses[-1].frames >= statuses[0].frames
+    for s in statuses:
+        assert s.recent_latency_ms.shape[0] == s.recent_device_time_s.shape[0]
+        assert np.all(s.recent_latency_ms >= 0) and s.error_deg is None
