@@ -21,7 +21,6 @@ import time
 import numpy as np
 
 from benchmarks.report import parser, positive_float, report
-from exohil.emulators.pacing import sleep_until
 from exohil.formats.measurement import Measurement
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.paths import FIXTURES_DIR
@@ -33,6 +32,7 @@ from exohil.harness.robot_render import (
 )
 from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.teleop import SHOULDER_ANGLES, TeleopSink
+from exohil.realtime import sleep_until
 
 RATE_HZ = 250.0
 

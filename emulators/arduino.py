@@ -28,11 +28,10 @@ import numpy as np
 from exohil.emulators.effects import Signal
 from exohil.emulators.fault_spec import FaultPlan, fault_plan
 from exohil.emulators.faults import FaultRecord, FrameFaultInjector
-from exohil.emulators.pacing import SPIN_S, sleep_until
 from exohil.emulators.pty_port import VirtualSerialPort
 from exohil.formats.recording import Recording
 from exohil.formats.wire import MM_PER_LSB, SEQ_MODULUS, TIME_MODULUS_US, WireFrame, encode_frame
-from exohil.realtime import request_realtime
+from exohil.realtime import SPIN_S, request_realtime, sleep_until
 
 _IDLE_POLL_S = 0.001
 _RECENT_FRAMES = 8192

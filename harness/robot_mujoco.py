@@ -27,10 +27,10 @@ from typing import Literal
 import mujoco
 import numpy as np
 
-from exohil.emulators.pacing import sleep_until
 from exohil.harness.robot_model import ARM_JOINTS, NAO_ARMS_MJCF
 from exohil.harness.robot_stats import LogHistogram
 from exohil.kinematics import NAO_JOINTS
+from exohil.realtime import sleep_until
 
 #: Bodies of the model, in the order of :meth:`MujocoNao.body_positions`.
 BODIES = ("torso", "RShoulder", "RBicep", "RElbow", "RForeArm", "r_wrist",
@@ -193,7 +193,10 @@ class MujocoNao:
         k = 0
         while True:
             deadline = start + k * period
-            sleep_until(deadline, cancel=self._stop)
+            # no spin before the deadline: a spinning thread takes the GIL from the
+            # acquisition and pipeline threads hundreds of times a second, and the robot
+            # does not need sub-millisecond step times (late steps are counted)
+            sleep_until(deadline, spin_s=0.0, cancel=self._stop)
             if self._stop.is_set():
                 return
             now = time.perf_counter()

@@ -25,7 +25,8 @@ ALLOWED = {
 }
 #: harness modules on the path of a frame from a real device to the robot
 DEVICE_PATH = ("acquisition", "link_decoder", "frame_buffer", "frame_source", "pipeline",
-               "teleop", "recorder")
+               "teleop", "recorder", "robot_mujoco", "robot_udp", "robot_coppelia",
+               "robot_trace")
 
 
 def _exohil_imports(path: Path) -> set[str]:
@@ -68,7 +69,7 @@ def test_the_real_device_path_does_not_depend_on_the_emulator(module):
 
 def test_the_rule_catches_a_wrong_way_import(tmp_path):
     bad = tmp_path / "acquisition.py"
-    bad.write_text("def f():\n    from exohil.emulators.pacing import sleep_until\n")
+    bad.write_text("def f():\n    from exohil.emulators.arduino import ArduinoEmulator\n")
     assert _exohil_imports(bad) == {"emulators"}
 
 
