@@ -1,0 +1,410 @@
+"""The calibrated suit model: a static map from the angles to each sensor plus effect terms.
+
+Every model here is linear in its coefficients once a few shape parameters (time constants,
+delays, knots) are fixed, so fitting is a ridge least-squares solve per sensor and blocked
+cross-validation costs one Gram matrix per block (fold fit = total − held-out block).
+
+For sensor j with static prediction ŝⱼ (a polynomial of the angles, fitted first and then
+held fixed as the *input* of the history-dependent terms) the model is
+
+    yⱼ = Lag( B(angles)·β + H(ŝⱼ)·w + C(ŝⱼ)·c ) + D(t)·d + G(zⱼ)·g
+
+* B: Legendre-product polynomial of the normalised angles (total degree chosen by held-out
+  error): geometry, routing, gains, offsets and units in one calibrated map.
+* H (``hysteresis``): Prandtl–Ishlinskii basis, ŝ − play_r(ŝ) for play operators of thresholds
+  r spread over the sensor's range; any weighted sum is a rate-independent loop.
+* C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
+  relaxation toward the current stretch).
+* Lag (``lag``): first-order low-pass (time constant τ) or a pure delay, applied to every
+  pose-driven column, so the fitted map is the map of the lagged response.
+* D (``drift``): Legendre polynomials of time (degree 1–3): a slow offset independent of pose.
+* G (``saturation``): hinge functions max(0, k − z), max(0, z − k) of the unsaturated prediction
+  z at its extreme quantiles: compression (hard stop or soft) at the ends of the range.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import lfilter, lfilter_zi
+
+from exohil.emulators.discrepancy.data import N_BLOCKS, Trial
+from exohil.kinematics import ms_to_matrix
+
+#: Regression rate, Hz: features are computed at the recording's rate and averaged down to
+#: about this rate for the least-squares fits (predictions and gaps use the full rate).
+FIT_RATE_HZ = 50.0
+#: Play-operator thresholds as fractions of the sensor's range (p1–p99).
+PLAY_FRACTIONS = (0.005, 0.015, 0.04, 0.1, 0.25)
+#: Hinge knots of the saturation term: quantiles of the unsaturated prediction.
+LOW_KNOTS = (0.01, 0.03, 0.07, 0.15)
+HIGH_KNOTS = (0.85, 0.93, 0.97, 0.99)
+#: Relative ridge: numerical regularisation only (columns are standardised).
+RIDGE = 1e-7
+
+
+@dataclass(frozen=True)
+class Spec:
+    """Which effect terms a model has and their shape parameters.
+
+    Attributes:
+        degree: total degree of the static polynomial.
+        hysteresis: play-operator term on.
+        creep_tau_s: time constants of the creep low-passes, s (empty = no creep).
+        lag_kind: "" (none), "first_order" or "delay".
+        lag_s: the lag's time constant or delay, s.
+        drift_degree: degree of the time polynomial (0 = no drift).
+        saturation: hinge term on.
+    """
+
+    degree: int = 3
+    hysteresis: bool = False
+    creep_tau_s: tuple[float, ...] = ()
+    lag_kind: str = ""
+    lag_s: float = 0.0
+    drift_degree: int = 0
+    saturation: bool = False
+
+    def effects(self) -> set[str]:
+        """The vocabulary names of the effect terms that are on."""
+        on = {"hysteresis": self.hysteresis, "creep": bool(self.creep_tau_s),
+              "lag": bool(self.lag_kind), "drift": self.drift_degree > 0,
+              "saturation": self.saturation}
+        return {name for name, flag in on.items() if flag}
+
+
+def legendre_products(u: np.ndarray, degree: int) -> tuple[np.ndarray, list[tuple[int, ...]]]:
+    """Products of Legendre polynomials Pₖ(uᵢ) of total degree ≤ ``degree``.
+
+    Args:
+        u: (N, A) inputs scaled to about [−1, 1].
+        degree: maximum total degree.
+
+    Returns:
+        (N, P) basis (the first column is the constant 1) and the P exponent tuples.
+    """
+    n, a = u.shape
+    per_angle = []
+    for i in range(a):
+        cols = [np.ones(n), u[:, i].copy()]
+        for k in range(1, degree):
+            cols.append(((2 * k + 1) * u[:, i] * cols[k] - k * cols[k - 1]) / (k + 1))
+        per_angle.append(cols)
+    exponents = [e for total in range(degree + 1)
+                 for e in itertools.product(range(total + 1), repeat=a) if sum(e) == total]
+    basis = np.empty((n, len(exponents)))
+    for p, e in enumerate(exponents):
+        col = np.ones(n)
+        for i, k in enumerate(e):
+            if k:
+                col = col * per_angle[i][k]
+        basis[:, p] = col
+    return basis, exponents
+
+
+def play(x: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
+    """Play (backlash) operators, relaxed at the first sample.
+
+    Args:
+        x: (N, S) inputs.
+        thresholds: (S, K) half-widths, same units as x.
+
+    Returns:
+        (N, S, K) operator outputs.
+    """
+    n, s = x.shape
+    k = thresholds.shape[1]
+    lower = x[:, :, None] - thresholds[None]
+    upper = x[:, :, None] + thresholds[None]
+    out = np.empty((n, s, k))
+    out[0] = x[0][:, None]
+    for i in range(1, n):
+        np.maximum(out[i - 1], lower[i], out=out[i])
+        np.minimum(out[i], upper[i], out=out[i])
+    return out
+
+
+def low_pass(x: np.ndarray, tau_s: float, rate_hz: float) -> np.ndarray:
+    """First-order low-pass along axis 0 (step-invariant), starting at rest at x[0]."""
+    if tau_s <= 0:
+        return x.copy()
+    pole = math.exp(-1.0 / (rate_hz * tau_s))
+    b, a = [0.0, 1.0 - pole], [1.0, -pole]
+    zi = lfilter_zi(b, a)[:, None] * x[0][None, :]
+    out, _ = lfilter(b, a, x, axis=0, zi=zi)
+    return out
+
+
+def delay(x: np.ndarray, delay_s: float, rate_hz: float) -> np.ndarray:
+    """x delayed by ``delay_s`` (fractional samples by linear interpolation; the ends hold)."""
+    n = x.shape[0]
+    src = np.clip(np.arange(n) - delay_s * rate_hz, 0.0, n - 1.0)
+    i0 = np.floor(src).astype(np.int64)
+    i1 = np.minimum(i0 + 1, n - 1)
+    frac = (src - i0)[:, None]
+    return x[i0] * (1.0 - frac) + x[i1] * frac
+
+
+def apply_lag(x: np.ndarray, kind: str, value_s: float, rate_hz: float) -> np.ndarray:
+    """The lag term applied to the columns of x (N, P)."""
+    if kind == "first_order":
+        return low_pass(x, value_s, rate_hz)
+    if kind == "delay":
+        return delay(x, value_s, rate_hz)
+    return x
+
+
+@dataclass
+class Inputs:
+    """Quantities fixed for a whole run: normalised angles, static input ŝ, caches.
+
+    Attributes:
+        u: (N, U) inputs of the static map (see :func:`map_inputs`).
+        input_kind: "arm_direction", "arm_axes" or "angles".
+        angle_lo / angle_hi: (A,) degrees, the scaling range.
+        static: (N, S) static prediction ŝ (input of the hysteresis and creep terms).
+        static_coef: (P, S) its coefficients on the degree-``static_degree`` basis.
+        static_degree: degree of that basis.
+        thresholds: (S, K) play thresholds, sensor units.
+        t_norm: (N,) time scaled to [−1, 1] over the recording.
+        t_span: (t₀, t₁) s, the scaling range of time.
+    """
+
+    u: np.ndarray
+    input_kind: str
+    angle_lo: np.ndarray
+    angle_hi: np.ndarray
+    static: np.ndarray
+    static_coef: np.ndarray
+    static_degree: int
+    thresholds: np.ndarray
+    t_norm: np.ndarray
+    t_span: tuple[float, float]
+    cache: dict = field(default_factory=dict)
+
+
+def scale_angles(angles: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Angles (deg) to [−1, 1] over [lo, hi] (a constant angle maps to 0)."""
+    half = np.where(hi > lo, (hi - lo) / 2.0, 1.0)
+    return (angles - (hi + lo) / 2.0) / half
+
+
+def map_inputs(angles: np.ndarray, angle_names: tuple[str, ...], lo: np.ndarray,
+               hi: np.ndarray) -> tuple[np.ndarray, str]:
+    """The static map's inputs and their kind.
+
+    For a shoulder recorded as MoBL-ARMS angles (``elv_angle``, ``shoulder_elv``, optionally
+    ``shoulder_rot``) the inputs are the humerus axis in the thorax frame (a unit vector:
+    smooth everywhere, no singularity when the arm hangs and θ is undefined), plus the
+    humerus x axis when the axial rotation moves. Any other joint uses its angles scaled to
+    [−1, 1] over their recorded range.
+    """
+    names = list(angle_names)
+    if "elv_angle" in names and "shoulder_elv" in names:
+        theta = np.deg2rad(angles[:, names.index("elv_angle")])
+        phi = np.deg2rad(angles[:, names.index("shoulder_elv")])
+        psi = (np.deg2rad(angles[:, names.index("shoulder_rot")]) if "shoulder_rot" in names
+               else np.zeros_like(theta))
+        rot = ms_to_matrix(theta, phi, psi)
+        if "shoulder_rot" in names:
+            return np.hstack([rot[:, :, 1], rot[:, :, 0]]), "arm_axes"
+        return rot[:, :, 1], "arm_direction"
+    return scale_angles(angles, lo, hi), "angles"
+
+
+def static_basis(inputs: Inputs, degree: int) -> np.ndarray:
+    key = ("B", degree)
+    if key not in inputs.cache:
+        inputs.cache[key] = legendre_products(inputs.u, degree)[0]
+    return inputs.cache[key]
+
+
+def hysteresis_columns(inputs: Inputs) -> np.ndarray:
+    """(N, S, K) Prandtl–Ishlinskii basis ŝ − play_r(ŝ)."""
+    if "H" not in inputs.cache:
+        inputs.cache["H"] = inputs.static[:, :, None] - play(inputs.static, inputs.thresholds)
+    return inputs.cache["H"]
+
+
+def creep_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.ndarray:
+    """(N, S) ŝ low-passed with ``tau_s`` (the relaxing creep state)."""
+    key = ("C", tau_s)
+    if key not in inputs.cache:
+        inputs.cache[key] = low_pass(inputs.static, tau_s, rate_hz)
+    return inputs.cache[key]
+
+
+def drift_columns(inputs: Inputs, degree: int) -> np.ndarray:
+    """(N, degree) Legendre polynomials P₁…P_degree of normalised time."""
+    return legendre_products(inputs.t_norm[:, None], degree)[0][:, 1:]
+
+
+def hinge_columns(z: np.ndarray, knots_lo: np.ndarray, knots_hi: np.ndarray) -> np.ndarray:
+    """(N, 8) hinges max(0, k − z) at the low knots and max(0, z − k) at the high knots."""
+    return np.column_stack([np.maximum(0.0, knots_lo[None] - z[:, None]),
+                            np.maximum(0.0, z[:, None] - knots_hi[None])])
+
+
+def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int,
+           hinge: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """(N, P) design matrix of sensor j for ``spec`` at ``rate_hz``.
+
+    ``hinge`` = (z, low knots, high knots): the unsaturated prediction and the saturation
+    term's knots, needed when that term is on.
+    """
+    pose = [static_basis(inputs, spec.degree)]
+    if spec.hysteresis:
+        pose.append(hysteresis_columns(inputs)[:, j, :])
+    for tau in spec.creep_tau_s:
+        pose.append(creep_columns(inputs, tau, rate_hz)[:, j:j + 1])
+    x = np.hstack(pose)
+    x = apply_lag(x, spec.lag_kind, spec.lag_s, rate_hz)
+    parts = [x]
+    if spec.drift_degree:
+        parts.append(drift_columns(inputs, spec.drift_degree))
+    if spec.saturation:
+        if hinge is None:
+            raise ValueError("the saturation term needs the unsaturated prediction and knots")
+        parts.append(hinge_columns(*hinge))
+    return np.hstack(parts) if len(parts) > 1 else x
+
+
+def saturation_knots(z: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Hinge knots: extreme quantiles of the unsaturated prediction over valid frames."""
+    return (np.quantile(z[valid], LOW_KNOTS), np.quantile(z[valid], HIGH_KNOTS))
+
+
+def _decimate(x: np.ndarray, m: int) -> np.ndarray:
+    """Mean of consecutive groups of m rows (a trailing partial group is dropped)."""
+    n = (x.shape[0] // m) * m
+    return x[:n].reshape(n // m, m, *x.shape[1:]).mean(axis=1)
+
+
+@dataclass
+class Fit:
+    """Blocked cross-validation and full-data fit of one model.
+
+    Attributes:
+        spec: the model.
+        residual: (N, S) held-out residual (measurement − prediction of the fold that did not
+            see the frame), sensor units; NaN at invalid frames.
+        block_mse: (N_BLOCKS,) held-out mean squared residual per block (all sensors).
+        coef: per sensor, the (P,) coefficients fitted on all valid frames.
+        prediction: (N, S) full-data prediction.
+        hinge: per sensor, (hinge input z, low knots, high knots) or None.
+    """
+
+    spec: Spec
+    residual: np.ndarray
+    block_mse: np.ndarray
+    coef: list[np.ndarray]
+    prediction: np.ndarray
+    hinge: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None]
+
+    @property
+    def gap(self) -> float:
+        """Held-out RMSE over all sensors and valid frames, sensor units."""
+        r = self.residual[np.isfinite(self.residual)]
+        return float(np.sqrt(np.mean(r**2)))
+
+    def sensor_gap(self) -> np.ndarray:
+        """(S,) held-out RMSE per sensor."""
+        return np.sqrt(np.nanmean(self.residual**2, axis=0))
+
+
+def _solve(gram: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
+    g = gram / np.outer(scale, scale)
+    g[np.diag_indices_from(g)] += RIDGE
+    return np.linalg.solve(g, rhs / scale) / scale
+
+
+def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, fit_mask: np.ndarray | None = None,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Blocked CV and full-data fit of one sensor on design x (N, P).
+
+    Args:
+        trial: blocks, validity and rate.
+        x: (N, P) design matrix.
+        y: (N,) measurement.
+        fit_mask: (N,) frames allowed in the fits (default: valid ones); held-out residuals
+            are still reported for every valid frame.
+
+    Returns:
+        held-out residual (N,) (NaN where invalid), full-data coefficients (P,), and the
+        full-data prediction (N,).
+    """
+    mask = trial.valid if fit_mask is None else (trial.valid & fit_mask)
+    m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
+    xd = _decimate(x, m)
+    yd = _decimate(y[:, None], m)[:, 0]
+    okd = _decimate(mask[:, None].astype(np.float64), m)[:, 0] == 1.0
+    bd = trial.blocks[: xd.shape[0] * m: m]
+    grams = np.empty((N_BLOCKS, x.shape[1], x.shape[1]))
+    rhs = np.empty((N_BLOCKS, x.shape[1]))
+    for b in range(N_BLOCKS):
+        sel = okd & (bd == b)
+        grams[b] = xd[sel].T @ xd[sel]
+        rhs[b] = xd[sel].T @ yd[sel]
+    gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
+    residual = np.full(y.shape, np.nan)
+    for b in range(N_BLOCKS):
+        coef = _solve(gram_all - grams[b], rhs_all - rhs[b])
+        sel = trial.valid & (trial.blocks == b)
+        residual[sel] = y[sel] - x[sel] @ coef
+    coef = _solve(gram_all, rhs_all)
+    return residual, coef, x @ coef
+
+
+def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
+    """Held-out residuals and full-data coefficients of ``spec`` for every sensor.
+
+    The saturation term's hinges act on the static prediction ŝ (monotone in the stretch,
+    so its extreme quantiles are where a stop or compression acts).
+    """
+    s = trial.n_sensors
+    residual = np.empty_like(trial.y)
+    prediction = np.empty_like(trial.y)
+    coefs: list[np.ndarray] = []
+    hinges: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+    for j in range(s):
+        y = trial.y[:, j]
+        hinge = None
+        if spec.saturation:
+            z = inputs.static[:, j]
+            hinge = (z, *saturation_knots(z, trial.valid))
+        x = design(trial.rate_hz, inputs, spec, j, hinge)
+        r, c, p = fit_design(trial, x, y)
+        residual[:, j], prediction[:, j] = r, p
+        coefs.append(c)
+        hinges.append(hinge)
+    block_mse = np.array([np.nanmean(residual[trial.blocks == b] ** 2)
+                          for b in range(N_BLOCKS)])
+    return Fit(spec=spec, residual=residual, block_mse=block_mse, coef=coefs,
+               prediction=prediction, hinge=hinges)
+
+
+def make_inputs(trial: Trial, static_degree: int) -> Inputs:
+    """Scale angles and time, fit the static map of ``static_degree`` on all valid frames
+    (its prediction ŝ is the input of the history terms) and place the play thresholds."""
+    lo = np.min(trial.angles[trial.valid], axis=0)
+    hi = np.max(trial.angles[trial.valid], axis=0)
+    t0, t1 = float(trial.t[0]), float(trial.t[-1])
+    u, kind = map_inputs(trial.angles, trial.angle_names, lo, hi)
+    inputs = Inputs(u=u, input_kind=kind, angle_lo=lo, angle_hi=hi,
+                    static=np.empty(0), static_coef=np.empty(0), static_degree=static_degree,
+                    thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
+                    t_span=(t0, t1))
+    basis = static_basis(inputs, static_degree)
+    coef = np.column_stack([fit_design(trial, basis, trial.y[:, j])[1]
+                            for j in range(trial.n_sensors)])
+    inputs.static_coef = coef
+    inputs.static = basis @ coef
+    spread = np.quantile(inputs.static[trial.valid], 0.99, axis=0) - np.quantile(
+        inputs.static[trial.valid], 0.01, axis=0)
+    spread = np.where(spread > 0, spread, 1.0)
+    inputs.thresholds = spread[:, None] * np.asarray(PLAY_FRACTIONS)[None, :]
+    return inputs
