@@ -34,6 +34,7 @@ def _register() -> None:
     from exohil.harness import (
         cmd_convert,
         cmd_demo,
+        cmd_discrepancy,
         cmd_emulate,
         cmd_fixtures,
         cmd_import,
@@ -45,7 +46,7 @@ def _register() -> None:
 
     for module in (
         cmd_demo, cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import,
-        cmd_plot, cmd_train,
+        cmd_plot, cmd_train, cmd_discrepancy,
     ):
         for command in module.COMMANDS:
             main.add_command(command)

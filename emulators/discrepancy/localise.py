@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from exohil.emulators.discrepancy.data import N_BLOCKS, Trial
+from exohil.emulators.discrepancy.data import Trial
 from exohil.emulators.discrepancy.model import low_pass
 
 #: Below this angular speed (deg/s, after a 0.1 s low-pass) the joint is holding still.
 STILL_DEG_S = 2.0
 #: A hold counts for creep when it lasts at least this long, s.
 MIN_HOLD_S = 1.0
+#: Equal time windows of the localisation in time.
+TIME_WINDOWS = 8
 
 
 def motion(trial: Trial, static: np.ndarray) -> dict[str, np.ndarray]:
@@ -48,14 +50,14 @@ def _holds(still: np.ndarray, valid: np.ndarray, rate_hz: float) -> list[tuple[i
 
 
 def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> dict:
-    """Residual RMS by held-out block (time), angle bin, direction of motion, speed tercile
+    """Residual RMS by time window, angle bin, direction of motion, speed tercile
     and during holds; sensor units."""
-    by_block = []
-    for b in range(N_BLOCKS):
-        sel = trial.blocks == b
-        by_block.append({"t0_s": round(float(trial.t[sel][0]), 3),
-                         "t1_s": round(float(trial.t[sel][-1]), 3),
-                         "rms": round(_rms(residual[sel]), 5)})
+    by_time = []
+    edges = np.linspace(trial.t[0], trial.t[-1], TIME_WINDOWS + 1)
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        sel = (trial.t >= lo) & (trial.t <= hi)
+        by_time.append({"t0_s": round(float(lo), 3), "t1_s": round(float(hi), 3),
+                        "rms": round(_rms(residual[sel]), 5)})
     by_angle = {}
     for k, name in enumerate(trial.angle_names):
         a = trial.angles[:, k]
@@ -84,7 +86,7 @@ def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> 
     in_hold = np.zeros(trial.n, dtype=bool)
     for start, stop in holds:
         in_hold[start:stop] = True
-    return {"by_block": by_block, "by_angle": by_angle, "by_direction": by_direction,
+    return {"by_time": by_time, "by_angle": by_angle, "by_direction": by_direction,
             "by_speed": by_speed,
             "holds": {"count": len(holds), "rms": round(_rms(residual[in_hold]), 5),
                       "moving_rms": round(_rms(residual[moving]), 5)}}

@@ -36,14 +36,16 @@ from exohil.kinematics import ms_to_matrix
 
 #: Regression rate, Hz: features are computed at the recording's rate and averaged down to
 #: about this rate for the least-squares fits (predictions and gaps use the full rate).
-FIT_RATE_HZ = 50.0
+FIT_RATE_HZ = 25.0
 #: Play-operator thresholds as fractions of the sensor's range (p1–p99).
 PLAY_FRACTIONS = (0.005, 0.015, 0.04, 0.1, 0.25)
 #: Hinge knots of the saturation term: quantiles of the unsaturated prediction.
-LOW_KNOTS = (0.01, 0.03, 0.07, 0.15)
-HIGH_KNOTS = (0.85, 0.93, 0.97, 0.99)
-#: Relative ridge: numerical regularisation only (columns are standardised).
+LOW_KNOTS = (0.02, 0.05, 0.1, 0.2)
+HIGH_KNOTS = (0.8, 0.9, 0.95, 0.98)
+#: Relative ridge: numerical regularisation only (columns are scaled to unit norm).
 RIDGE = 1e-7
+#: Relative ridge of the saturation hinges.
+EFFECT_RIDGE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -140,12 +142,21 @@ def low_pass(x: np.ndarray, tau_s: float, rate_hz: float) -> np.ndarray:
 
 def delay(x: np.ndarray, delay_s: float, rate_hz: float) -> np.ndarray:
     """x delayed by ``delay_s`` (fractional samples by linear interpolation; the ends hold)."""
-    n = x.shape[0]
-    src = np.clip(np.arange(n) - delay_s * rate_hz, 0.0, n - 1.0)
-    i0 = np.floor(src).astype(np.int64)
-    i1 = np.minimum(i0 + 1, n - 1)
-    frac = (src - i0)[:, None]
-    return x[i0] * (1.0 - frac) + x[i1] * frac
+    samples = delay_s * rate_hz
+    k = int(math.floor(samples))
+    frac = samples - k
+
+    def shifted(by: int) -> np.ndarray:
+        out = np.empty_like(x)
+        if by >= 0:
+            out[by:] = x[:x.shape[0] - by]
+            out[:by] = x[0]
+        else:
+            out[:by] = x[-by:]
+            out[by:] = x[-1]
+        return out
+
+    return shifted(k) if frac == 0 else (1.0 - frac) * shifted(k) + frac * shifted(k + 1)
 
 
 def apply_lag(x: np.ndarray, kind: str, value_s: float, rate_hz: float) -> np.ndarray:
@@ -315,29 +326,39 @@ class Fit:
         return np.sqrt(np.nanmean(self.residual**2, axis=0))
 
 
-def _solve(gram: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+def _solve(gram: np.ndarray, rhs: np.ndarray, penalty: np.ndarray) -> np.ndarray:
     scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
     g = gram / np.outer(scale, scale)
-    g[np.diag_indices_from(g)] += RIDGE
+    g[np.diag_indices_from(g)] += penalty
     return np.linalg.solve(g, rhs / scale) / scale
 
 
-def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, fit_mask: np.ndarray | None = None,
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def penalties(spec: Spec, n_columns: int) -> np.ndarray:
+    """Relative ridge per design column: numerical only for the static map, and
+    ``EFFECT_RIDGE`` for the hinge columns, which are non-zero on few frames (a fold with
+    only a handful of them must not extrapolate with a huge coefficient)."""
+    out = np.full(n_columns, RIDGE)
+    if spec.saturation:
+        out[-2 * len(LOW_KNOTS):] = EFFECT_RIDGE
+    return out
+
+
+def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray,
+               penalty: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Blocked CV and full-data fit of one sensor on design x (N, P).
 
     Args:
         trial: blocks, validity and rate.
         x: (N, P) design matrix.
         y: (N,) measurement.
-        fit_mask: (N,) frames allowed in the fits (default: valid ones); held-out residuals
-            are still reported for every valid frame.
+        penalty: (P,) relative ridge per column (default: ``RIDGE``).
 
     Returns:
         held-out residual (N,) (NaN where invalid), full-data coefficients (P,), and the
         full-data prediction (N,).
     """
-    mask = trial.valid if fit_mask is None else (trial.valid & fit_mask)
+    mask = trial.valid
+    penalty = np.full(x.shape[1], RIDGE) if penalty is None else penalty
     m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
     xd = _decimate(x, m)
     yd = _decimate(y[:, None], m)[:, 0]
@@ -352,10 +373,10 @@ def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, fit_mask: np.ndarray 
     gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
     residual = np.full(y.shape, np.nan)
     for b in range(N_BLOCKS):
-        coef = _solve(gram_all - grams[b], rhs_all - rhs[b])
+        coef = _solve(gram_all - grams[b], rhs_all - rhs[b], penalty)
         sel = trial.valid & (trial.blocks == b)
         residual[sel] = y[sel] - x[sel] @ coef
-    coef = _solve(gram_all, rhs_all)
+    coef = _solve(gram_all, rhs_all, penalty)
     return residual, coef, x @ coef
 
 
@@ -377,7 +398,7 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
             z = inputs.static[:, j]
             hinge = (z, *saturation_knots(z, trial.valid))
         x = design(trial.rate_hz, inputs, spec, j, hinge)
-        r, c, p = fit_design(trial, x, y)
+        r, c, p = fit_design(trial, x, y, penalties(spec, x.shape[1]))
         residual[:, j], prediction[:, j] = r, p
         coefs.append(c)
         hinges.append(hinge)

@@ -38,8 +38,8 @@ from exohil.emulators.discrepancy.model import (
 from exohil.formats.recording import Recording
 
 VOCABULARY = ("hysteresis", "creep", "saturation", "lag", "drift")
-LAG_TAU_S = (0.01, 0.02, 0.04, 0.08, 0.16, 0.32)
-LAG_DELAY_S = (0.01, 0.02, 0.04, 0.08, 0.16)
+LAG_TAU_S = (0.01, 0.02, 0.04, 0.08, 0.2)
+LAG_DELAY_S = (0.01, 0.025, 0.06, 0.15)
 CREEP_TAU_S = (1.5, 5.0, 15.0, 45.0)
 DRIFT_DEGREES = (1, 2, 3)
 
@@ -90,7 +90,7 @@ def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
         tau = best.spec.creep_tau_s[0]
         pairs = [replace(spec, creep_tau_s=(tau, other)) for other in CREEP_TAU_S if other != tau]
         best = min([best] + [fit(trial, inputs, s) for s in pairs], key=lambda f: f.gap)
-    return _best_degree(trial, inputs, best)
+    return best
 
 
 def _best_degree(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
@@ -236,7 +236,9 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
             progress(f"[{step}] no candidate beats the noise (gap {base.gap:.4g}, floor "
                      f"{floor:.4g}; tried {table}): nothing added")
             break
-        kind, cand, evidence = winners[0]
+        kind, cand, _ = winners[0]
+        cand = _best_degree(trial, inputs, cand)
+        evidence = _evidence(base, cand, floor)
         spec, base = cand.spec, cand
         steps.append({"effect": kind, "gap": round(cand.gap, 6),
                       "params": effect_params(kind, cand, inputs, trial),
