@@ -43,7 +43,7 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
               help="Current suit profile (geometric or calibrated TOML): the effects it already "
                    "has are fitted from the start and not proposed again. Its geometry is not "
                    "assumed; the static map is calibrated to the measurement.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", "out_dir", type=click.Path(path_type=Path),
               default=Path("discrepancy"), show_default=True,
               help="Output folder: discrepancy.json, report.md, plots, suit_profile.toml.")
 def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> None:

@@ -8,7 +8,7 @@ at every grid time. Filters and history-dependent effects then run on a uniform 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,6 +41,9 @@ class Trial:
         units: sensor unit (e.g. "mm").
         rate_hz: grid rate, Hz.
         blocks: (N,) int, the fold (0 … N_BLOCKS − 1) that holds each frame out.
+        noise: (S,) white-noise standard deviation per sensor (:func:`noise_floor`).
+        scored: (N,) bool, valid frames whose held-out residual counts in the gap (see
+            :func:`exohil.emulators.discrepancy.model.restrict_to_coverage`).
     """
 
     t: np.ndarray
@@ -53,6 +56,8 @@ class Trial:
     units: str
     rate_hz: float
     blocks: np.ndarray
+    scored: np.ndarray
+    noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n(self) -> int:
@@ -119,10 +124,12 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     rank = np.cumsum(valid) - 1
     per_block = max(1, int(round(BLOCK_S * rate)))
     blocks = (rank // per_block) % N_BLOCKS
-    return Trial(t=t, y=y, valid=valid, angles=angles,
-                 angle_names=tuple(stream.names[k] for k in moving), joint=joint,
-                 sensor_names=tuple(rec.sensor_names), units=rec.sensor_units, rate_hz=rate,
-                 blocks=blocks.astype(np.int64))
+    trial = Trial(t=t, y=y, valid=valid, angles=angles,
+                  angle_names=tuple(stream.names[k] for k in moving), joint=joint,
+                  sensor_names=tuple(rec.sensor_names), units=rec.sensor_units, rate_hz=rate,
+                  blocks=blocks.astype(np.int64), scored=valid.copy())
+    trial.noise = noise_floor(trial)
+    return trial
 
 
 def noise_floor(trial: Trial) -> np.ndarray:

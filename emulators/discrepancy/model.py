@@ -7,7 +7,7 @@ cross-validation costs one Gram matrix per block (fold fit = total − held-out 
 For sensor j with static prediction ŝⱼ (a polynomial of the angles, fitted first and then
 held fixed as the *input* of the history-dependent terms) the model is
 
-    yⱼ = Lag( B(angles)·β + H(ŝⱼ)·w + C(ŝⱼ)·c ) + D(t)·d + G(zⱼ)·g
+    yⱼ = clip( Lag( B(angles)·β + H(ŝⱼ)·w + C(ŝⱼ)·c ) + D(t)·d , lowerⱼ, upperⱼ )
 
 * B: Legendre-product polynomial of the normalised angles (total degree chosen by held-out
   error): geometry, routing, gains, offsets and units in one calibrated map.
@@ -18,8 +18,8 @@ held fixed as the *input* of the history-dependent terms) the model is
 * Lag (``lag``): first-order low-pass (time constant τ) or a pure delay, applied to every
   pose-driven column, so the fitted map is the map of the lagged response.
 * D (``drift``): Legendre polynomials of time (degree 1–3): a slow offset independent of pose.
-* G (``saturation``): hinge functions max(0, k − z), max(0, z − k) of the unsaturated prediction
-  z at its extreme quantiles: compression (hard stop or soft) at the ends of the range.
+* Stops (``saturation``): the sensor sits on a plateau at an end of its range while the joint
+  moves; the model is fitted on the frames off the plateaus and clipped at their levels.
 """
 
 from __future__ import annotations
@@ -32,19 +32,21 @@ import numpy as np
 from scipy.signal import lfilter, lfilter_zi
 
 from exohil.emulators.discrepancy.data import N_BLOCKS, Trial
+from exohil.emulators.effects import Creep, Signal
 from exohil.kinematics import ms_to_matrix
 
 #: Regression rate, Hz: features are computed at the recording's rate and averaged down to
 #: about this rate for the least-squares fits (predictions and gaps use the full rate).
 FIT_RATE_HZ = 25.0
+#: Share of moving frames a sensor must sit at an end of its range to count as a stop.
+PLATEAU_SHARE = 0.02
+#: Coverage radius in the static map's input space (unit arm vector or scaled angles).
+COVER_RADIUS = 0.1
 #: Play-operator thresholds as fractions of the sensor's range (p1–p99).
 PLAY_FRACTIONS = (0.005, 0.015, 0.04, 0.1, 0.25)
-#: Hinge knots of the saturation term: quantiles of the unsaturated prediction.
-LOW_KNOTS = (0.02, 0.05, 0.1, 0.2)
-HIGH_KNOTS = (0.8, 0.9, 0.95, 0.98)
 #: Relative ridge: numerical regularisation only (columns are scaled to unit norm).
 RIDGE = 1e-7
-#: Relative ridge of the saturation hinges.
+#: Relative ridge of the effect columns (0.1 % of each column's energy: a negligible bias).
 EFFECT_RIDGE = 1e-3
 
 
@@ -55,16 +57,19 @@ class Spec:
     Attributes:
         degree: total degree of the static polynomial.
         hysteresis: play-operator term on.
-        creep_tau_s: time constants of the creep low-passes, s (empty = no creep).
+        creep_tau_s: time constants of the creep low-passes, s (empty = none).
+        creep_asym_s: (build, recover) time constants of an asymmetric creep state, s
+            (empty = none): builds while the stretch grows, recovers more slowly.
         lag_kind: "" (none), "first_order" or "delay".
         lag_s: the lag's time constant or delay, s.
         drift_degree: degree of the time polynomial (0 = no drift).
-        saturation: hinge term on.
+        saturation: hard stops at the plateaus the sensor sits on while the joint moves.
     """
 
     degree: int = 3
     hysteresis: bool = False
     creep_tau_s: tuple[float, ...] = ()
+    creep_asym_s: tuple[float, ...] = ()
     lag_kind: str = ""
     lag_s: float = 0.0
     drift_degree: int = 0
@@ -72,7 +77,8 @@ class Spec:
 
     def effects(self) -> set[str]:
         """The vocabulary names of the effect terms that are on."""
-        on = {"hysteresis": self.hysteresis, "creep": bool(self.creep_tau_s),
+        on = {"hysteresis": self.hysteresis,
+              "creep": bool(self.creep_tau_s) or bool(self.creep_asym_s),
               "lag": bool(self.lag_kind), "drift": self.drift_degree > 0,
               "saturation": self.saturation}
         return {name for name, flag in on.items() if flag}
@@ -248,44 +254,59 @@ def creep_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.ndarray:
     return inputs.cache[key]
 
 
+def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
+                       rate_hz: float) -> np.ndarray:
+    """(N, S) asymmetric creep state for unit gain: relaxes toward ŝ − ŝ₀ (the stretch since
+    the first frame) with ``build_s`` while it grows and ``recover_s`` while it shrinks."""
+    key = ("CA", build_s, recover_s)
+    if key not in inputs.cache:
+        t = np.arange(inputs.static.shape[0]) / rate_hz
+        signal = Signal.from_values(t, inputs.static)
+        crept = Creep(gain=1.0, tau_build_s=build_s, tau_recover_s=recover_s).apply(
+            signal, np.random.default_rng(0))
+        inputs.cache[key] = crept.values - inputs.static
+    return inputs.cache[key]
+
+
 def drift_columns(inputs: Inputs, degree: int) -> np.ndarray:
     """(N, degree) Legendre polynomials P₁…P_degree of normalised time."""
     return legendre_products(inputs.t_norm[:, None], degree)[0][:, 1:]
 
 
-def hinge_columns(z: np.ndarray, knots_lo: np.ndarray, knots_hi: np.ndarray) -> np.ndarray:
-    """(N, 8) hinges max(0, k − z) at the low knots and max(0, z − k) at the high knots."""
-    return np.column_stack([np.maximum(0.0, knots_lo[None] - z[:, None]),
-                            np.maximum(0.0, z[:, None] - knots_hi[None])])
-
-
-def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int,
-           hinge: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-    """(N, P) design matrix of sensor j for ``spec`` at ``rate_hz``.
-
-    ``hinge`` = (z, low knots, high knots): the unsaturated prediction and the saturation
-    term's knots, needed when that term is on.
-    """
+def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
+    """(N, P) design matrix of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
     pose = [static_basis(inputs, spec.degree)]
     if spec.hysteresis:
         pose.append(hysteresis_columns(inputs)[:, j, :])
     for tau in spec.creep_tau_s:
         pose.append(creep_columns(inputs, tau, rate_hz)[:, j:j + 1])
+    if spec.creep_asym_s:
+        pose.append(creep_asym_columns(inputs, *spec.creep_asym_s, rate_hz)[:, j:j + 1])
     x = np.hstack(pose)
     x = apply_lag(x, spec.lag_kind, spec.lag_s, rate_hz)
-    parts = [x]
     if spec.drift_degree:
-        parts.append(drift_columns(inputs, spec.drift_degree))
-    if spec.saturation:
-        if hinge is None:
-            raise ValueError("the saturation term needs the unsaturated prediction and knots")
-        parts.append(hinge_columns(*hinge))
-    return np.hstack(parts) if len(parts) > 1 else x
+        x = np.hstack([x, drift_columns(inputs, spec.drift_degree)])
+    return x
 
 
-def saturation_knots(z: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Hinge knots: extreme quantiles of the unsaturated prediction over valid frames."""
-    return (np.quantile(z[valid], LOW_KNOTS), np.quantile(z[valid], HIGH_KNOTS))
+def plateaus(trial: Trial, inputs: Inputs, j: int) -> tuple[float, float]:
+    """Stop levels of sensor j: an end of its range where it sits (within 6 σ of noise) on
+    at least ``PLATEAU_SHARE`` of the frames while the joint moves faster than 10 °/s.
+    A sensor that only reaches its extreme at one pose does so for a few moving frames; a
+    stop holds it there over a range of poses. ±inf where there is none."""
+    if "moving" not in inputs.cache:
+        speed = np.linalg.norm(np.gradient(low_pass(trial.angles, 0.05, trial.rate_hz),
+                                           axis=0), axis=1) * trial.rate_hz
+        inputs.cache["moving"] = trial.valid & (speed > 10.0)
+    moving = inputs.cache["moving"]
+    y = trial.y[:, j]
+    band = 6.0 * trial.noise[j]  # the extreme sample sits ~3.5 σ beyond a plateau's level
+    lo_level, hi_level = np.min(y[trial.valid]), np.max(y[trial.valid])
+    near_lo, near_hi = moving & (y <= lo_level + band), moving & (y >= hi_level - band)
+    share = max(int(moving.sum()), 1)
+    lo = float(np.median(y[near_lo])) if near_lo.sum() >= PLATEAU_SHARE * share else -np.inf
+    hi = float(np.median(y[near_hi])) if near_hi.sum() >= PLATEAU_SHARE * share else np.inf
+    return lo, hi
 
 
 def _decimate(x: np.ndarray, m: int) -> np.ndarray:
@@ -301,11 +322,11 @@ class Fit:
     Attributes:
         spec: the model.
         residual: (N, S) held-out residual (measurement − prediction of the fold that did not
-            see the frame), sensor units; NaN at invalid frames.
+            see the frame), sensor units; NaN at frames that are not scored.
         block_mse: (N_BLOCKS,) held-out mean squared residual per block (all sensors).
         coef: per sensor, the (P,) coefficients fitted on all valid frames.
         prediction: (N, S) full-data prediction.
-        hinge: per sensor, (hinge input z, low knots, high knots) or None.
+        clip: per sensor, the (lower, upper) stop levels (±inf when none).
     """
 
     spec: Spec
@@ -313,7 +334,7 @@ class Fit:
     block_mse: np.ndarray
     coef: list[np.ndarray]
     prediction: np.ndarray
-    hinge: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None]
+    clip: list[tuple[float, float]]
 
     @property
     def gap(self) -> float:
@@ -333,18 +354,19 @@ def _solve(gram: np.ndarray, rhs: np.ndarray, penalty: np.ndarray) -> np.ndarray
     return np.linalg.solve(g, rhs / scale) / scale
 
 
-def penalties(spec: Spec, n_columns: int) -> np.ndarray:
-    """Relative ridge per design column: numerical only for the static map, and
-    ``EFFECT_RIDGE`` for the hinge columns, which are non-zero on few frames (a fold with
-    only a handful of them must not extrapolate with a huge coefficient)."""
-    out = np.full(n_columns, RIDGE)
-    if spec.saturation:
-        out[-2 * len(LOW_KNOTS):] = EFFECT_RIDGE
+def penalties(n_static: int, n_columns: int) -> np.ndarray:
+    """Relative ridge per design column: numerical only for the static map's ``n_static``
+    columns, ``EFFECT_RIDGE`` for the effect columns, which can be nearly constant in a fold
+    (a play operator that never reverses in its training blocks) and must not extrapolate
+    with a huge coefficient."""
+    out = np.full(n_columns, EFFECT_RIDGE)
+    out[:n_static] = RIDGE
     return out
 
 
-def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray,
-               penalty: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, penalty: np.ndarray | None = None,
+               fit_mask: np.ndarray | None = None,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Blocked CV and full-data fit of one sensor on design x (N, P).
 
     Args:
@@ -352,12 +374,14 @@ def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray,
         x: (N, P) design matrix.
         y: (N,) measurement.
         penalty: (P,) relative ridge per column (default: ``RIDGE``).
+        fit_mask: (N,) frames allowed in the fits (default: all valid frames); held-out
+            residuals are reported for every scored frame.
 
     Returns:
-        held-out residual (N,) (NaN where invalid), full-data coefficients (P,), and the
+        held-out residual (N,) (NaN where not scored), full-data coefficients (P,), and the
         full-data prediction (N,).
     """
-    mask = trial.valid
+    mask = trial.valid if fit_mask is None else trial.valid & fit_mask
     penalty = np.full(x.shape[1], RIDGE) if penalty is None else penalty
     m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
     xd = _decimate(x, m)
@@ -374,7 +398,7 @@ def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray,
     residual = np.full(y.shape, np.nan)
     for b in range(N_BLOCKS):
         coef = _solve(gram_all - grams[b], rhs_all - rhs[b], penalty)
-        sel = trial.valid & (trial.blocks == b)
+        sel = trial.scored & (trial.blocks == b)
         residual[sel] = y[sel] - x[sel] @ coef
     coef = _solve(gram_all, rhs_all, penalty)
     return residual, coef, x @ coef
@@ -383,29 +407,54 @@ def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray,
 def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     """Held-out residuals and full-data coefficients of ``spec`` for every sensor.
 
-    The saturation term's hinges act on the static prediction ŝ (monotone in the stretch,
-    so its extreme quantiles are where a stop or compression acts).
+    With the saturation term the model is fitted on the frames off the plateaus
+    (:func:`plateaus`) and clipped at the stop levels.
     """
     s = trial.n_sensors
     residual = np.empty_like(trial.y)
     prediction = np.empty_like(trial.y)
     coefs: list[np.ndarray] = []
-    hinges: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+    clips: list[tuple[float, float]] = []
     for j in range(s):
         y = trial.y[:, j]
-        hinge = None
-        if spec.saturation:
-            z = inputs.static[:, j]
-            hinge = (z, *saturation_knots(z, trial.valid))
-        x = design(trial.rate_hz, inputs, spec, j, hinge)
-        r, c, p = fit_design(trial, x, y, penalties(spec, x.shape[1]))
+        x = design(trial.rate_hz, inputs, spec, j)
+        n_static = static_basis(inputs, spec.degree).shape[1]
+        lo, hi = plateaus(trial, inputs, j) if spec.saturation else (-np.inf, np.inf)
+        free = (y > lo + 3.0 * trial.noise[j]) & (y < hi - 3.0 * trial.noise[j])
+        r, c, p = fit_design(trial, x, y, penalties(n_static, x.shape[1]), fit_mask=free)
+        r = y - np.clip(y - r, lo, hi)  # NaN (unscored) stays NaN
+        p = np.clip(p, lo, hi)
+        clips.append((float(lo), float(hi)))
         residual[:, j], prediction[:, j] = r, p
         coefs.append(c)
-        hinges.append(hinge)
     block_mse = np.array([np.nanmean(residual[trial.blocks == b] ** 2)
                           for b in range(N_BLOCKS)])
     return Fit(spec=spec, residual=residual, block_mse=block_mse, coef=coefs,
-               prediction=prediction, hinge=hinges)
+               prediction=prediction, clip=clips)
+
+
+def restrict_to_coverage(trial: Trial, u: np.ndarray) -> float:
+    """Score only held-out frames whose pose the other folds cover.
+
+    A frame counts in the gap when some training frame of its fold lies within
+    ``COVER_RADIUS`` of it in the static map's input space (about 6° of arm direction, or
+    5 % of an angle's range): the gap then measures what the model gets wrong where it was
+    calibrated, not how a polynomial extrapolates to a pose visited once. Sets
+    ``trial.scored`` and returns the fraction of valid frames left out.
+    """
+    from scipy.spatial import cKDTree
+
+    scored = trial.valid.copy()
+    step = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
+    for b in range(N_BLOCKS):
+        train = np.flatnonzero(trial.valid & (trial.blocks != b))[::step]
+        held = np.flatnonzero(trial.valid & (trial.blocks == b))
+        if held.size == 0 or train.size == 0:
+            continue
+        dist, _ = cKDTree(u[train]).query(u[held], distance_upper_bound=COVER_RADIUS)
+        scored[held[~np.isfinite(dist)]] = False
+    trial.scored = scored
+    return 1.0 - scored.sum() / max(int(trial.valid.sum()), 1)
 
 
 def make_inputs(trial: Trial, static_degree: int) -> Inputs:

@@ -50,7 +50,7 @@ class CalibratedSuit:
         spec: the model's terms and shape parameters.
         inputs: the static map's scaling, static input coefficients and play thresholds.
         coef: (S, P) coefficients per sensor in design-column order.
-        knots_lo / knots_hi: (S, 4) saturation hinge knots (zeros when off).
+        stops: (S, 2) hard-stop levels (lower, upper; ±inf when none).
         noise: (S,) white-noise standard deviation, sensor units.
     """
 
@@ -64,8 +64,7 @@ class CalibratedSuit:
     spec: Spec
     inputs: Inputs
     coef: np.ndarray
-    knots_lo: np.ndarray
-    knots_hi: np.ndarray
+    stops: np.ndarray
     noise: np.ndarray
 
 
@@ -77,8 +76,10 @@ def _toml_value(value) -> str:
     if isinstance(value, int | np.integer):
         return str(int(value))
     if isinstance(value, float | np.floating):
-        if not math.isfinite(float(value)):
-            raise ValueError("a calibrated profile cannot hold NaN or infinity")
+        if math.isnan(float(value)):
+            raise ValueError("a calibrated profile cannot hold NaN")
+        if math.isinf(float(value)):
+            return "inf" if value > 0 else "-inf"
         return repr(float(value))
     if isinstance(value, list | tuple | np.ndarray):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
@@ -127,6 +128,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
         "terms": {
             "hysteresis": spec.hysteresis,
             "creep_tau_s": list(spec.creep_tau_s),
+            "creep_build_recover_s": list(spec.creep_asym_s),
             "lag_kind": spec.lag_kind or "none",
             "lag_s": spec.lag_s,
             "drift_degree": spec.drift_degree,
@@ -136,8 +138,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             {"name": name,
              "input_coef": suit.inputs.static_coef[:, j].tolist(),
              "play_thresholds": suit.inputs.thresholds[j].tolist(),
-             "saturation_knots_lo": suit.knots_lo[j].tolist(),
-             "saturation_knots_hi": suit.knots_hi[j].tolist(),
+             "stops": suit.stops[j].tolist(),
              "coef": suit.coef[j].tolist(),
              "noise_sigma": float(suit.noise[j])}
             for j, name in enumerate(suit.sensors)
@@ -167,6 +168,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
         sm, terms, sensors = data["static_map"], data["terms"], data["sensor"]
         spec = Spec(degree=int(sm["degree"]), hysteresis=bool(terms["hysteresis"]),
                     creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
+                    creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
                     lag_kind="" if terms["lag_kind"] == "none" else str(terms["lag_kind"]),
                     lag_s=float(terms["lag_s"]), drift_degree=int(terms["drift_degree"]),
                     saturation=bool(terms["saturation"]))
@@ -185,8 +187,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
             angles=tuple(data["angles"]), rate_hz=float(data["rate_hz"]),
             effects=tuple(data["effects"]), spec=spec, inputs=inputs,
             coef=np.asarray([s["coef"] for s in sensors], dtype=np.float64),
-            knots_lo=np.asarray([s["saturation_knots_lo"] for s in sensors]),
-            knots_hi=np.asarray([s["saturation_knots_hi"] for s in sensors]),
+            stops=np.asarray([s["stops"] for s in sensors], dtype=np.float64),
             noise=np.asarray([s["noise_sigma"] for s in sensors], dtype=np.float64))
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise ProfileError(f"{path}: malformed calibrated suit profile ({exc!r})") from exc
@@ -207,9 +208,8 @@ def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndar
     inputs.static = legendre_products(u, inputs.static_degree)[0] @ inputs.static_coef
     out = np.empty((t.shape[0], len(suit.sensors)))
     for j in range(len(suit.sensors)):
-        hinge = ((inputs.static[:, j], suit.knots_lo[j], suit.knots_hi[j])
-                 if suit.spec.saturation else None)
-        out[:, j] = design(suit.rate_hz, inputs, suit.spec, j, hinge) @ suit.coef[j]
+        out[:, j] = np.clip(design(suit.rate_hz, inputs, suit.spec, j) @ suit.coef[j],
+                            suit.stops[j, 0], suit.stops[j, 1])
     return out
 
 
@@ -241,14 +241,10 @@ def simulate_calibrated_recording(trajectory: Trajectory, suit: CalibratedSuit,
 def calibrated_suit(outcome: Outcome, name: str) -> CalibratedSuit:
     """The final model of a workflow run as a calibrated suit."""
     after, trial = outcome.after, outcome.trial
-    s = trial.n_sensors
-    knots_lo, knots_hi = np.zeros((s, 4)), np.zeros((s, 4))
-    for j, hinge in enumerate(after.hinge):
-        if hinge is not None:
-            knots_lo[j], knots_hi[j] = hinge[1], hinge[2]
     return CalibratedSuit(
         name=name, sensors=trial.sensor_names, units=trial.units, joint=trial.joint,
         angles=trial.angle_names, rate_hz=trial.rate_hz,
         effects=tuple(outcome.summary["effects"]), spec=after.spec, inputs=outcome.inputs,
-        coef=np.asarray(after.coef), knots_lo=knots_lo, knots_hi=knots_hi,
+        coef=np.asarray(after.coef),
+        stops=np.asarray(after.clip, dtype=np.float64),
         noise=np.asarray(outcome.summary["noise_floor_per_sensor"]))

@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from exohil.emulators.discrepancy.data import Trial, noise_floor, prepare_trial
+from exohil.emulators.discrepancy.data import Trial, prepare_trial
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
     Fit,
@@ -34,6 +34,7 @@ from exohil.emulators.discrepancy.model import (
     fit,
     legendre_products,
     make_inputs,
+    restrict_to_coverage,
 )
 from exohil.formats.recording import Recording
 
@@ -41,6 +42,8 @@ VOCABULARY = ("hysteresis", "creep", "saturation", "lag", "drift")
 LAG_TAU_S = (0.01, 0.02, 0.04, 0.08, 0.2)
 LAG_DELAY_S = (0.01, 0.025, 0.06, 0.15)
 CREEP_TAU_S = (1.5, 5.0, 15.0, 45.0)
+#: (build, recover) pairs of the asymmetric creep state, s.
+CREEP_ASYM_S = ((3.0, 9.0), (10.0, 30.0), (30.0, 90.0))
 DRIFT_DEGREES = (1, 2, 3)
 
 
@@ -72,7 +75,8 @@ def _candidates(kind: str, spec: Spec) -> list[Spec]:
     if kind == "hysteresis":
         return [replace(spec, hysteresis=True)]
     if kind == "creep":
-        return [replace(spec, creep_tau_s=(tau,)) for tau in CREEP_TAU_S]
+        return ([replace(spec, creep_tau_s=(tau,)) for tau in CREEP_TAU_S]
+                + [replace(spec, creep_asym_s=pair) for pair in CREEP_ASYM_S])
     if kind == "lag":
         return ([replace(spec, lag_kind="first_order", lag_s=tau) for tau in LAG_TAU_S]
                 + [replace(spec, lag_kind="delay", lag_s=d) for d in LAG_DELAY_S])
@@ -86,10 +90,16 @@ def _candidates(kind: str, spec: Spec) -> list[Spec]:
 def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
     """The candidate configuration of ``kind`` with the lowest held-out error."""
     best = min((fit(trial, inputs, s) for s in _candidates(kind, spec)), key=lambda f: f.gap)
-    if kind == "creep":  # a second time constant (two-time-constant creep), if it helps
+    if kind == "creep" and best.spec.creep_tau_s:  # a second time constant, if it helps
         tau = best.spec.creep_tau_s[0]
         pairs = [replace(spec, creep_tau_s=(tau, other)) for other in CREEP_TAU_S if other != tau]
         best = min([best] + [fit(trial, inputs, s) for s in pairs], key=lambda f: f.gap)
+    if kind == "lag":  # refine the time constant or delay between the grid points
+        factor = 1.5
+        for _ in range(3):
+            near = [replace(best.spec, lag_s=best.spec.lag_s * f) for f in (factor, 1 / factor)]
+            best = min([best] + [fit(trial, inputs, s) for s in near], key=lambda f: f.gap)
+            factor = factor ** 0.5
     return best
 
 
@@ -105,8 +115,8 @@ def _column_slices(spec: Spec, n_static: int, n_play: int) -> dict[str, slice]:
     """Where each term's coefficients sit in a sensor's coefficient vector."""
     out, at = {}, n_static
     for kind, width in (("hysteresis", n_play if spec.hysteresis else 0),
-                        ("creep", len(spec.creep_tau_s)), ("drift", spec.drift_degree),
-                        ("saturation", 8 if spec.saturation else 0)):
+                        ("creep", len(spec.creep_tau_s) + (1 if spec.creep_asym_s else 0)),
+                        ("drift", spec.drift_degree)):
         out[kind] = slice(at, at + width)
         at += width
     return out
@@ -121,13 +131,15 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
         else slice(0, 0)
     if kind == "hysteresis":
         weights = [c[cols] for c in result.coef]
-        width = [float(2.0 * np.dot(w, r)) for w, r in zip(weights, inputs.thresholds,
+        # rising: ŝ − play = +r, and the rising branch reads low, so the full width
+        # (falling − rising) after a large excursion is −2 Σ w·r
+        width = [float(-2.0 * np.dot(w, r)) for w, r in zip(weights, inputs.thresholds,
                                                               strict=True)]
         return {"loop_width": [round(w, 5) for w in width],
                 "play_thresholds": np.round(inputs.thresholds, 5).tolist(),
                 "weights": [np.round(w, 5).tolist() for w in weights]}
     if kind == "creep":
-        return {"tau_s": list(spec.creep_tau_s),
+        return {"tau_s": list(spec.creep_tau_s), "build_recover_s": list(spec.creep_asym_s),
                 "gain": [np.round(c[cols], 5).tolist() for c in result.coef]}
     if kind == "lag":
         key = "tau_s" if spec.lag_kind == "first_order" else "delay_s"
@@ -147,7 +159,9 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
                 "mean_rate_per_s": [round(c / span, 7) for c in change]}
     if kind == "saturation":
         pred = result.prediction[trial.valid]
-        return {"lower": np.round(pred.min(axis=0), 5).tolist(),
+        return {"stops": [[None if not np.isfinite(v) else round(v, 5) for v in pair]
+                          for pair in result.clip],
+                "lower": np.round(pred.min(axis=0), 5).tolist(),
                 "upper": np.round(pred.max(axis=0), 5).tolist()}
     raise ValueError(kind)
 
@@ -171,7 +185,8 @@ def _evidence(base: Fit, cand: Fit, floor: float) -> dict:
 
 def _config(spec: Spec) -> dict:
     return {"degree": spec.degree, "hysteresis": spec.hysteresis,
-            "creep_tau_s": list(spec.creep_tau_s), "lag": spec.lag_kind, "lag_s": spec.lag_s,
+            "creep_tau_s": list(spec.creep_tau_s), "creep_asym_s": list(spec.creep_asym_s),
+            "lag": spec.lag_kind, "lag_s": spec.lag_s,
             "drift_degree": spec.drift_degree, "saturation": spec.saturation}
 
 
@@ -190,14 +205,18 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         DiscrepancyError: the recording cannot be used (no mocap, too short, ...).
     """
     trial = prepare_trial(rec, name)
-    floors = noise_floor(trial)
+    floors = trial.noise
     floor = float(np.sqrt(np.mean(floors**2)))
     progress(f"[1] calibrating the static map: {trial.n_sensors} sensors ({trial.units}) from "
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
     fits = []
-    n_inputs = make_inputs(trial, 1).u.shape[1]
+    u = make_inputs(trial, 1).u
+    n_inputs = u.shape[1]
+    uncovered = restrict_to_coverage(trial, u)
+    if uncovered > 0:
+        progress(f"    {uncovered:.1%} of frames are poses no other fold covers: not scored")
     for degree in _degrees(n_inputs):
         inputs = make_inputs(trial, degree)
         fits.append((fit(trial, inputs, Spec(degree=degree)), inputs))
@@ -265,6 +284,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "rate_hz": round(trial.rate_hz, 4),
         "frames": trial.n,
         "invalid_frames": int((~trial.valid).sum()),
+        "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
         "static_map": {"kind": "legendre_polynomial", "degree": spec.degree},
         "heldout_blocks": int(trial.blocks.max()) + 1,
