@@ -127,8 +127,7 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     unless the name says otherwise)."""
     spec = result.spec
     n_static = len(legendre_products(inputs.u[:1], spec.degree)[1])
-    cols = _column_slices(spec, n_static, inputs.thresholds.shape[1])[kind] if kind != "lag" \
-        else slice(0, 0)
+    cols = _column_slices(spec, n_static, inputs.thresholds.shape[1]).get(kind, slice(0, 0))
     if kind == "hysteresis":
         weights = [c[cols] for c in result.coef]
         # rising: ŝ − play = +r, and the rising branch reads low, so the full width
