@@ -268,9 +268,9 @@ def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
     return inputs.cache[key]
 
 
-def drift_columns(inputs: Inputs, degree: int) -> np.ndarray:
-    """(N, degree) Legendre polynomials P₁…P_degree of normalised time."""
-    return legendre_products(inputs.t_norm[:, None], degree)[0][:, 1:]
+def drift_columns(t_norm: np.ndarray, degree: int) -> np.ndarray:
+    """(N, degree) Legendre polynomials P₁…P_degree of time scaled to [−1, 1]."""
+    return legendre_products(t_norm[:, None], degree)[0][:, 1:]
 
 
 def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
@@ -285,7 +285,7 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
     x = np.hstack(pose)
     x = apply_lag(x, spec.lag_kind, spec.lag_s, rate_hz)
     if spec.drift_degree:
-        x = np.hstack([x, drift_columns(inputs, spec.drift_degree)])
+        x = np.hstack([x, drift_columns(inputs.t_norm, spec.drift_degree)])
     return x
 
 

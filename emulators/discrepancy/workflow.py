@@ -144,14 +144,7 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
         key = "tau_s" if spec.lag_kind == "first_order" else "delay_s"
         return {"model": spec.lag_kind, key: spec.lag_s}
     if kind == "drift":
-        ends = drift_columns(Inputs(u=inputs.u[:1], input_kind=inputs.input_kind,
-                                    angle_lo=inputs.angle_lo,
-                                    angle_hi=inputs.angle_hi, static=inputs.static[:1],
-                                    static_coef=inputs.static_coef,
-                                    static_degree=inputs.static_degree,
-                                    thresholds=inputs.thresholds,
-                                    t_norm=np.array([-1.0, 1.0]), t_span=inputs.t_span),
-                             spec.drift_degree)
+        ends = drift_columns(np.array([-1.0, 1.0]), spec.drift_degree)
         change = [float((ends[1] - ends[0]) @ c[cols]) for c in result.coef]
         span = inputs.t_span[1] - inputs.t_span[0]
         return {"degree": spec.drift_degree, "change": [round(c, 5) for c in change],
