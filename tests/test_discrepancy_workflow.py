@@ -115,6 +115,12 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     assert (out / "report.md").read_text().startswith("# Discrepancy report")
     assert load_calibrated_profile(out / "suit_profile.toml").sensors == rec.sensor_names
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary left
+    again = CliRunner().invoke(main, ["discrepancy", str(path), "--profile",
+                                      str(out / "suit_profile.toml"), "--out", str(tmp_path / "b")])
+    assert again.exit_code == 0, again.output
+    second = json.loads((tmp_path / "b" / "discrepancy.json").read_text())
+    assert second["already_in_model"] == summary["effects"]
+    assert not set(second["effects"]) & set(summary["effects"])
 
 
 def test_cli_errors_are_one_line(tmp_path):

@@ -46,7 +46,8 @@ class CalibratedSuit:
         units: sensor unit.
         joint / angles: the mocap joint and the angle names it is driven by (degrees).
         rate_hz: sample rate the filters (lag, creep) were fitted at, Hz.
-        effects: effect names in the order the workflow added them.
+        effects: the model's effect terms: those it started with (``--profile``), then those
+            the workflow added, in order.
         spec: the model's terms and shape parameters.
         inputs: the static map's scaling, static input coefficients and play thresholds.
         coef: (S, P) coefficients per sensor in design-column order.
@@ -244,7 +245,8 @@ def calibrated_suit(outcome: Outcome, name: str) -> CalibratedSuit:
     return CalibratedSuit(
         name=name, sensors=trial.sensor_names, units=trial.units, joint=trial.joint,
         angles=trial.angle_names, rate_hz=trial.rate_hz,
-        effects=tuple(outcome.summary["effects"]), spec=after.spec, inputs=outcome.inputs,
+        effects=tuple(outcome.summary["already_in_model"]) + tuple(outcome.summary["effects"]),
+        spec=after.spec, inputs=outcome.inputs,
         coef=np.asarray(after.coef),
         stops=np.asarray(after.clip, dtype=np.float64),
         noise=np.asarray(outcome.summary["noise_floor_per_sensor"]))

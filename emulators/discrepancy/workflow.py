@@ -182,6 +182,14 @@ def _config(spec: Spec) -> dict:
             "drift_degree": spec.drift_degree, "saturation": spec.saturation}
 
 
+def _conclusion(steps: list[dict], spec: Spec) -> str:
+    if steps:
+        return f"named {', '.join(s['effect'] for s in steps)}"
+    if not [k for k in VOCABULARY if k not in spec.effects()]:
+        return "every effect of the vocabulary is already in the model; nothing to add"
+    return "no candidate effect beats the noise; nothing added"
+
+
 def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         progress: Callable[[str], None] = lambda line: None) -> Outcome:
     """Run the whole workflow on a recording.
@@ -284,7 +292,6 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "localisation_after": localise(trial, after.residual, mot),
         "steps": steps,
         "not_added": rejected,
-        "conclusion": (f"named {', '.join(s['effect'] for s in steps)}" if steps
-                       else "no candidate effect beats the noise; nothing added"),
+        "conclusion": _conclusion(steps, spec),
     }
     return Outcome(trial=trial, inputs=inputs, before=before, after=after, summary=summary)
