@@ -76,14 +76,12 @@ def _degrees(n_inputs: int) -> range:
 
 
 def _candidates(kind: str, spec: Spec) -> list[Spec]:
+    """The configurations of ``kind`` to try on top of ``spec`` (lag: see _refine_lag)."""
     if kind == "hysteresis":
         return [replace(spec, hysteresis=True)]
     if kind == "creep":
         return ([replace(spec, creep_tau_s=(tau,)) for tau in CREEP_TAU_S]
                 + [replace(spec, creep_asym_s=pair) for pair in CREEP_ASYM_S])
-    if kind == "lag":
-        return ([replace(spec, lag_kind="first_order", lag_s=tau) for tau in LAG_TAU_S]
-                + [replace(spec, lag_kind="delay", lag_s=d) for d in LAG_DELAY_S])
     if kind == "drift":
         return [replace(spec, drift_degree=d) for d in DRIFT_DEGREES]
     if kind == "saturation":
@@ -93,15 +91,15 @@ def _candidates(kind: str, spec: Spec) -> list[Spec]:
 
 def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
     """The candidate configuration of ``kind`` with the lowest held-out error."""
+    if kind == "lag":  # refine each lag model between its grid neighbours, then compare
+        return min([_refine_lag(trial, inputs, spec, "first_order", LAG_TAU_S),
+                    _refine_lag(trial, inputs, spec, "delay", LAG_DELAY_S)],
+                   key=lambda f: f.gap)
     best = min((fit(trial, inputs, s) for s in _candidates(kind, spec)), key=lambda f: f.gap)
     if kind == "creep" and best.spec.creep_tau_s:  # a second time constant, if it helps
         tau = best.spec.creep_tau_s[0]
         pairs = [replace(spec, creep_tau_s=(tau, other)) for other in CREEP_TAU_S if other != tau]
         best = min([best] + [fit(trial, inputs, s) for s in pairs], key=lambda f: f.gap)
-    if kind == "lag":  # refine each lag model between its grid neighbours, then compare
-        best = min([_refine_lag(trial, inputs, spec, "first_order", LAG_TAU_S),
-                    _refine_lag(trial, inputs, spec, "delay", LAG_DELAY_S)],
-                   key=lambda f: f.gap)
     return best
 
 
