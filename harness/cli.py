@@ -36,6 +36,7 @@ def _register() -> None:
     from exohil.harness import (
         cmd_convert,
         cmd_demo,
+        cmd_discrepancy,
         cmd_emulate,
         cmd_fixtures,
         cmd_import,
@@ -48,7 +49,7 @@ def _register() -> None:
 
     for module in (
         cmd_demo, cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import,
-        cmd_plot, cmd_train, cmd_run,
+        cmd_plot, cmd_train, cmd_run, cmd_discrepancy,
     ):
         for command in module.COMMANDS:
             main.add_command(command)

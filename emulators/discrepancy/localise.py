@@ -1,0 +1,172 @@
+"""Where the residual lives (time, angle space, direction, speed, holds) and each effect's
+physical signature in it. All statistics are in the recording's sensor units unless named
+otherwise; they describe a held-out residual (measurement − simulation), so a model that
+over-fits cannot make them look small.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from exohil.emulators.discrepancy.data import Trial
+from exohil.emulators.discrepancy.model import low_pass
+
+#: Below this angular speed (deg/s, after a 0.1 s low-pass) the joint is holding still.
+STILL_DEG_S = 2.0
+#: A hold counts for creep when it lasts at least this long, s.
+MIN_HOLD_S = 1.0
+#: Equal time windows of the localisation in time.
+TIME_WINDOWS = 8
+
+
+def motion(trial: Trial, static: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-frame motion descriptors.
+
+    Returns a dict with ``speed_deg_s`` (N,) angular speed; ``still`` (N,) bool;
+    ``velocity`` (N, S) rate of change of the static prediction (sensor units/s);
+    ``direction`` (N, S) +1 rising, −1 falling, 0 still.
+    """
+    smooth = low_pass(trial.angles, 0.05, trial.rate_hz)
+    speed = np.linalg.norm(np.gradient(smooth, axis=0), axis=1) * trial.rate_hz
+    velocity = np.gradient(low_pass(static, 0.05, trial.rate_hz), axis=0) * trial.rate_hz
+    still = speed < STILL_DEG_S
+    direction = np.where(still[:, None], 0, np.sign(velocity)).astype(np.int64)
+    return {"speed_deg_s": speed, "still": still, "velocity": velocity, "direction": direction}
+
+
+def _rms(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+
+def _holds(still: np.ndarray, valid: np.ndarray, rate_hz: float) -> list[tuple[int, int]]:
+    """(start, stop) frame ranges of holds lasting ≥ MIN_HOLD_S that follow a movement."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(np.int8), [0]])))
+    out = []
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        if start > 0 and stop - start >= MIN_HOLD_S * rate_hz and valid[start:stop].mean() > 0.9:
+            out.append((int(start), int(stop)))
+    return out
+
+
+def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> dict:
+    """Residual RMS by time window, angle bin, direction of motion, speed tercile
+    and during holds; sensor units."""
+    by_time = []
+    edges = np.linspace(trial.t[0], trial.t[-1], TIME_WINDOWS + 1)
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        sel = (trial.t >= lo) & (trial.t <= hi)
+        by_time.append({"t0_s": round(float(lo), 3), "t1_s": round(float(hi), 3),
+                        "rms": round(_rms(residual[sel]), 5)})
+    by_angle = {}
+    for k, name in enumerate(trial.angle_names):
+        a = trial.angles[:, k]
+        edges = np.linspace(np.min(a[trial.valid]), np.max(a[trial.valid]), 7)
+        cells = []
+        for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+            sel = (a >= lo) & (a <= hi)
+            cells.append({"lo_deg": round(float(lo), 2), "hi_deg": round(float(hi), 2),
+                          "rms": round(_rms(residual[sel]), 5)})
+        by_angle[name] = cells
+    direction = mot["direction"]
+    by_direction = {
+        label: round(_rms(residual[direction == sign]), 5)
+        for label, sign in (("rising", 1), ("falling", -1), ("still", 0))
+    }
+    moving = ~mot["still"] & trial.valid
+    speed = mot["speed_deg_s"]
+    by_speed = []
+    if moving.sum() > 3:
+        cuts = np.quantile(speed[moving], [0.0, 1 / 3, 2 / 3, 1.0])
+        for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
+            sel = moving & (speed >= lo) & (speed <= hi)
+            by_speed.append({"lo_deg_s": round(float(lo), 2), "hi_deg_s": round(float(hi), 2),
+                             "rms": round(_rms(residual[sel]), 5)})
+    holds = _holds(mot["still"], trial.valid, trial.rate_hz)
+    in_hold = np.zeros(trial.n, dtype=bool)
+    for start, stop in holds:
+        in_hold[start:stop] = True
+    return {"by_time": by_time, "by_angle": by_angle, "by_direction": by_direction,
+            "by_speed": by_speed,
+            "holds": {"count": len(holds), "rms": round(_rms(residual[in_hold]), 5),
+                      "moving_rms": round(_rms(residual[moving]), 5)}}
+
+
+def signatures(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray],
+               floor: float) -> dict[str, float]:
+    """Physical signatures of the five effects in a held-out residual.
+
+    * ``direction_split_slow`` / ``direction_split_fast``: mean residual while the sensor's
+      input falls minus while it rises, in the slowest and fastest third of movement (sensor
+      units, sign-aligned per sensor). Hysteresis: both about the loop width (rate-
+      independent); lag: grows with speed, small when slow.
+    * ``rate_independence``: slow split / fast split (≈ 1 hysteresis, ≪ 1 lag).
+    * ``velocity_correlation``: correlation of the residual with the input's rate of change
+      (lag: strongly negative or positive, ∝ velocity).
+    * ``hold_relaxation``: RMS change of the residual over holds ≥ 1 s after a move, in units
+      of the noise floor (creep: relaxes during holds; hysteresis and lag: flat).
+    * ``time_trend``: share of residual variance explained by a cubic in time (drift).
+    * ``extreme_excess``: residual RMS in the outer 5 % of each sensor's range over the RMS in
+      the middle 90 % (saturation: compression at the extremes).
+    """
+    vel = mot["velocity"]
+    valid = trial.valid
+    moving = ~mot["still"] & valid
+    splits: dict[str, list[float]] = {"slow": [], "fast": []}
+    weights: dict[str, list[float]] = {"slow": [], "fast": []}
+    corr_num, corr_den = 0.0, 0.0
+    excess_out, excess_mid = [], []
+    for j in range(trial.n_sensors):
+        r = residual[:, j]
+        speed = np.abs(vel[:, j])
+        mv = moving & np.isfinite(r) & (speed > 0)
+        if mv.sum() < 30:
+            continue
+        cuts = np.quantile(speed[mv], [1 / 3, 2 / 3])
+        for label, sel in (("slow", mv & (speed <= cuts[0])), ("fast", mv & (speed >= cuts[1]))):
+            up, down = sel & (vel[:, j] > 0), sel & (vel[:, j] < 0)
+            if up.sum() > 5 and down.sum() > 5:
+                splits[label].append(abs(np.mean(r[down]) - np.mean(r[up])))
+                weights[label].append(1.0)
+        rv, vv = r[mv] - np.mean(r[mv]), vel[mv, j] - np.mean(vel[mv, j])
+        denom = np.sqrt(np.sum(rv**2) * np.sum(vv**2))
+        if denom > 0:
+            corr_num += abs(np.sum(rv * vv)) / denom
+            corr_den += 1.0
+        y = trial.y[valid, j]
+        lo, hi = np.quantile(y, [0.05, 0.95])
+        outer = valid & np.isfinite(r) & ((trial.y[:, j] < lo) | (trial.y[:, j] > hi))
+        mid = valid & np.isfinite(r) & ~outer
+        excess_out.append(np.mean(r[outer] ** 2))
+        excess_mid.append(np.mean(r[mid] ** 2))
+    slow = float(np.mean(splits["slow"])) if splits["slow"] else 0.0
+    fast = float(np.mean(splits["fast"])) if splits["fast"] else 0.0
+    holds = _holds(mot["still"], valid, trial.rate_hz)
+    changes = []
+    skip = int(0.2 * trial.rate_hz)
+    for start, stop in holds:
+        seg = residual[start + skip:stop]
+        seg = seg[np.all(np.isfinite(seg), axis=1)]
+        if seg.shape[0] > 10:
+            head = seg[: max(3, seg.shape[0] // 10)].mean(axis=0)
+            tail = seg[-max(3, seg.shape[0] // 10):].mean(axis=0)
+            changes.append(np.mean((tail - head) ** 2))
+    relax = float(np.sqrt(np.mean(changes))) / floor if changes and floor > 0 else 0.0
+    ok = valid & np.all(np.isfinite(residual), axis=1)
+    tn = (trial.t[ok] - trial.t[0]) / max(trial.t[-1] - trial.t[0], 1e-9)
+    design = np.vander(tn, 4)
+    r = residual[ok]
+    coef, *_ = np.linalg.lstsq(design, r, rcond=None)
+    r0 = r - r.mean(axis=0)
+    trend = 1.0 - float(np.sum((r - design @ coef) ** 2) / max(np.sum(r0**2), 1e-300))
+    extreme = (float(np.sqrt(np.mean(excess_out) / max(np.mean(excess_mid), 1e-300)))
+               if excess_out else 1.0)
+    return {
+        "direction_split_slow": round(slow, 5),
+        "direction_split_fast": round(fast, 5),
+        "rate_independence": round(slow / fast, 4) if fast > 0 else 0.0,
+        "velocity_correlation": round(corr_num / corr_den, 4) if corr_den else 0.0,
+        "hold_relaxation": round(relax, 4),
+        "time_trend": round(trend, 4),
+        "extreme_excess": round(extreme, 4),
+    }

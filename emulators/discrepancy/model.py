@@ -1,0 +1,481 @@
+"""The calibrated suit model: a static map from the angles to each sensor plus effect terms.
+
+Every model here is linear in its coefficients once a few shape parameters (time constants,
+delays, knots) are fixed, so fitting is a ridge least-squares solve per sensor and blocked
+cross-validation costs one Gram matrix per block (fold fit = total − held-out block).
+
+For sensor j with static prediction ŝⱼ (a polynomial of the angles, fitted first and then
+held fixed as the *input* of the history-dependent terms) the model is
+
+    yⱼ = clip( Lag( B(angles)·β + H(ŝⱼ)·w + C(ŝⱼ)·c ) + D(t)·d , lowerⱼ, upperⱼ )
+
+* B: Legendre-product polynomial of the normalised angles (total degree chosen by held-out
+  error): geometry, routing, gains, offsets and units in one calibrated map.
+* H (``hysteresis``): Prandtl–Ishlinskii basis, ŝ − play_r(ŝ) for play operators of thresholds
+  r spread over the sensor's range; any weighted sum is a rate-independent loop.
+* C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
+  relaxation toward the current stretch).
+* Lag (``lag``): first-order low-pass (time constant τ) or a pure delay, applied to every
+  pose-driven column, so the fitted map is the map of the lagged response.
+* D (``drift``): Legendre polynomials of time (degree 1–3): a slow offset independent of pose.
+* Stops (``saturation``): the sensor sits on a plateau at an end of its range while the joint
+  moves; the model is fitted on the frames off the plateaus and clipped at their levels.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import lfilter, lfilter_zi
+
+from exohil.emulators.discrepancy.data import N_BLOCKS, Trial
+from exohil.emulators.effects import Creep, Signal
+from exohil.kinematics import ms_to_matrix
+
+#: Regression rate, Hz: features are computed at the recording's rate and averaged down to
+#: about this rate for the least-squares fits (predictions and gaps use the full rate).
+FIT_RATE_HZ = 25.0
+#: Share of moving frames a sensor must sit at an end of its range to count as a stop.
+PLATEAU_SHARE = 0.02
+#: Coverage radius in the static map's input space (unit arm vector or scaled angles).
+COVER_RADIUS = 0.1
+#: Play-operator thresholds as fractions of the sensor's range (p1–p99).
+PLAY_FRACTIONS = (0.005, 0.015, 0.04, 0.1, 0.25)
+#: Relative ridge: numerical regularisation only (columns are scaled to unit norm).
+RIDGE = 1e-7
+#: Relative ridge of the effect columns (0.1 % of each column's energy: a negligible bias).
+EFFECT_RIDGE = 1e-3
+
+
+@dataclass(frozen=True)
+class Spec:
+    """Which effect terms a model has and their shape parameters.
+
+    Attributes:
+        degree: total degree of the static polynomial.
+        hysteresis: play-operator term on.
+        creep_tau_s: time constants of the creep low-passes, s (empty = none).
+        creep_asym_s: (build, recover) time constants of an asymmetric creep state, s
+            (empty = none): builds while the stretch grows, recovers more slowly.
+        lag_kind: "" (none), "first_order" or "delay".
+        lag_s: the lag's time constant or delay, s.
+        drift_degree: degree of the time polynomial (0 = no drift).
+        saturation: hard stops at the plateaus the sensor sits on while the joint moves.
+    """
+
+    degree: int = 3
+    hysteresis: bool = False
+    creep_tau_s: tuple[float, ...] = ()
+    creep_asym_s: tuple[float, ...] = ()
+    lag_kind: str = ""
+    lag_s: float = 0.0
+    drift_degree: int = 0
+    saturation: bool = False
+
+    def effects(self) -> set[str]:
+        """The vocabulary names of the effect terms that are on."""
+        on = {"hysteresis": self.hysteresis,
+              "creep": bool(self.creep_tau_s) or bool(self.creep_asym_s),
+              "lag": bool(self.lag_kind), "drift": self.drift_degree > 0,
+              "saturation": self.saturation}
+        return {name for name, flag in on.items() if flag}
+
+
+def legendre_products(u: np.ndarray, degree: int) -> tuple[np.ndarray, list[tuple[int, ...]]]:
+    """Products of Legendre polynomials Pₖ(uᵢ) of total degree ≤ ``degree``.
+
+    Args:
+        u: (N, A) inputs scaled to about [−1, 1].
+        degree: maximum total degree.
+
+    Returns:
+        (N, P) basis (the first column is the constant 1) and the P exponent tuples.
+    """
+    n, a = u.shape
+    per_angle = []
+    for i in range(a):
+        cols = [np.ones(n), u[:, i].copy()]
+        for k in range(1, degree):
+            cols.append(((2 * k + 1) * u[:, i] * cols[k] - k * cols[k - 1]) / (k + 1))
+        per_angle.append(cols)
+    exponents = [e for total in range(degree + 1)
+                 for e in itertools.product(range(total + 1), repeat=a) if sum(e) == total]
+    basis = np.empty((n, len(exponents)))
+    for p, e in enumerate(exponents):
+        col = np.ones(n)
+        for i, k in enumerate(e):
+            if k:
+                col = col * per_angle[i][k]
+        basis[:, p] = col
+    return basis, exponents
+
+
+def play(x: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
+    """Play (backlash) operators, relaxed at the first sample.
+
+    Args:
+        x: (N, S) inputs.
+        thresholds: (S, K) half-widths, same units as x.
+
+    Returns:
+        (N, S, K) operator outputs.
+    """
+    n, s = x.shape
+    k = thresholds.shape[1]
+    lower = x[:, :, None] - thresholds[None]
+    upper = x[:, :, None] + thresholds[None]
+    out = np.empty((n, s, k))
+    out[0] = x[0][:, None]
+    for i in range(1, n):
+        np.maximum(out[i - 1], lower[i], out=out[i])
+        np.minimum(out[i], upper[i], out=out[i])
+    return out
+
+
+def low_pass(x: np.ndarray, tau_s: float, rate_hz: float) -> np.ndarray:
+    """First-order low-pass along axis 0 (step-invariant), starting at rest at x[0]."""
+    if tau_s <= 0:
+        return x.copy()
+    pole = math.exp(-1.0 / (rate_hz * tau_s))
+    b, a = [0.0, 1.0 - pole], [1.0, -pole]
+    zi = lfilter_zi(b, a)[:, None] * x[0][None, :]
+    out, _ = lfilter(b, a, x, axis=0, zi=zi)
+    return out
+
+
+def delay(x: np.ndarray, delay_s: float, rate_hz: float) -> np.ndarray:
+    """x delayed by ``delay_s`` (fractional samples by linear interpolation; the ends hold)."""
+    samples = delay_s * rate_hz
+    k = int(math.floor(samples))
+    frac = samples - k
+
+    def shifted(by: int) -> np.ndarray:
+        out = np.empty_like(x)
+        if by >= 0:
+            out[by:] = x[:x.shape[0] - by]
+            out[:by] = x[0]
+        else:
+            out[:by] = x[-by:]
+            out[by:] = x[-1]
+        return out
+
+    return shifted(k) if frac == 0 else (1.0 - frac) * shifted(k) + frac * shifted(k + 1)
+
+
+def apply_lag(x: np.ndarray, kind: str, value_s: float, rate_hz: float) -> np.ndarray:
+    """The lag term applied to the columns of x (N, P)."""
+    if kind == "first_order":
+        return low_pass(x, value_s, rate_hz)
+    if kind == "delay":
+        return delay(x, value_s, rate_hz)
+    return x
+
+
+@dataclass
+class Inputs:
+    """Quantities fixed for a whole run: normalised angles, static input ŝ, caches.
+
+    Attributes:
+        u: (N, U) inputs of the static map (see :func:`map_inputs`).
+        input_kind: "arm_direction", "arm_axes" or "angles".
+        angle_lo / angle_hi: (A,) degrees, the scaling range.
+        static: (N, S) static prediction ŝ (input of the hysteresis and creep terms).
+        static_coef: (P, S) its coefficients on the degree-``static_degree`` basis.
+        static_degree: degree of that basis.
+        thresholds: (S, K) play thresholds, sensor units.
+        t_norm: (N,) time scaled to [−1, 1] over the recording.
+        t_span: (t₀, t₁) s, the scaling range of time.
+    """
+
+    u: np.ndarray
+    input_kind: str
+    angle_lo: np.ndarray
+    angle_hi: np.ndarray
+    static: np.ndarray
+    static_coef: np.ndarray
+    static_degree: int
+    thresholds: np.ndarray
+    t_norm: np.ndarray
+    t_span: tuple[float, float]
+    cache: dict = field(default_factory=dict)
+
+
+def scale_angles(angles: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Angles (deg) to [−1, 1] over [lo, hi] (a constant angle maps to 0)."""
+    half = np.where(hi > lo, (hi - lo) / 2.0, 1.0)
+    return (angles - (hi + lo) / 2.0) / half
+
+
+def map_inputs(angles: np.ndarray, angle_names: tuple[str, ...], lo: np.ndarray,
+               hi: np.ndarray) -> tuple[np.ndarray, str]:
+    """The static map's inputs and their kind.
+
+    For a shoulder recorded as MoBL-ARMS angles (``elv_angle``, ``shoulder_elv``, optionally
+    ``shoulder_rot``) the inputs are the humerus axis in the thorax frame (a unit vector:
+    smooth everywhere, no singularity when the arm hangs and θ is undefined), plus the
+    humerus x axis when the axial rotation moves. Any other joint uses its angles scaled to
+    [−1, 1] over their recorded range.
+    """
+    names = list(angle_names)
+    if "elv_angle" in names and "shoulder_elv" in names:
+        theta = np.deg2rad(angles[:, names.index("elv_angle")])
+        phi = np.deg2rad(angles[:, names.index("shoulder_elv")])
+        psi = (np.deg2rad(angles[:, names.index("shoulder_rot")]) if "shoulder_rot" in names
+               else np.zeros_like(theta))
+        rot = ms_to_matrix(theta, phi, psi)
+        if "shoulder_rot" in names:
+            return np.hstack([rot[:, :, 1], rot[:, :, 0]]), "arm_axes"
+        return rot[:, :, 1], "arm_direction"
+    return scale_angles(angles, lo, hi), "angles"
+
+
+def static_basis(inputs: Inputs, degree: int) -> np.ndarray:
+    key = ("B", degree)
+    if key not in inputs.cache:
+        inputs.cache[key] = legendre_products(inputs.u, degree)[0]
+    return inputs.cache[key]
+
+
+def hysteresis_columns(inputs: Inputs) -> np.ndarray:
+    """(N, S, K) Prandtl–Ishlinskii basis ŝ − play_r(ŝ)."""
+    if "H" not in inputs.cache:
+        inputs.cache["H"] = inputs.static[:, :, None] - play(inputs.static, inputs.thresholds)
+    return inputs.cache["H"]
+
+
+def creep_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.ndarray:
+    """(N, S) ŝ low-passed with ``tau_s`` (the relaxing creep state)."""
+    key = ("C", tau_s)
+    if key not in inputs.cache:
+        inputs.cache[key] = low_pass(inputs.static, tau_s, rate_hz)
+    return inputs.cache[key]
+
+
+def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
+                       rate_hz: float) -> np.ndarray:
+    """(N, S) asymmetric creep state for unit gain: relaxes toward ŝ − ŝ₀ (the stretch since
+    the first frame) with ``build_s`` while it grows and ``recover_s`` while it shrinks."""
+    key = ("CA", build_s, recover_s)
+    if key not in inputs.cache:
+        t = np.arange(inputs.static.shape[0]) / rate_hz
+        signal = Signal.from_values(t, inputs.static)
+        crept = Creep(gain=1.0, tau_build_s=build_s, tau_recover_s=recover_s).apply(
+            signal, np.random.default_rng(0))
+        inputs.cache[key] = crept.values - inputs.static
+    return inputs.cache[key]
+
+
+def drift_columns(t_norm: np.ndarray, degree: int) -> np.ndarray:
+    """(N, degree) Legendre polynomials P₁…P_degree of time scaled to [−1, 1]."""
+    return legendre_products(t_norm[:, None], degree)[0][:, 1:]
+
+
+def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
+    """(N, P) design matrix of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
+    pose = [static_basis(inputs, spec.degree)]
+    if spec.hysteresis:
+        pose.append(hysteresis_columns(inputs)[:, j, :])
+    for tau in spec.creep_tau_s:
+        pose.append(creep_columns(inputs, tau, rate_hz)[:, j:j + 1])
+    if spec.creep_asym_s:
+        build_s, recover_s = spec.creep_asym_s
+        pose.append(creep_asym_columns(inputs, build_s, recover_s, rate_hz)[:, j:j + 1])
+    x = np.hstack(pose)
+    x = apply_lag(x, spec.lag_kind, spec.lag_s, rate_hz)
+    if spec.drift_degree:
+        x = np.hstack([x, drift_columns(inputs.t_norm, spec.drift_degree)])
+    return x
+
+
+def plateaus(trial: Trial, inputs: Inputs, j: int) -> tuple[float, float]:
+    """Stop levels of sensor j: an end of its range where it sits (within 6 σ of noise) on
+    at least ``PLATEAU_SHARE`` of the frames while the joint moves faster than 10 °/s.
+    A sensor that only reaches its extreme at one pose does so for a few moving frames; a
+    stop holds it there over a range of poses. ±inf where there is none."""
+    if "moving" not in inputs.cache:
+        speed = np.linalg.norm(np.gradient(low_pass(trial.angles, 0.05, trial.rate_hz),
+                                           axis=0), axis=1) * trial.rate_hz
+        inputs.cache["moving"] = trial.valid & (speed > 10.0)
+    moving = inputs.cache["moving"]
+    y = trial.y[:, j]
+    band = 6.0 * trial.noise[j]  # the extreme sample sits ~3.5 σ beyond a plateau's level
+    lo_level, hi_level = np.min(y[trial.valid]), np.max(y[trial.valid])
+    near_lo, near_hi = moving & (y <= lo_level + band), moving & (y >= hi_level - band)
+    share = max(int(moving.sum()), 1)
+    lo = float(np.median(y[near_lo])) if near_lo.sum() >= PLATEAU_SHARE * share else -np.inf
+    hi = float(np.median(y[near_hi])) if near_hi.sum() >= PLATEAU_SHARE * share else np.inf
+    return lo, hi
+
+
+def _decimate(x: np.ndarray, m: int) -> np.ndarray:
+    """Mean of consecutive groups of m rows (a trailing partial group is dropped)."""
+    n = (x.shape[0] // m) * m
+    return x[:n].reshape(n // m, m, *x.shape[1:]).mean(axis=1)
+
+
+@dataclass
+class Fit:
+    """Blocked cross-validation and full-data fit of one model.
+
+    Attributes:
+        spec: the model.
+        residual: (N, S) held-out residual (measurement − prediction of the fold that did not
+            see the frame), sensor units; NaN at frames that are not scored.
+        block_mse: (N_BLOCKS,) held-out mean squared residual per block (all sensors).
+        coef: per sensor, the (P,) coefficients fitted on all valid frames.
+        prediction: (N, S) full-data prediction.
+        clip: per sensor, the (lower, upper) stop levels (±inf when none).
+    """
+
+    spec: Spec
+    residual: np.ndarray
+    block_mse: np.ndarray
+    coef: list[np.ndarray]
+    prediction: np.ndarray
+    clip: list[tuple[float, float]]
+
+    @property
+    def gap(self) -> float:
+        """Held-out RMSE over all sensors and valid frames, sensor units."""
+        r = self.residual[np.isfinite(self.residual)]
+        return float(np.sqrt(np.mean(r**2)))
+
+    def sensor_gap(self) -> np.ndarray:
+        """(S,) held-out RMSE per sensor."""
+        return np.sqrt(np.nanmean(self.residual**2, axis=0))
+
+
+def _solve(gram: np.ndarray, rhs: np.ndarray, penalty: np.ndarray) -> np.ndarray:
+    scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
+    g = gram / np.outer(scale, scale)
+    g[np.diag_indices_from(g)] += penalty
+    return np.linalg.solve(g, rhs / scale) / scale
+
+
+def penalties(n_static: int, n_columns: int) -> np.ndarray:
+    """Relative ridge per design column: numerical only for the static map's ``n_static``
+    columns, ``EFFECT_RIDGE`` for the effect columns, which can be nearly constant in a fold
+    (a play operator that never reverses in its training blocks) and must not extrapolate
+    with a huge coefficient."""
+    out = np.full(n_columns, EFFECT_RIDGE)
+    out[:n_static] = RIDGE
+    return out
+
+
+def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, penalty: np.ndarray | None = None,
+               fit_mask: np.ndarray | None = None,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Blocked CV and full-data fit of one sensor on design x (N, P).
+
+    Args:
+        trial: blocks, validity and rate.
+        x: (N, P) design matrix.
+        y: (N,) measurement.
+        penalty: (P,) relative ridge per column (default: ``RIDGE``).
+        fit_mask: (N,) frames allowed in the fits (default: all valid frames); held-out
+            residuals are reported for every scored frame.
+
+    Returns:
+        held-out residual (N,) (NaN where not scored), full-data coefficients (P,), and the
+        full-data prediction (N,).
+    """
+    mask = trial.valid if fit_mask is None else trial.valid & fit_mask
+    penalty = np.full(x.shape[1], RIDGE) if penalty is None else penalty
+    m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
+    xd = _decimate(x, m)
+    yd = _decimate(y[:, None], m)[:, 0]
+    okd = _decimate(mask[:, None].astype(np.float64), m)[:, 0] == 1.0
+    bd = trial.blocks[: xd.shape[0] * m: m]
+    grams = np.empty((N_BLOCKS, x.shape[1], x.shape[1]))
+    rhs = np.empty((N_BLOCKS, x.shape[1]))
+    for b in range(N_BLOCKS):
+        sel = okd & (bd == b)
+        grams[b] = xd[sel].T @ xd[sel]
+        rhs[b] = xd[sel].T @ yd[sel]
+    gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
+    residual = np.full(y.shape, np.nan)
+    for b in range(N_BLOCKS):
+        coef = _solve(gram_all - grams[b], rhs_all - rhs[b], penalty)
+        sel = trial.scored & (trial.blocks == b)
+        residual[sel] = y[sel] - x[sel] @ coef
+    coef = _solve(gram_all, rhs_all, penalty)
+    return residual, coef, x @ coef
+
+
+def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
+    """Held-out residuals and full-data coefficients of ``spec`` for every sensor.
+
+    With the saturation term the model is fitted on the frames off the plateaus
+    (:func:`plateaus`) and clipped at the stop levels.
+    """
+    s = trial.n_sensors
+    residual = np.empty_like(trial.y)
+    prediction = np.empty_like(trial.y)
+    coefs: list[np.ndarray] = []
+    clips: list[tuple[float, float]] = []
+    for j in range(s):
+        y = trial.y[:, j]
+        x = design(trial.rate_hz, inputs, spec, j)
+        n_static = static_basis(inputs, spec.degree).shape[1]
+        lo, hi = plateaus(trial, inputs, j) if spec.saturation else (-np.inf, np.inf)
+        free = (y > lo + 3.0 * trial.noise[j]) & (y < hi - 3.0 * trial.noise[j])
+        r, c, p = fit_design(trial, x, y, penalties(n_static, x.shape[1]), fit_mask=free)
+        r = y - np.clip(y - r, lo, hi)  # NaN (unscored) stays NaN
+        p = np.clip(p, lo, hi)
+        clips.append((float(lo), float(hi)))
+        residual[:, j], prediction[:, j] = r, p
+        coefs.append(c)
+    block_mse = np.array([np.nanmean(residual[trial.blocks == b] ** 2)
+                          for b in range(N_BLOCKS)])
+    return Fit(spec=spec, residual=residual, block_mse=block_mse, coef=coefs,
+               prediction=prediction, clip=clips)
+
+
+def restrict_to_coverage(trial: Trial, u: np.ndarray) -> float:
+    """Score only held-out frames whose pose the other folds cover.
+
+    A frame counts in the gap when some training frame of its fold lies within
+    ``COVER_RADIUS`` of it in the static map's input space (about 6° of arm direction, or
+    5 % of an angle's range): the gap then measures what the model gets wrong where it was
+    calibrated, not how a polynomial extrapolates to a pose visited once. Sets
+    ``trial.scored`` and returns the fraction of valid frames left out.
+    """
+    from scipy.spatial import cKDTree
+
+    scored = trial.valid.copy()
+    step = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
+    for b in range(N_BLOCKS):
+        train = np.flatnonzero(trial.valid & (trial.blocks != b))[::step]
+        held = np.flatnonzero(trial.valid & (trial.blocks == b))
+        if held.size == 0 or train.size == 0:
+            continue
+        dist, _ = cKDTree(u[train]).query(u[held], distance_upper_bound=COVER_RADIUS)
+        scored[held[~np.isfinite(dist)]] = False
+    trial.scored = scored
+    return 1.0 - scored.sum() / max(int(trial.valid.sum()), 1)
+
+
+def make_inputs(trial: Trial, static_degree: int) -> Inputs:
+    """Scale angles and time, fit the static map of ``static_degree`` on all valid frames
+    (its prediction ŝ is the input of the history terms) and place the play thresholds."""
+    lo = np.min(trial.angles[trial.valid], axis=0)
+    hi = np.max(trial.angles[trial.valid], axis=0)
+    t0, t1 = float(trial.t[0]), float(trial.t[-1])
+    u, kind = map_inputs(trial.angles, trial.angle_names, lo, hi)
+    inputs = Inputs(u=u, input_kind=kind, angle_lo=lo, angle_hi=hi,
+                    static=np.empty(0), static_coef=np.empty(0), static_degree=static_degree,
+                    thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
+                    t_span=(t0, t1))
+    basis = static_basis(inputs, static_degree)
+    coef = np.column_stack([fit_design(trial, basis, trial.y[:, j])[1]
+                            for j in range(trial.n_sensors)])
+    inputs.static_coef = coef
+    inputs.static = basis @ coef
+    spread = np.quantile(inputs.static[trial.valid], 0.99, axis=0) - np.quantile(
+        inputs.static[trial.valid], 0.01, axis=0)
+    spread = np.where(spread > 0, spread, 1.0)
+    inputs.thresholds = spread[:, None] * np.asarray(PLAY_FRACTIONS)[None, :]
+    return inputs

@@ -1,0 +1,252 @@
+"""The calibrated suit profile: the workflow's model written as TOML the emulator can load.
+
+A calibrated suit is not a tendon geometry: it is the calibrated static map (Legendre
+polynomial of the arm direction or the joint angles) plus the effect terms the workflow
+added, with their fitted parameters. Schema ``exohil-calibrated-suit-profile`` version 1
+(docs/discrepancy.md); it sits beside the geometric ``exohil-suit-profile`` (which is
+unchanged) and is read by :func:`load_calibrated_profile`. :func:`simulate_calibrated` turns
+angles into sensor values with it and :func:`simulate_calibrated_recording` makes a
+recording (format v1) from a movement, like :func:`exohil.emulators.simulate.simulate`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from exohil.emulators.discrepancy.model import (
+    Inputs,
+    Spec,
+    design,
+    legendre_products,
+    map_inputs,
+)
+from exohil.emulators.discrepancy.workflow import Outcome
+from exohil.emulators.effects import Noise, Signal
+from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory
+from exohil.emulators.suit_profile import ProfileError
+from exohil.formats.recording import AngleStream, Recording, SensorStream
+
+CALIBRATED_SCHEMA = "exohil-calibrated-suit-profile"
+CALIBRATED_VERSION = 1
+
+
+@dataclass(frozen=True)
+class CalibratedSuit:
+    """A calibrated suit model.
+
+    Attributes:
+        name: profile name.
+        sensors: sensor names, in column order.
+        units: sensor unit.
+        joint / angles: the mocap joint and the angle names it is driven by (degrees).
+        rate_hz: sample rate the filters (lag, creep) were fitted at, Hz.
+        effects: the model's effect terms: those it started with (``--profile``), then those
+            the workflow added, in order.
+        spec: the model's terms and shape parameters.
+        inputs: the static map's scaling, static input coefficients and play thresholds.
+        coef: (S, P) coefficients per sensor in design-column order.
+        stops: (S, 2) hard-stop levels (lower, upper; ±inf when none).
+        noise: (S,) white-noise standard deviation, sensor units.
+    """
+
+    name: str
+    sensors: tuple[str, ...]
+    units: str
+    joint: str
+    angles: tuple[str, ...]
+    rate_hz: float
+    effects: tuple[str, ...]
+    spec: Spec
+    inputs: Inputs
+    coef: np.ndarray
+    stops: np.ndarray
+    noise: np.ndarray
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, int | np.integer):
+        return str(int(value))
+    if isinstance(value, float | np.floating):
+        if math.isnan(float(value)):
+            raise ValueError("a calibrated profile cannot hold NaN")
+        if math.isinf(float(value)):
+            return "inf" if value > 0 else "-inf"
+        return repr(float(value))
+    if isinstance(value, list | tuple | np.ndarray):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def to_toml(data: dict) -> str:
+    """TOML text for the profile's layout: top-level keys, then tables (dict values), then
+    arrays of tables (lists of dicts)."""
+    lines = []
+    tables = {k: v for k, v in data.items() if isinstance(v, dict)}
+    arrays = {k: v for k, v in data.items()
+              if isinstance(v, list) and v and all(isinstance(i, dict) for i in v)}
+    for key, value in data.items():
+        if key not in tables and key not in arrays:
+            lines.append(f"{key} = {_toml_value(value)}")
+    for key, table in tables.items():
+        lines += ["", f"[{key}]"] + [f"{k} = {_toml_value(v)}" for k, v in table.items()]
+    for key, items in arrays.items():
+        for item in items:
+            lines += ["", f"[[{key}]]"] + [f"{k} = {_toml_value(v)}" for k, v in item.items()]
+    return "\n".join(lines) + "\n"
+
+
+def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
+    """The profile as plain data in the TOML layout."""
+    spec, inputs = suit.spec, suit.inputs
+    return {
+        "schema": CALIBRATED_SCHEMA,
+        "version": CALIBRATED_VERSION,
+        "name": suit.name,
+        "description": description,
+        "units": suit.units,
+        "joint": suit.joint,
+        "angles": list(suit.angles),
+        "rate_hz": suit.rate_hz,
+        "effects": list(suit.effects),
+        "static_map": {
+            "inputs": inputs.input_kind,
+            "angle_lo_deg": inputs.angle_lo.tolist(),
+            "angle_hi_deg": inputs.angle_hi.tolist(),
+            "input_degree": inputs.static_degree,
+            "degree": spec.degree,
+            "time_span_s": list(inputs.t_span),
+        },
+        "terms": {
+            "hysteresis": spec.hysteresis,
+            "creep_tau_s": list(spec.creep_tau_s),
+            "creep_build_recover_s": list(spec.creep_asym_s),
+            "lag_kind": spec.lag_kind or "none",
+            "lag_s": spec.lag_s,
+            "drift_degree": spec.drift_degree,
+            "saturation": spec.saturation,
+        },
+        "sensor": [
+            {"name": name,
+             "input_coef": suit.inputs.static_coef[:, j].tolist(),
+             "play_thresholds": suit.inputs.thresholds[j].tolist(),
+             "stops": suit.stops[j].tolist(),
+             "coef": suit.coef[j].tolist(),
+             "noise_sigma": float(suit.noise[j])}
+            for j, name in enumerate(suit.sensors)
+        ],
+    }
+
+
+def write_calibrated_profile(path: str | Path, suit: CalibratedSuit, description: str = "",
+                             ) -> None:
+    """Write ``suit`` as TOML (the caller picks a temporary name and renames it)."""
+    Path(path).write_text(to_toml(profile_dict(suit, description)), encoding="utf-8")
+
+
+def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
+    """Read a calibrated suit profile; one :class:`ProfileError` line on any problem."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise ProfileError(f"{path}: no such calibrated suit profile") from exc
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ProfileError(f"{path}: not a readable TOML file ({exc})") from exc
+    if data.get("schema") != CALIBRATED_SCHEMA or data.get("version") != CALIBRATED_VERSION:
+        raise ProfileError(f"{path}: not a calibrated suit profile (schema "
+                           f"{CALIBRATED_SCHEMA!r} version {CALIBRATED_VERSION})")
+    try:
+        sm, terms, sensors = data["static_map"], data["terms"], data["sensor"]
+        spec = Spec(degree=int(sm["degree"]), hysteresis=bool(terms["hysteresis"]),
+                    creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
+                    creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
+                    lag_kind="" if terms["lag_kind"] == "none" else str(terms["lag_kind"]),
+                    lag_s=float(terms["lag_s"]), drift_degree=int(terms["drift_degree"]),
+                    saturation=bool(terms["saturation"]))
+        inputs = Inputs(u=np.empty((0, 0)), input_kind=str(sm["inputs"]),
+                        angle_lo=np.asarray(sm["angle_lo_deg"], dtype=np.float64),
+                        angle_hi=np.asarray(sm["angle_hi_deg"], dtype=np.float64),
+                        static=np.empty(0),
+                        static_coef=np.column_stack([s["input_coef"] for s in sensors]),
+                        static_degree=int(sm["input_degree"]),
+                        thresholds=np.asarray([s["play_thresholds"] for s in sensors]),
+                        t_norm=np.empty(0),
+                        t_span=(float(sm["time_span_s"][0]), float(sm["time_span_s"][1])))
+        return CalibratedSuit(
+            name=str(data["name"]), sensors=tuple(s["name"] for s in sensors),
+            units=str(data["units"]), joint=str(data["joint"]),
+            angles=tuple(data["angles"]), rate_hz=float(data["rate_hz"]),
+            effects=tuple(data["effects"]), spec=spec, inputs=inputs,
+            coef=np.asarray([s["coef"] for s in sensors], dtype=np.float64),
+            stops=np.asarray([s["stops"] for s in sensors], dtype=np.float64),
+            noise=np.asarray([s["noise_sigma"] for s in sensors], dtype=np.float64))
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise ProfileError(f"{path}: malformed calibrated suit profile ({exc!r})") from exc
+
+
+def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray,
+                        ) -> np.ndarray:
+    """Noise-free sensor values (N, S) in ``suit.units`` for angles (N, A) in degrees (in
+    ``suit.angles`` order) sampled uniformly at ``suit.rate_hz`` at times ``t`` (s)."""
+    u, _ = map_inputs(angles_deg, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
+    t0, t1 = suit.inputs.t_span
+    inputs = Inputs(u=u, input_kind=suit.inputs.input_kind, angle_lo=suit.inputs.angle_lo,
+                    angle_hi=suit.inputs.angle_hi, static=np.empty(0),
+                    static_coef=suit.inputs.static_coef,
+                    static_degree=suit.inputs.static_degree,
+                    thresholds=suit.inputs.thresholds,
+                    t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1))
+    inputs.static = legendre_products(u, inputs.static_degree)[0] @ inputs.static_coef
+    out = np.empty((t.shape[0], len(suit.sensors)))
+    for j in range(len(suit.sensors)):
+        out[:, j] = np.clip(design(suit.rate_hz, inputs, suit.spec, j) @ suit.coef[j],
+                            suit.stops[j, 0], suit.stops[j, 1])
+    return out
+
+
+def simulate_calibrated_recording(trajectory: Trajectory, suit: CalibratedSuit,
+                                  seed: int) -> Recording:
+    """A recording of the calibrated suit following a shoulder ``trajectory``: sensors at the
+    profile's rate with its white noise, exact angles on ``/mocap/shoulder`` at 120 Hz."""
+    missing = [a for a in suit.angles if a not in ANGLE_NAMES]
+    if missing:
+        raise ProfileError(f"profile {suit.name!r} is driven by {missing}, which a shoulder "
+                           "trajectory does not have")
+    t = trajectory.frame_times(suit.rate_hz)
+    sampled = trajectory.sample(t)
+    angles = sampled[:, [ANGLE_NAMES.index(a) for a in suit.angles]]
+    clean = Signal.from_values(t, simulate_calibrated(suit, t, angles))
+    noisy = Noise(sigma_mm=suit.noise.tolist()).apply(clean, np.random.default_rng(seed))
+    t_mocap = trajectory.frame_times(MOCAP_RATE_HZ)
+    return Recording(
+        sensor_names=suit.sensors,
+        sensors=SensorStream(seq=np.arange(t.shape[0]), t=t, values=noisy.values),
+        mocap={"shoulder": AngleStream(t=t_mocap, names=ANGLE_NAMES,
+                                       angles=trajectory.sample(t_mocap))},
+        sensor_units=suit.units, sensor_rate_hz=suit.rate_hz, mocap_rate_hz=MOCAP_RATE_HZ,
+        segments=list(trajectory.segments),
+        metadata={"generator": "exohil.emulators.discrepancy.profile", "seed": str(int(seed)),
+                  "trajectory": trajectory.source, "suit_profile": suit.name})
+
+
+def calibrated_suit(outcome: Outcome, name: str) -> CalibratedSuit:
+    """The final model of a workflow run as a calibrated suit."""
+    after, trial = outcome.after, outcome.trial
+    return CalibratedSuit(
+        name=name, sensors=trial.sensor_names, units=trial.units, joint=trial.joint,
+        angles=trial.angle_names, rate_hz=trial.rate_hz,
+        effects=tuple(outcome.summary["already_in_model"]) + tuple(outcome.summary["effects"]),
+        spec=after.spec, inputs=outcome.inputs,
+        coef=np.asarray(after.coef),
+        stops=np.asarray(after.clip, dtype=np.float64),
+        noise=np.asarray(outcome.summary["noise_floor_per_sensor"]))

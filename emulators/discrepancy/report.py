@@ -1,0 +1,160 @@
+"""Outputs of a discrepancy run: ``discrepancy.json``, ``report.md`` with two plots, and the
+calibrated suit profile ``suit_profile.toml``. Every file is written under a temporary name
+in the output folder and renamed when complete, so a crash never leaves a half-written file
+under a final name.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from exohil.emulators.discrepancy.localise import motion
+from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
+from exohil.emulators.discrepancy.workflow import Outcome
+
+OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
+                "suit_profile.toml")
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _main_angle(outcome: Outcome) -> int:
+    """The angle with the widest recorded range (the x axis of the angle plot)."""
+    a = outcome.trial.angles[outcome.trial.valid]
+    return int(np.argmax(np.ptp(a, axis=0)))
+
+
+def _plots(outcome: Outcome) -> dict[str, bytes]:
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    trial = outcome.trial
+    s = trial.n_sensors
+    units = trial.units
+    out = {}
+    fig, axes = plt.subplots(s, 1, figsize=(10, 1.8 * s + 1), sharex=True, squeeze=False)
+    for j, ax in enumerate(axes[:, 0]):
+        ax.plot(trial.t, outcome.before.residual[:, j], lw=0.5, color="0.6", label="before")
+        ax.plot(trial.t, outcome.after.residual[:, j], lw=0.5, color="C3", label="after")
+        ax.set_ylabel(f"{trial.sensor_names[j]} [{units}]")
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle("held-out residual (measured − simulated), before and after the added effects")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    out["residual_time.png"] = buf.getvalue()
+
+    k = _main_angle(outcome)
+    direction = motion(trial, outcome.inputs.static)["direction"]
+    stride = max(1, trial.n // 20000)
+    fig, axes = plt.subplots(s, 2, figsize=(10, 1.8 * s + 1), sharex=True, squeeze=False)
+    for j in range(s):
+        for col, (label, fit) in enumerate((("before", outcome.before),
+                                            ("after", outcome.after))):
+            ax = axes[j, col]
+            for sign, colour, name in ((1, "tab:red", "rising"), (-1, "tab:blue", "falling"),
+                                       (0, "0.6", "still")):
+                sel = (direction[:, j] == sign) & trial.valid
+                sel[np.arange(trial.n) % stride != 0] = False
+                ax.plot(trial.angles[sel, k], fit.residual[sel, j], ".", ms=1, color=colour,
+                        label=name)
+            if j == 0:
+                ax.set_title(label)
+            if col == 0:
+                ax.set_ylabel(f"{trial.sensor_names[j]} [{units}]")
+    axes[0, 1].legend(loc="upper right", fontsize=8, markerscale=6)
+    for ax in axes[-1]:
+        ax.set_xlabel(f"{trial.angle_names[k]} [deg]")
+    fig.suptitle("held-out residual against angle, by direction of the sensor's motion")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    out["residual_angle.png"] = buf.getvalue()
+    return out
+
+
+def markdown(summary: dict) -> str:
+    """The human-readable report."""
+    u = summary["units"]
+    lines = [f"# Discrepancy report: {summary['recording']}", "",
+             f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
+             f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
+             f"at {summary['rate_hz']} Hz, {summary['invalid_frames']} invalid (dropped or "
+             "outside motion capture).", "",
+             f"**{summary['conclusion']}.** Held-out gap (sensor-space RMSE on "
+             f"{summary['heldout_blocks']}-fold blocked cross-validation): "
+             f"{summary['gap_before']:.4g} {u} before, {summary['gap_after']:.4g} {u} after; "
+             f"noise floor {summary['noise_floor']:.4g} {u}.", "",
+             "| step | effect | held-out gap | removed RMS | blocks improved | parameters |",
+             "|---|---|---|---|---|---|",
+             f"| 0 | calibrated static map (degree {summary['static_map']['degree']}) | "
+             f"{summary['gap_before']:.4g} | | | |"]
+    for i, step in enumerate(summary["steps"], start=1):
+        ev = step["evidence"]
+        params = json.dumps({k: v for k, v in step["params"].items()
+                             if k not in ("play_thresholds", "weights")})
+        lines.append(f"| {i} | {step['effect']} | {step['gap']:.4g} | {ev['removed_rms']:.4g} "
+                     f"| {ev['blocks_improved']}/{summary['heldout_blocks']} | `{params}` |")
+    lines += ["", "## Signatures in the residual at each step", ""]
+    for i, step in enumerate(summary["steps"], start=1):
+        sig = step["evidence"]["signature"]
+        lines.append(f"- step {i} ({step['effect']}): " + ", ".join(
+            f"{k} {v}" for k, v in sig.items()))
+    if summary["not_added"]:
+        lines += ["", "## Not added (not beyond the noise)", ""]
+        for item in summary["not_added"]:
+            ev = item["evidence"]
+            lines.append(f"- {item['effect']}: held-out gap {item['gap']:.4g}, removed RMS "
+                         f"{ev['removed_rms']:.4g} vs noise floor {ev['noise_floor']:.4g}")
+    lb, la = summary["localisation_before"], summary["localisation_after"]
+    lines += ["", "## Where the residual was (before → after, RMS)", "",
+              f"- by direction: {lb['by_direction']} → {la['by_direction']}",
+              f"- by speed tercile: {[c['rms'] for c in lb['by_speed']]} → "
+              f"{[c['rms'] for c in la['by_speed']]}",
+              f"- during holds: {lb['holds']['rms']} → {la['holds']['rms']} "
+              f"({lb['holds']['count']} holds ≥ 1 s)",
+              f"- by time: {[c['rms'] for c in lb['by_time']]} → "
+              f"{[c['rms'] for c in la['by_time']]}"]
+    for name, cells in lb["by_angle"].items():
+        after = la["by_angle"][name]
+        lines.append(f"- by {name}: {[c['rms'] for c in cells]} → {[c['rms'] for c in after]}")
+    lines += ["", "![residual against time](residual_time.png)", "",
+              "![residual against angle](residual_angle.png)", "",
+              "The updated model is `suit_profile.toml` (schema exohil-calibrated-suit-profile; "
+              "load with `exohil.emulators.discrepancy.load_calibrated_profile`).", ""]
+    return "\n".join(lines)
+
+
+def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str) -> list[Path]:
+    """Write every output into ``out_dir`` (created if needed); returns the paths."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files: dict[str, bytes] = _plots(outcome)
+    suit = calibrated_suit(outcome, profile_name)
+    files["suit_profile.toml"] = to_toml(profile_dict(
+        suit, f"calibrated by exohil discrepancy from {outcome.summary['recording']}")
+    ).encode("utf-8")
+    files["report.md"] = markdown(outcome.summary).encode("utf-8")
+    files["discrepancy.json"] = (json.dumps(outcome.summary, indent=1) + "\n").encode("utf-8")
+    written = []
+    for name in OUTPUT_NAMES:
+        path = out_dir / name
+        _write_atomic(path, files[name])
+        written.append(path)
+    return written

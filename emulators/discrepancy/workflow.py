@@ -1,0 +1,318 @@
+"""The discrepancy workflow: calibrate, simulate, localise, name the missing effect, add it,
+repeat until nothing significant remains.
+
+Decision rule (why an effect is named): a candidate is *significant* when, on held-out
+contiguous blocks (blocked cross-validation: every block is predicted by a model fitted on
+the others), it
+
+1. removes systematic error larger than the measurement noise: the drop in held-out mean
+   squared error ΔMSE exceeds σ², σ being the white-noise floor estimated from second
+   differences (:func:`noise_floor`); an effect whose contribution per sample is below the
+   sensor noise cannot be told from it (signal-to-noise ratio < 1), and
+2. does not rest on one block: ΔMSE stays positive when the block with the largest
+   improvement is left out (evidence from at least two independent stretches of time).
+
+Held-out error already charges a candidate for its extra parameters (fitting noise makes
+held-out error worse, not better), so no parameter-count penalty is added. Among significant
+candidates the largest ΔMSE is named; the workflow stops when none is significant.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from exohil.emulators.discrepancy.data import Trial, prepare_trial
+from exohil.emulators.discrepancy.localise import localise, motion, signatures
+from exohil.emulators.discrepancy.model import (
+    Fit,
+    Inputs,
+    Spec,
+    drift_columns,
+    fit,
+    legendre_products,
+    make_inputs,
+    restrict_to_coverage,
+)
+from exohil.formats.recording import Recording
+
+VOCABULARY = ("hysteresis", "creep", "saturation", "lag", "drift")
+LAG_TAU_S = (0.01, 0.02, 0.04, 0.08, 0.2)
+LAG_DELAY_S = (0.01, 0.025, 0.06, 0.15)
+#: Relative precision of the refined lag (log seconds).
+LAG_LOG_TOL = 0.02
+CREEP_TAU_S = (1.5, 5.0, 15.0, 45.0)
+#: (build, recover) pairs of the asymmetric creep state, s.
+CREEP_ASYM_S = ((3.0, 9.0), (10.0, 30.0), (30.0, 90.0))
+DRIFT_DEGREES = (1, 2, 3)
+
+
+@dataclass
+class Outcome:
+    """Everything the workflow found.
+
+    Attributes:
+        trial: the recording on its grid.
+        inputs: scaling, static input and caches of the final model.
+        before / after: fits of the calibrated model before any effect was added and at the
+            end.
+        summary: the ``discrepancy.json`` content.
+    """
+
+    trial: Trial
+    inputs: Inputs
+    before: Fit
+    after: Fit
+    summary: dict
+
+
+def _degrees(n_inputs: int) -> range:
+    """Static-map degrees tried: more for fewer inputs (the basis grows as degree^inputs)."""
+    return {1: range(1, 8), 2: range(2, 7), 3: range(2, 6)}.get(n_inputs, range(2, 4))
+
+
+def _candidates(kind: str, spec: Spec) -> list[Spec]:
+    """The configurations of ``kind`` to try on top of ``spec`` (lag: see _refine_lag)."""
+    if kind == "hysteresis":
+        return [replace(spec, hysteresis=True)]
+    if kind == "creep":
+        return ([replace(spec, creep_tau_s=(tau,)) for tau in CREEP_TAU_S]
+                + [replace(spec, creep_asym_s=pair) for pair in CREEP_ASYM_S])
+    if kind == "drift":
+        return [replace(spec, drift_degree=d) for d in DRIFT_DEGREES]
+    if kind == "saturation":
+        return [replace(spec, saturation=True)]
+    raise ValueError(f"unknown effect {kind!r}; known: {', '.join(VOCABULARY)}")
+
+
+def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
+    """The candidate configuration of ``kind`` with the lowest held-out error."""
+    if kind == "lag":  # refine each lag model between its grid neighbours, then compare
+        return min([_refine_lag(trial, inputs, spec, "first_order", LAG_TAU_S),
+                    _refine_lag(trial, inputs, spec, "delay", LAG_DELAY_S)],
+                   key=lambda f: f.gap)
+    best = min((fit(trial, inputs, s) for s in _candidates(kind, spec)), key=lambda f: f.gap)
+    if kind == "creep" and best.spec.creep_tau_s:  # a second time constant, if it helps
+        tau = best.spec.creep_tau_s[0]
+        pairs = [replace(spec, creep_tau_s=(tau, other)) for other in CREEP_TAU_S if other != tau]
+        best = min([best] + [fit(trial, inputs, s) for s in pairs], key=lambda f: f.gap)
+    return best
+
+
+def _refine_lag(trial: Trial, inputs: Inputs, spec: Spec, lag_kind: str,
+                grid: tuple[float, ...]) -> Fit:
+    """The best time constant or delay of one lag model: grid, then a golden-section search
+    on log(seconds) between the best grid point's neighbours (the held-out error is sharp in
+    τ: 10 % off leaves a velocity-shaped residual)."""
+    fits = {v: fit(trial, inputs, replace(spec, lag_kind=lag_kind, lag_s=v)) for v in grid}
+    k = min(range(len(grid)), key=lambda i: fits[grid[i]].gap)
+    lo = math.log(grid[max(k - 1, 0)] if k > 0 else grid[0] / 2)
+    hi = math.log(grid[min(k + 1, len(grid) - 1)] if k < len(grid) - 1 else grid[-1] * 2)
+
+    def gap(log_s: float) -> float:
+        value = math.exp(log_s)
+        if value not in fits:
+            fits[value] = fit(trial, inputs, replace(spec, lag_kind=lag_kind, lag_s=value))
+        return fits[value].gap
+
+    minimize_scalar(gap, bounds=(lo, hi), method="bounded",
+                    options={"xatol": LAG_LOG_TOL, "maxiter": 8})
+    return min(fits.values(), key=lambda f: f.gap)
+
+
+def _best_degree(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
+    """Re-choose the static map's degree with the effect terms in place: an unexplained
+    effect makes the static-only fit prefer a stiffer map than the suit needs."""
+    others = [fit(trial, inputs, replace(current.spec, degree=d))
+              for d in _degrees(inputs.u.shape[1]) if d != current.spec.degree]
+    return min([current] + others, key=lambda f: f.gap)
+
+
+def _column_slices(spec: Spec, n_static: int, n_play: int) -> dict[str, slice]:
+    """Where each term's coefficients sit in a sensor's coefficient vector."""
+    out, at = {}, n_static
+    for kind, width in (("hysteresis", n_play if spec.hysteresis else 0),
+                        ("creep", len(spec.creep_tau_s) + (1 if spec.creep_asym_s else 0)),
+                        ("drift", spec.drift_degree)):
+        out[kind] = slice(at, at + width)
+        at += width
+    return out
+
+
+def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
+    """The fitted parameters of one effect term, per sensor where they differ (sensor units
+    unless the name says otherwise)."""
+    spec = result.spec
+    n_static = len(legendre_products(inputs.u[:1], spec.degree)[1])
+    cols = _column_slices(spec, n_static, inputs.thresholds.shape[1]).get(kind, slice(0, 0))
+    if kind == "hysteresis":
+        weights = [c[cols] for c in result.coef]
+        # rising: ŝ − play = +r, and the rising branch reads low, so the full width
+        # (falling − rising) after a large excursion is −2 Σ w·r
+        width = [float(-2.0 * np.dot(w, r)) for w, r in zip(weights, inputs.thresholds,
+                                                              strict=True)]
+        return {"loop_width": [round(w, 5) for w in width],
+                "play_thresholds": np.round(inputs.thresholds, 5).tolist(),
+                "weights": [np.round(w, 5).tolist() for w in weights]}
+    if kind == "creep":
+        return {"tau_s": list(spec.creep_tau_s), "build_recover_s": list(spec.creep_asym_s),
+                "gain": [np.round(c[cols], 5).tolist() for c in result.coef]}
+    if kind == "lag":
+        key = "tau_s" if spec.lag_kind == "first_order" else "delay_s"
+        return {"model": spec.lag_kind, key: spec.lag_s}
+    if kind == "drift":
+        ends = drift_columns(np.array([-1.0, 1.0]), spec.drift_degree)
+        change = [float((ends[1] - ends[0]) @ c[cols]) for c in result.coef]
+        span = inputs.t_span[1] - inputs.t_span[0]
+        return {"degree": spec.drift_degree, "change": [round(c, 5) for c in change],
+                "mean_rate_per_s": [round(c / span, 7) for c in change]}
+    if kind == "saturation":
+        pred = result.prediction[trial.valid]
+        return {"stops": [[None if not np.isfinite(v) else round(v, 5) for v in pair]
+                          for pair in result.clip],
+                "lower": np.round(pred.min(axis=0), 5).tolist(),
+                "upper": np.round(pred.max(axis=0), 5).tolist()}
+    raise ValueError(kind)
+
+
+def _evidence(base: Fit, cand: Fit, floor: float) -> dict:
+    delta = base.block_mse - cand.block_mse
+    dmse = float(np.mean(delta))
+    robust = float(np.mean(np.sort(delta)[:-1]))
+    return {
+        "heldout_gap": round(cand.gap, 6),
+        "gap_reduction": round((base.gap - cand.gap) / base.gap, 4) if base.gap > 0 else 0.0,
+        "delta_mse": round(dmse, 8),
+        "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
+        "noise_floor": round(floor, 6),
+        "blocks_improved": int(np.sum(delta > 0)),
+        "delta_mse_without_best_block": round(robust, 8),
+        "significant": bool(dmse > floor**2 and robust > 0),
+        "config": _config(cand.spec),
+    }
+
+
+def _config(spec: Spec) -> dict:
+    return {"degree": spec.degree, "hysteresis": spec.hysteresis,
+            "creep_tau_s": list(spec.creep_tau_s), "creep_asym_s": list(spec.creep_asym_s),
+            "lag": spec.lag_kind, "lag_s": spec.lag_s,
+            "drift_degree": spec.drift_degree, "saturation": spec.saturation}
+
+
+def _conclusion(steps: list[dict], spec: Spec) -> str:
+    if steps:
+        return f"named {', '.join(s['effect'] for s in steps)}"
+    if not [k for k in VOCABULARY if k not in spec.effects()]:
+        return "every effect of the vocabulary is already in the model; nothing to add"
+    return "no candidate effect beats the noise; nothing added"
+
+
+def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
+        progress: Callable[[str], None] = lambda line: None) -> Outcome:
+    """Run the whole workflow on a recording.
+
+    Args:
+        rec: measured recording (sensors + motion capture).
+        name: how the recording is named in messages.
+        in_model: effects the current suit model already has (from its profile): they are
+            fitted from the start and never proposed as missing.
+        progress: called with one line per step.
+
+    Raises:
+        DiscrepancyError: the recording cannot be used (no mocap, too short, ...).
+    """
+    trial = prepare_trial(rec, name)
+    floors = trial.noise
+    floor = float(np.sqrt(np.mean(floors**2)))
+    progress(f"[1] calibrating the static map: {trial.n_sensors} sensors ({trial.units}) from "
+             f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
+             f"{trial.rate_hz:.1f} Hz, {int((~trial.valid).sum())} invalid; noise floor "
+             f"{floor:.4g} {trial.units}")
+    fits = []
+    u = make_inputs(trial, 1).u
+    n_inputs = u.shape[1]
+    uncovered = restrict_to_coverage(trial, u)
+    if uncovered > 0:
+        progress(f"    {uncovered:.1%} of frames are poses no other fold covers: not scored")
+    for degree in _degrees(n_inputs):
+        inputs = make_inputs(trial, degree)
+        fits.append((fit(trial, inputs, Spec(degree=degree)), inputs))
+    static_fit, inputs = min(fits, key=lambda pair: pair[0].gap)
+    spec = static_fit.spec
+    for kind in in_model:
+        spec = _best(trial, inputs, kind, spec).spec
+    base = fit(trial, inputs, spec) if in_model else static_fit
+    before = base
+    progress(f"[2] simulated with the calibrated model (degree {spec.degree}"
+             f"{', with ' + ', '.join(in_model) if in_model else ''}): held-out gap "
+             f"{base.gap:.4g} {trial.units}")
+    mot = motion(trial, inputs.static)
+    local_before = localise(trial, base.residual, mot)
+    progress(f"[3] localised: by direction {local_before['by_direction']}, during holds "
+             f"{local_before['holds']['rms']}, by speed "
+             f"{[c['rms'] for c in local_before['by_speed']]}")
+    steps: list[dict] = []
+    rejected: list[dict] = []
+    step = 4
+    while True:
+        missing = [k for k in VOCABULARY if k not in spec.effects()]
+        if not missing:
+            break
+        sig = signatures(trial, base.residual, mot, floor)
+        scored = []
+        for kind in missing:
+            cand = _best(trial, inputs, kind, spec)
+            scored.append((kind, cand, _evidence(base, cand, floor)))
+        scored.sort(key=lambda item: -item[2]["delta_mse"])
+        table = ", ".join(f"{k} {e['heldout_gap']:.4g}" for k, _, e in scored)
+        winners = [item for item in scored if item[2]["significant"]]
+        if not winners:
+            rejected = [{"effect": k, "gap": e["heldout_gap"], "evidence": {**e, **sig}}
+                        for k, _, e in scored]
+            progress(f"[{step}] no candidate beats the noise (gap {base.gap:.4g}, floor "
+                     f"{floor:.4g}; tried {table}): nothing added")
+            break
+        kind, cand, _ = winners[0]
+        cand = _best_degree(trial, inputs, cand)
+        evidence = _evidence(base, cand, floor)
+        spec, base = cand.spec, cand
+        steps.append({"effect": kind, "gap": round(cand.gap, 6),
+                      "params": effect_params(kind, cand, inputs, trial),
+                      "evidence": {**evidence, "signature": sig,
+                                   "alternatives": {k: e["heldout_gap"] for k, _, e in scored
+                                                    if k != kind}}})
+        progress(f"[{step}] added {kind}: held-out gap {cand.gap:.4g} {trial.units} "
+                 f"(tried {table})")
+        step += 1
+    after = base
+    summary = {
+        "recording": name,
+        "effects": [s["effect"] for s in steps],
+        "gap_before": round(before.gap, 6),
+        "gap_after": round(after.gap, 6),
+        "units": trial.units,
+        "sensors": list(trial.sensor_names),
+        "sensor_gap_before": np.round(before.sensor_gap(), 6).tolist(),
+        "sensor_gap_after": np.round(after.sensor_gap(), 6).tolist(),
+        "noise_floor": round(floor, 6),
+        "noise_floor_per_sensor": np.round(floors, 6).tolist(),
+        "joint": trial.joint,
+        "angles": list(trial.angle_names),
+        "rate_hz": round(trial.rate_hz, 4),
+        "frames": trial.n,
+        "invalid_frames": int((~trial.valid).sum()),
+        "unscored_frames": int((trial.valid & ~trial.scored).sum()),
+        "already_in_model": list(in_model),
+        "static_map": {"kind": "legendre_polynomial", "degree": spec.degree},
+        "heldout_blocks": int(trial.blocks.max()) + 1,
+        "localisation_before": local_before,
+        "localisation_after": localise(trial, after.residual, mot),
+        "steps": steps,
+        "not_added": rejected,
+        "conclusion": _conclusion(steps, spec),
+    }
+    return Outcome(trial=trial, inputs=inputs, before=before, after=after, summary=summary)

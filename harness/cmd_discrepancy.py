@@ -1,0 +1,82 @@
+"""``exohil discrepancy``: where simulation and measurement disagree, and which effect is
+missing (docs/discrepancy.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
+    """The profile's name and the vocabulary effects its model already has."""
+    from exohil.emulators.discrepancy import VOCABULARY
+    from exohil.emulators.discrepancy.profile import (
+        CALIBRATED_SCHEMA,
+        load_calibrated_profile,
+    )
+    from exohil.emulators.suit_profile import ProfileError, load_profile
+
+    if profile_path is None:
+        return "calibrated", ()
+    try:
+        import tomllib
+
+        schema = tomllib.loads(profile_path.read_text(encoding="utf-8")).get("schema")
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise click.ClickException(f"{profile_path}: not a readable suit profile ({exc})") from exc
+    try:
+        if schema == CALIBRATED_SCHEMA:
+            suit = load_calibrated_profile(profile_path)
+            return suit.name, tuple(e for e in suit.effects if e in VOCABULARY)
+        profile = load_profile(profile_path)
+    except ProfileError as exc:
+        raise click.ClickException(str(exc)) from exc
+    kinds = {e.name for e in profile.effects.effects}
+    return profile.name, tuple(k for k in VOCABULARY if k in kinds)
+
+
+@click.command("discrepancy")
+@click.argument("measured", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--profile", "profile_path", type=click.Path(exists=True, dir_okay=False,
+                                                           path_type=Path),
+              help="Current suit profile (geometric or calibrated TOML): the effects it already "
+                   "has are fitted from the start and not proposed again. Its geometry is not "
+                   "assumed; the static map is calibrated to the measurement.")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path),
+              default=Path("discrepancy"), show_default=True,
+              help="Output folder: discrepancy.json, report.md, plots, suit_profile.toml.")
+def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> None:
+    """Find what the simulated suit gets wrong on MEASURED (sensors + motion capture), name
+    the missing effect, add it, and show the held-out gap shrink, step by step.
+
+    \b
+    Example:
+      exohil discrepancy trial.mcap --out disc/
+    """
+    from exohil.emulators.discrepancy import DiscrepancyError, run
+    from exohil.emulators.discrepancy.report import OUTPUT_NAMES, write_outputs
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.recording_reader import read_recording
+
+    inputs = {measured.resolve()} | ({profile_path.resolve()} if profile_path else set())
+    outputs = {(out_dir / name).resolve() for name in OUTPUT_NAMES}
+    if out_dir.resolve() in inputs or inputs & outputs:
+        raise click.ClickException(f"--out {out_dir} would overwrite an input; choose another "
+                                   "folder")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise click.ClickException(f"--out {out_dir} is not a folder")
+    name, in_model = _in_model(profile_path)
+    try:
+        rec = read_recording(measured)
+        outcome = run(rec, measured.name, in_model=in_model,
+                      progress=lambda line: click.echo(line, err=True))
+    except (RecordingError, DiscrepancyError) as exc:
+        raise click.ClickException(str(exc)) from exc
+    written = write_outputs(outcome, out_dir, f"{name}+{measured.stem}")
+    s = outcome.summary
+    click.echo(f"{s['conclusion']}: held-out gap {s['gap_before']:.4g} -> {s['gap_after']:.4g} "
+               f"{s['units']}; wrote {', '.join(str(p) for p in written)}", err=True)
+
+
+COMMANDS: list[click.Command] = [discrepancy]

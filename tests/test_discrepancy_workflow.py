@@ -1,0 +1,158 @@
+"""The discrepancy workflow: data preparation, model pieces, CLI contract, calibrated profile."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from exohil.emulators.discrepancy import DiscrepancyError, noise_floor, prepare_trial, run
+from exohil.emulators.discrepancy.hidden import Case, make_recording, random_trajectory
+from exohil.emulators.discrepancy.model import delay, low_pass, play
+from exohil.emulators.discrepancy.profile import (
+    calibrated_suit,
+    load_calibrated_profile,
+    simulate_calibrated,
+    simulate_calibrated_recording,
+)
+from exohil.formats.recording import Recording, SensorStream
+from exohil.formats.recording_reader import read_recording
+from exohil.formats.recording_writer import write_recording
+from exohil.harness.cli import main
+
+FOREIGN = Path(__file__).resolve().parents[2] / "shared" / "samples" / "foreign-recording-v1.mcap"
+
+
+@pytest.fixture(scope="module")
+def hysteresis_outcome():
+    rec = make_recording(Case("hysteresis", "lib", 2, seed=11, duration_s=40.0))
+    return rec, run(rec, "hyst")
+
+
+def test_sequence_gaps_become_invalid_grid_frames():
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    keep = np.ones(len(rec.sensors), dtype=bool)
+    keep[100:110] = False
+    keep[5000] = False
+    gappy = Recording(sensor_names=rec.sensor_names,
+                      sensors=SensorStream(seq=rec.sensors.seq[keep], t=rec.sensors.t[keep],
+                                           values=rec.sensors.values[keep]),
+                      mocap=rec.mocap)
+    trial = prepare_trial(gappy)
+    assert trial.n == len(rec.sensors)
+    assert not trial.valid[100:110].any() and not trial.valid[5000]
+    assert trial.valid[110:4990].all()
+    np.testing.assert_allclose(trial.t, rec.sensors.t, atol=1e-9)
+
+
+def test_no_mocap_and_too_short_are_one_clear_error():
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    no_mocap = Recording(sensor_names=rec.sensor_names, sensors=rec.sensors)
+    with pytest.raises(DiscrepancyError, match="no motion capture"):
+        prepare_trial(no_mocap, "x.mcap")
+    short = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    with pytest.raises(DiscrepancyError, match="too short to hold out a block"):
+        prepare_trial(short, "x.mcap")
+
+
+def test_noise_floor_recovers_white_noise_under_motion():
+    rec = make_recording(Case("clean", "lib", 1, seed=5, duration_s=30.0))
+    floor = noise_floor(prepare_trial(rec))
+    np.testing.assert_allclose(floor, 0.15, rtol=0.08)
+
+
+def test_play_delay_and_low_pass():
+    x = np.array([0.0, 1.0, 2.0, 1.5, 1.0, 2.0])[:, None]
+    out = play(x, np.array([[0.5]]))[:, 0, 0]
+    np.testing.assert_allclose(out, [0.0, 0.5, 1.5, 1.5, 1.5, 1.5])
+    np.testing.assert_allclose(delay(np.arange(6.0)[:, None], 0.2, 10.0)[:, 0],
+                               [0, 0, 0, 1, 2, 3])
+    step = low_pass(np.r_[np.zeros(3), np.ones(2000)][:, None], 0.1, 1000.0)[:, 0]
+    assert step[2] == 0.0 and abs(step[3 + 100] - (1 - np.exp(-1))) < 0.01
+
+
+def test_hidden_hysteresis_is_named_and_the_gap_shrinks(hysteresis_outcome):
+    _, outcome = hysteresis_outcome
+    s = outcome.summary
+    assert s["effects"][0] == "hysteresis"
+    assert s["gap_after"] <= 0.5 * s["gap_before"]
+    assert s["steps"][0]["evidence"]["significant"]
+    widths = s["steps"][0]["params"]["loop_width"]
+    assert all(w > 0 for w in widths)  # the falling branch reads above the rising one
+
+
+def test_calibrated_profile_round_trip_reproduces_the_model(hysteresis_outcome, tmp_path):
+    from exohil.emulators.discrepancy.profile import write_calibrated_profile
+
+    _, outcome = hysteresis_outcome
+    suit = calibrated_suit(outcome, "test")
+    write_calibrated_profile(tmp_path / "p.toml", suit)
+    loaded = load_calibrated_profile(tmp_path / "p.toml")
+    assert loaded.effects == ("hysteresis",) + tuple(outcome.summary["effects"][1:])
+    trial = outcome.trial
+    sim = simulate_calibrated(loaded, trial.t, trial.angles)
+    np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
+    rec = simulate_calibrated_recording(random_trajectory(2, 20.0), loaded, seed=1)
+    assert rec.sensors.values.shape == (5000, trial.n_sensors)
+    assert np.isfinite(rec.sensors.values).all()
+
+
+def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_path):
+    rec, _ = hysteresis_outcome
+    path = tmp_path / "measured.mcap"
+    write_recording(path, rec)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "[1] calibrating" in result.stderr and "added hysteresis" in result.stderr
+    summary = json.loads((out / "discrepancy.json").read_text())
+    assert set(summary) >= {"effects", "gap_before", "gap_after", "units", "sensors", "steps"}
+    assert summary["units"] == "mm" and summary["sensors"] == list(rec.sensor_names)
+    assert summary["effects"] == [s["effect"] for s in summary["steps"]]
+    assert set(summary["effects"]) <= {"hysteresis", "creep", "saturation", "lag", "drift"}
+    for step in summary["steps"]:
+        assert set(step) == {"effect", "gap", "params", "evidence"}
+    assert (out / "report.md").read_text().startswith("# Discrepancy report")
+    assert load_calibrated_profile(out / "suit_profile.toml").sensors == rec.sensor_names
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary left
+    again = CliRunner().invoke(main, ["discrepancy", str(path), "--profile",
+                                      str(out / "suit_profile.toml"), "--out", str(tmp_path / "b")])
+    assert again.exit_code == 0, again.output
+    second = json.loads((tmp_path / "b" / "discrepancy.json").read_text())
+    assert second["already_in_model"] == summary["effects"]
+    assert not set(second["effects"]) & set(summary["effects"])
+
+
+def test_cli_errors_are_one_line(tmp_path):
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    short = tmp_path / "short.mcap"
+    write_recording(short, rec)
+    result = CliRunner().invoke(main, ["discrepancy", str(short), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 1 and "too short to hold out a block" in result.output
+    assert len(result.output.strip().splitlines()) == 1 + sum(
+        line.startswith("[") for line in result.output.splitlines())
+    sensors_only = tmp_path / "motion.mcap"
+    write_recording(sensors_only, Recording(sensor_names=rec.sensor_names, sensors=rec.sensors))
+    result = CliRunner().invoke(main, ["discrepancy", str(sensors_only), "--out",
+                                       str(tmp_path / "o")])
+    assert result.exit_code == 1 and "no motion capture" in result.output
+    result = CliRunner().invoke(main, ["discrepancy", str(short), "--out", str(short)])
+    assert result.exit_code == 1 and "overwrite an input" in result.output
+
+
+def test_profile_effects_already_in_the_model_are_not_proposed(tmp_path):
+    rec = make_recording(Case("hysteresis", "alt", 2, seed=4, duration_s=40.0))
+    outcome = run(rec, "x", in_model=("hysteresis",))
+    assert "hysteresis" not in outcome.summary["effects"]
+    assert outcome.summary["gap_before"] < 0.5  # already explained by the fitted term
+
+
+@pytest.mark.skipif(not FOREIGN.is_file(), reason="shared sample not present")
+def test_foreign_recording_is_accepted_as_it_is():
+    rec = read_recording(FOREIGN)
+    outcome = run(rec, FOREIGN.name)
+    s = outcome.summary
+    assert s["invalid_frames"] > 0  # its sequence gaps
+    assert s["gap_after"] <= s["gap_before"]
+    assert len(s["sensors"]) == 4
