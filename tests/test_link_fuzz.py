@@ -9,11 +9,13 @@ reordering or bit flips, every frame whose bytes arrived intact is delivered wit
 numbering: the decoder is back in sync within one frame of any damage.
 
 Each example decodes a few hundred frames in pure Python (a few ms); the example counts are
-set here, not by the hypothesis profile, so the file runs in a few seconds in CI.
+set here, not by the hypothesis profile, so the file runs in a few seconds in CI. For a longer
+campaign set ``EXOHIL_FUZZ_EXAMPLES`` (docs/reliability.md).
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 from hypothesis import given, settings
@@ -30,7 +32,7 @@ from exohil.formats.wire import (
 from exohil.harness.frame_source import Frame, LinkStats
 from exohil.harness.link_decoder import StreamDecoder
 
-EXAMPLES = 150
+EXAMPLES = int(os.environ.get("EXOHIL_FUZZ_EXAMPLES", "150"))
 
 
 @dataclass(frozen=True)
