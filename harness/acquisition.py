@@ -312,6 +312,7 @@ class SerialFrameSource:
 
 
 def _close(port: serial.SerialBase) -> None:
+    """Close ``port``, ignoring errors from a device that is already gone."""
     try:
         port.close()
     except (serial.SerialException, OSError):

@@ -21,12 +21,13 @@ frame is judged by both: with ``d = (seq - prev) mod 65536`` frames and
 
 A frame that passes is delivered (``d - 1`` frames counted ``dropped``). An exact repeat of one
 of the last 1024 accepted frames, or one whose sequence number did not advance, is a
-``duplicate``. Any other valid-CRC frame is held as a candidate for a new numbering (a device
-reset restarts both counters): once ``RESYNC_FRAMES`` consecutive candidates step consistently
-with each other, the new numbering is taken (``sequence_resets``) and they are delivered,
-continuing the host's numbering (sequence +1, device time + the host time elapsed); candidates
-that never make such a run are ``implausible`` and discarded. Delivered sequence numbers and
-device times therefore always increase strictly.
+``duplicate``. A frame up to ``LATE_FRAMES`` behind the last accepted one, in sequence and time
+alike, arrived late and is ``implausible``. Any other valid-CRC frame is held as a candidate for
+a new numbering (a device reset restarts both counters): once ``RESYNC_FRAMES`` consecutive
+candidates step consistently with each other, the new numbering is taken (``sequence_resets``)
+and they are delivered, continuing the host's numbering (sequence +1, device time + the host
+time elapsed); candidates that never make such a run are ``implausible`` and discarded.
+Delivered sequence numbers and device times therefore always increase strictly.
 """
 
 from __future__ import annotations
@@ -55,6 +56,9 @@ RESYNC_FRAMES = 3
 MAX_CANDIDATE_STEP = 64
 #: Accepted frames remembered to recognise exact repeats.
 RECENT_FRAMES = 1024
+#: A frame this many frames or fewer behind the last accepted one, in sequence and time alike,
+#: is a late frame of the current numbering (discarded), never the start of a new one.
+LATE_FRAMES = 256
 
 _HALF_SEQ = SEQ_MODULUS // 2
 _HALF_TIME_US = TIME_MODULUS_US // 2
@@ -163,6 +167,9 @@ class StreamDecoder:
         if (wire.seq - last.wire_seq) % SEQ_MODULUS == 0:
             self._stats.duplicates += 1
             return []
+        if self._late(last, wire):
+            self._stats.implausible += 1
+            return []
         return self._candidate(wire, host_ns)
 
     def _period_us(self) -> tuple[float, int] | None:
@@ -194,6 +201,19 @@ class StreamDecoder:
         if m > 0 and host_ns - last.host_ns < dt * 500:  # ns; at least half of dt (µs)
             return None
         return frames, dt
+
+    def _late(self, last: _Accepted, wire: WireFrame) -> bool:
+        """Whether ``wire`` is a frame of the current numbering at most LATE_FRAMES behind
+        ``last``, in sequence and time alike (it arrived late, e.g. overtaken)."""
+        d = (last.wire_seq - wire.seq) % SEQ_MODULUS
+        dt = (last.wire_t_us - wire.t_us) % TIME_MODULUS_US
+        if not (0 < d <= LATE_FRAMES and 0 < dt < _HALF_TIME_US):
+            return False
+        period = self._period_us()
+        if period is None:
+            return True
+        p_us, span = period
+        return abs(dt - d * p_us) <= TOL_PERIODS * p_us * (1.0 + d / span)
 
     def _candidate(self, wire: WireFrame, host_ns: int) -> list[Frame]:
         """Hold ``wire`` as a candidate for a new numbering; take the numbering once
