@@ -11,8 +11,15 @@ any pyserial URL (``serial.serial_for_url``: a pty path such as the emulator's, 
 * hands frames to a :class:`~exohil.harness.frame_buffer.FrameBuffer` that never blocks it
   (when full the oldest frames go, counted as ``overflow``);
 * treats EIO, a vanished device, or "readable but empty" (pyserial raises SerialException) as
-  a disconnect: closes the port and re-opens it with exponential backoff (capped), counting
-  ``reconnects``; the sequence numbering continues, so frames lost meanwhile count as dropped.
+  a disconnect (counted ``disconnects``): closes the port and re-opens it with exponential
+  backoff (capped), counting ``reconnects``; the sequence numbering continues, so frames lost
+  meanwhile count as dropped (and ``dropped_in_disconnects``);
+* re-opens a device path only if it still leads to the same device (:func:`same_device`):
+  a path that now leads elsewhere (a stale link to a pty that another process got after the
+  emulator died, another USB device) is not opened, counted ``wrong_device``, and retried;
+* with ``device_timeout_s``, ends when no frame has arrived for that long (a device that never
+  returns): :attr:`SerialFrameSource.alive` goes False, :attr:`~SerialFrameSource.device_timed_out`
+  True, and ``last_error`` says why.
 
 ``stop()`` wakes any wait and joins within a bounded time, whatever the link is doing.
 """
@@ -20,11 +27,15 @@ any pyserial URL (``serial.serial_for_url``: a pty path such as the emulator's, 
 from __future__ import annotations
 
 import dataclasses
+import os
+import stat
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import serial
+from serial.tools.list_ports_linux import SysFS
 
 from exohil.harness.frame_buffer import FrameBuffer
 from exohil.harness.frame_source import Frame, LinkStats
@@ -37,6 +48,71 @@ Opener = Callable[[str, float], serial.Serial]
 def open_serial_url(url: str, read_timeout_s: float) -> serial.Serial:
     """Open any pyserial URL with a read timeout (seconds)."""
     return serial.serial_for_url(url, timeout=read_timeout_s)
+
+
+@dataclass(frozen=True)
+class DeviceIdentity:
+    """What a device path leads to, to tell the same device from another one on re-open.
+
+    Attributes:
+        node: (st_rdev, st_ino, st_ctime_ns) of the device node the path resolves to; a
+            node created anew (a new pty, even at the same /dev/pts number; a re-enumerated
+            USB device) has a new ctime.
+        link: (st_ino, st_ctime_ns) of the path itself when it is a symlink (the emulator's
+            stable link, udev's /dev/serial/by-*/ links): a new value means whoever manages the
+            link re-pointed it; None for a plain device path.
+        usb: (vid, pid, serial number, or the USB port path when the device has none) for a
+            USB serial device (from sysfs, as pyserial's list_ports reads it); None otherwise.
+    """
+
+    node: tuple[int, int, int]
+    link: tuple[int, int] | None
+    usb: tuple[int, int, str] | None
+
+
+def device_identity(url: str) -> DeviceIdentity | None:
+    """The identity of the device ``url`` leads to now; None for a URL that is not a local
+    path (``loop://``, ``socket://``: nothing to check) or a path that does not exist."""
+    if "://" in url:
+        return None
+    try:
+        node = os.stat(url)
+        path = os.lstat(url)
+    except OSError:
+        return None
+    link = (path.st_ino, path.st_ctime_ns) if stat.S_ISLNK(path.st_mode) else None
+    info = SysFS(os.path.realpath(url))
+    usb = None
+    if info.vid is not None and info.pid is not None:
+        usb = (info.vid, info.pid, info.serial_number or info.location or "")
+    return DeviceIdentity((node.st_rdev, node.st_ino, node.st_ctime_ns), link, usb)
+
+
+def same_device(known: DeviceIdentity, now: DeviceIdentity) -> bool:
+    """Whether ``now`` is still the device first opened as ``known``.
+
+    USB devices are the same when vendor, product and serial number (or port) match; otherwise
+    the same node is the same device, and a new node is accepted only behind a symlink that was
+    re-pointed since (re-enumeration, as udev and the emulator do it). A stale link (unchanged,
+    its target re-created for someone else) and a plain path to a new node are refused.
+    """
+    if known.usb is not None or now.usb is not None:
+        return known.usb == now.usb
+    if known.node == now.node:
+        return True
+    return known.link is not None and now.link is not None and known.link != now.link
+
+
+def _opened_node(port: serial.SerialBase) -> tuple[int, int, int] | None:
+    """(st_rdev, st_ino, st_ctime_ns) of the node an opened port reads, when it has an fd."""
+    fd = getattr(port, "fd", None)
+    if not isinstance(fd, int):
+        return None
+    try:
+        node = os.fstat(fd)
+    except OSError:
+        return None
+    return node.st_rdev, node.st_ino, node.st_ctime_ns
 
 
 class SerialFrameSource:
@@ -54,6 +130,8 @@ class SerialFrameSource:
         opener: how to open ``url`` (tests inject fakes); default :func:`open_serial_url`.
         realtime: run the reader thread under SCHED_FIFO (needs CAP_SYS_NICE; when refused,
             :attr:`realtime_error` says why).
+        device_timeout_s: end the reader when no frame has been delivered for this long, s,
+            since the last one (or since ``start()``), connected or not; None: retry forever.
     """
 
     def __init__(
@@ -67,8 +145,12 @@ class SerialFrameSource:
         backoff_max_s: float = 0.5,
         opener: Opener = open_serial_url,
         realtime: bool = False,
+        device_timeout_s: float | None = None,
     ) -> None:
+        if device_timeout_s is not None and not device_timeout_s > 0:
+            raise ValueError("device_timeout_s must be > 0 s")
         self.url = url
+        self.device_timeout_s = device_timeout_s
         self._read_timeout_s = read_timeout_s
         self._backoff_initial_s = backoff_initial_s
         self._backoff_max_s = backoff_max_s
@@ -83,11 +165,14 @@ class SerialFrameSource:
         self.last_error: str | None = None
         self.realtime = realtime
         self.realtime_error: str | None = None
+        self._last_frame_ns = time.perf_counter_ns()
+        self._timed_out = False
 
     # ---- FrameSource -----------------------------------------------------------------
     def start(self) -> None:
         if self._thread is not None:
             raise RuntimeError("already started")
+        self._last_frame_ns = time.perf_counter_ns()
         self._thread = threading.Thread(target=self._run, name=f"acquire {self.url}", daemon=True)
         self._thread.start()
 
@@ -113,8 +198,17 @@ class SerialFrameSource:
 
     @property
     def alive(self) -> bool:
-        """True while the reader thread runs."""
+        """True while the reader thread runs (False after ``stop()`` or a device timeout)."""
         return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def device_timed_out(self) -> bool:
+        """True once the reader ended because no frame came for ``device_timeout_s``."""
+        return self._timed_out
+
+    def seconds_since_last_frame(self) -> float:
+        """Host time since the last frame was delivered (or since ``start()``), s."""
+        return (time.perf_counter_ns() - self._last_frame_ns) / 1e9
 
     @property
     def connected(self) -> bool:
@@ -125,19 +219,58 @@ class SerialFrameSource:
         return self._connected.wait(timeout)
 
     # ---- reader thread -----------------------------------------------------------------
+    def _expired(self) -> bool:
+        """Check the device timeout; on expiry record why and return True."""
+        if self.device_timeout_s is None or self._timed_out:
+            return self._timed_out
+        silent_s = self.seconds_since_last_frame()
+        if silent_s < self.device_timeout_s:
+            return False
+        state = "connected but silent" if self.connected else "not connected"
+        cause = f"; last error: {self.last_error}" if self.last_error else ""
+        self.last_error = (f"no frame from {self.url} for {silent_s:.1f} s (device timeout "
+                           f"{self.device_timeout_s:g} s, {state}){cause}")
+        self._timed_out = True
+        return True
+
+    def _wait(self, seconds: float) -> None:
+        """Sleep up to ``seconds``, waking for stop() or the device timeout."""
+        if self.device_timeout_s is not None:
+            left = self.device_timeout_s - self.seconds_since_last_frame()
+            seconds = max(0.0, min(seconds, left))
+        self._stop.wait(seconds)
+
     def _run(self) -> None:
         if self.realtime:
             self.realtime_error = request_realtime()
         backoff = self._backoff_initial_s
         opened_before = False
-        while not self._stop.is_set():
+        known: DeviceIdentity | None = None
+        while not self._stop.is_set() and not self._expired():
+            identity = device_identity(self.url)
+            if known is not None and (identity is None or not same_device(known, identity)):
+                if identity is not None:
+                    with self._lock:
+                        self._stats.wrong_device += 1
+                    self.last_error = (f"{self.url} now leads to another device than the one "
+                                       "opened first; not opening it")
+                else:
+                    self.last_error = f"{self.url} does not exist"
+                self._wait(backoff)
+                backoff = min(2.0 * backoff, self._backoff_max_s)
+                continue
             try:
                 port = self._opener(self.url, self._read_timeout_s)
             except (serial.SerialException, OSError, ValueError) as exc:
                 self.last_error = str(exc)
-                self._stop.wait(backoff)
+                self._wait(backoff)
                 backoff = min(2.0 * backoff, self._backoff_max_s)
                 continue
+            opened = _opened_node(port)
+            if identity is not None and opened is not None and opened != identity.node:
+                _close(port)  # the path changed between stat and open: look again
+                continue
+            known = identity
             backoff = self._backoff_initial_s
             if opened_before:
                 with self._lock:
@@ -145,26 +278,42 @@ class SerialFrameSource:
             opened_before = True
             self._connected.set()
             try:
-                self._read_until_disconnect(port)
+                lost = self._read_until_disconnect(port)
             finally:
                 self._connected.clear()
                 with self._lock:
                     self._decoder.reset()
-                try:
-                    port.close()
-                except (serial.SerialException, OSError):
-                    pass
+                _close(port)
+            if lost:
+                with self._lock:
+                    self._stats.disconnects += 1
 
-    def _read_until_disconnect(self, port: serial.Serial) -> None:
+    def _read_until_disconnect(self, port: serial.Serial) -> bool:
+        """Read and decode until the link fails (True), stop() or the device timeout."""
         while not self._stop.is_set():
             try:
                 data = port.read(max(1, port.in_waiting))
             except (serial.SerialException, OSError) as exc:
                 self.last_error = str(exc)
-                return
+                return True
             if not data:
+                if self._expired():
+                    return False
                 continue
             host_ns = time.perf_counter_ns()
             with self._lock:
                 frames = self._decoder.feed(data, host_ns)
                 self._stats.overflow += self._buffer.put(frames)
+            if frames:
+                self._last_frame_ns = host_ns
+            elif self._expired():
+                return False
+        return False
+
+
+def _close(port: serial.SerialBase) -> None:
+    """Close ``port``, ignoring errors from a device that is already gone."""
+    try:
+        port.close()
+    except (serial.SerialException, OSError):
+        pass

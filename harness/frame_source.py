@@ -40,25 +40,42 @@ class LinkStats:
     Attributes:
         frames: frames decoded with a valid CRC and delivered to the buffer.
         dropped: frames missing by sequence number (gaps between delivered frames).
-        duplicates: frames whose sequence number did not advance (discarded).
+        dropped_in_disconnects: the part of ``dropped`` missing across a disconnect (the
+            gap between the last frame before the link was lost and the first after).
+        duplicates: frames whose sequence number did not advance, or exact repeats of a
+            recent frame (discarded).
+        implausible: frames with a valid CRC whose sequence number and device time did not
+            fit the stream (stale, far ahead, or disagreeing with each other; discarded, see
+            harness/link_decoder.py).
+        sequence_resets: times the device's numbering restarted (e.g. a device reset) and
+            the host took the new numbering after consecutive consistent frames; the host's
+            numbering continues across it.
         crc_errors: packets whose CRC did not match.
         decode_errors: packets that were not valid COBS or had a wrong length/type.
         garbage_bytes: bytes discarded (rejected packets, partial packets at reconnect,
             over-long runs without a delimiter).
         resyncs: times the decoder discarded data and re-locked on the next delimiter.
-        reconnects: successful re-opens after a disconnect.
+        disconnects: times the link was lost (read error, the device vanished).
+        reconnects: successful re-opens after a disconnect, of the same device.
+        wrong_device: re-open attempts refused because the path led to another device
+            (e.g. a stale link to a pty that now belongs to someone else).
         overflow: frames discarded because the buffer was full (oldest first).
         bytes_read: bytes read from the link.
     """
 
     frames: int = 0
     dropped: int = 0
+    dropped_in_disconnects: int = 0
     duplicates: int = 0
+    implausible: int = 0
+    sequence_resets: int = 0
     crc_errors: int = 0
     decode_errors: int = 0
     garbage_bytes: int = 0
     resyncs: int = 0
+    disconnects: int = 0
     reconnects: int = 0
+    wrong_device: int = 0
     overflow: int = 0
     bytes_read: int = 0
 
