@@ -169,6 +169,11 @@ def load_bench(path: Path) -> BenchConfig:
     )
 
 
+#: A serial device that sends no frame for this long (absent, or gone and not back) ends the
+#: run, s; the acquisition thread keeps reconnecting until then.
+DEVICE_TIMEOUT_S = 10.0
+
+
 @dataclass
 class OpenDevice:
     """A started device: its frames, its write clock (emulator only) and the emulator."""
@@ -191,7 +196,7 @@ def open_device(device: Device, expected_sensors: int | None, *, realtime: bool 
     """
     if isinstance(device, SerialDevice):
         with SerialFrameSource(device.url, expected_sensors=expected_sensors,
-                               realtime=realtime) as source:
+                               realtime=realtime, device_timeout_s=DEVICE_TIMEOUT_S) as source:
             yield OpenDevice(source, None)
         return
     from exohil.emulators.arduino import ArduinoEmulator

@@ -185,10 +185,13 @@ class Pipeline:
         progress_every_s: float = 1.0,
         idle_timeout_s: float | None = None,
         until_device_time_s: float | None = None,
+        source_done: Callable[[], bool] | None = None,
     ) -> PipelineRun:
         """Process frames until ``duration_s`` (wall clock) or ``max_frames`` or ``stop`` is set,
         or, once frames have started to arrive, none arrived for ``idle_timeout_s``, or a frame
-        stamped at or after ``until_device_time_s`` (device clock, s) was processed.
+        stamped at or after ``until_device_time_s`` (device clock, s) was processed, or
+        ``source_done()`` says the source will send nothing more and its buffer is empty (an
+        emulator that has sent everything; a reader whose device never came back).
         ``progress(status)`` is called about every ``progress_every_s``. The sinks are not
         closed (their owner does)."""
         log = _Log()
@@ -213,6 +216,8 @@ class Pipeline:
                 next_progress += progress_every_s
             frame = self.source.get(timeout=0.05)
             if frame is None:
+                if source_done is not None and source_done():
+                    break
                 continue
             last_frame_at = time.perf_counter()
             sample = self._process(frame, log)

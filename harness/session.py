@@ -163,6 +163,8 @@ class SessionResult:
     clipped_values: int
     robots: list[Any] = field(default_factory=list)
     robot_trace: RobotTrace | None = None
+    #: why the device stopped before the run's end (a device that never came back), or None
+    device_lost: str | None = None
 
     @property
     def fault_counts(self) -> dict[str, int] | None:
@@ -227,9 +229,11 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                          duration_s=seconds, recording=reference) as opened:
             pipeline = Pipeline(opened.source, model.engine(), sinks, opened.device_clock)
             if opened.emulator is not None:
+                # until every frame the emulator sent is processed, outages included
                 limit = None if seconds is None else seconds + 30.0
-                run = pipeline.run(duration_s=limit, idle_timeout_s=1.0, stop=stop,
-                                   progress=progress)
+                emulator = opened.emulator
+                run = pipeline.run(duration_s=limit, stop=stop, progress=progress,
+                                   source_done=lambda: emulator.finished)
             else:
                 end, wall, idle = None, seconds, None
                 if seconds is None and reference is not None and len(reference.sensors):
@@ -237,8 +241,13 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                     end = float(t[-1]) - 1.5 / reference.sensor_rate_hz  # its last frame
                     wall = float(t[-1] - t[0]) + 60.0  # a device that never gets there
                     idle = 3.0  # or stops streaming first
+                source = opened.source
                 run = pipeline.run(duration_s=wall, stop=stop, progress=progress,
-                                   until_device_time_s=end, idle_timeout_s=idle)
+                                   until_device_time_s=end, idle_timeout_s=idle,
+                                   source_done=lambda: not source.alive)
+            device_lost = None
+            if opened.source.device_timed_out:
+                device_lost = opened.source.last_error or "the device stopped sending"
             emulator = opened.emulator
             fault_log = None if emulator is None else emulator.fault_log
             seq0 = None if emulator is None else emulator.seq0
@@ -253,7 +262,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         stats = run.link
         hint = (f" ({stats.decode_errors} packets of another shape: does the device send "
                 f"{len(est.sensor_names)} sensors?)" if stats.decode_errors else "")
-        raise SessionError(f"no frame arrived from the {config.device.describe()}{hint}")
+        why = f": {device_lost}" if device_lost else ""
+        raise SessionError(f"no frame arrived from the {config.device.describe()}{hint}{why}")
     truth = None if reference is None else truth_at(reference, est, run.device_time_s)
     trace = None if tracer is None else tracer.trace()
     if trace is not None and reference is not None:
@@ -261,7 +271,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
     return SessionResult(config, model, run, truth, fault_log, seq0, wire, clipped, robots,
-                         trace)
+                         trace, device_lost)
 
 
 def _with_running_error(progress: Progress, reference: Recording,

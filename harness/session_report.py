@@ -71,6 +71,7 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
         "frames": {"sent": sent, "received": run.frames, "dropped": run.link.dropped,
                    "crc_errors": run.link.crc_errors},
         "link": vars(run.link),
+        "device_lost": result.device_lost,
         "device_log": counts,
         "values_clipped_to_wire_range": result.clipped_values,
         "teleop": {
@@ -96,10 +97,14 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
     lines = [
         "",
         f"frames      {s['frames']['received']} received in {s['wall_s']} s  "
-        f"dropped {link['dropped']}  crc errors {link['crc_errors']}  "
-        f"decode errors {link['decode_errors']}  reconnects {link['reconnects']}  "
-        f"host overflow {link['overflow']}",
+        f"dropped {link['dropped']} (in disconnects {link['dropped_in_disconnects']})  "
+        f"crc errors {link['crc_errors']}  decode errors {link['decode_errors']}",
+        f"link        disconnects {link['disconnects']}  reconnects {link['reconnects']}  "
+        f"wrong device {link['wrong_device']}  implausible headers {link['implausible']}  "
+        f"sequence resets {link['sequence_resets']}  host overflow {link['overflow']}",
     ]
+    if s.get("device_lost"):
+        lines.append(f"device lost {s['device_lost']}: the run ended before its time")
     if s["device_log"] is not None:
         log = ", ".join(f"{k} {v}" for k, v in sorted(s["device_log"].items()))
         lines.append(f"device log  {log or 'nothing injected or lost'}")
