@@ -143,16 +143,47 @@ class PipelineRun:
         return (b[ok] - a[ok]) / 1e6
 
 
-@dataclass
 class _Log:
-    seq: list[int] = field(default_factory=list)
-    t: list[float] = field(default_factory=list)
-    values: list[np.ndarray] = field(default_factory=list)
-    est: list[np.ndarray] = field(default_factory=list)
-    stamps: list[list[int]] = field(default_factory=list)
-    compute: list[int] = field(default_factory=list)
-    commands: list[np.ndarray] = field(default_factory=list)
-    clamped: list[bool] = field(default_factory=list)
+    """Per-frame figures in fixed-size numpy blocks. A long run holds a few large arrays
+    instead of several small objects per frame, which the garbage collector had to walk again
+    and again: its full collections stalled the pipeline for tens of ms, and grew with the run.
+    Integer row: seq, estimator ns, the stamps; float row: device time, values, estimates,
+    command, clamped."""
+
+    BLOCK = 4096
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.n_sensors = self.n_angles = 0
+        self._ints: list[np.ndarray] = []
+        self._floats: list[np.ndarray] = []
+
+    def add(self, seq: int, compute_ns: int, stamps: list[int], t: float, values: np.ndarray,
+            estimates: np.ndarray, command: np.ndarray, clamped: bool) -> None:
+        i = self.n % self.BLOCK
+        if i == 0:
+            if not self._ints:
+                self.n_sensors, self.n_angles = values.shape[0], estimates.shape[0]
+            self._ints.append(np.empty((self.BLOCK, 2 + len(STAGES)), dtype=np.int64))
+            self._floats.append(np.empty((self.BLOCK, 5 + self.n_sensors + self.n_angles)))
+        ints, floats = self._ints[-1][i], self._floats[-1][i]
+        ints[0], ints[1], ints[2:] = seq, compute_ns, stamps
+        s, a = self.n_sensors, self.n_angles
+        floats[0], floats[1:1 + s], floats[1 + s:1 + s + a] = t, values, estimates
+        floats[1 + s + a:4 + s + a], floats[4 + s + a] = command, clamped
+        self.n += 1
+
+    def rows(self, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """(integer rows, float rows) of the frames from ``since`` on."""
+        if self.n == since:
+            return (np.empty((0, 2 + len(STAGES)), dtype=np.int64),
+                    np.empty((0, 5 + self.n_sensors + self.n_angles)))
+        first = since // self.BLOCK
+        ints = np.concatenate(self._ints[first:])[since - first * self.BLOCK:self.n - first
+                                                  * self.BLOCK]
+        floats = np.concatenate(self._floats[first:])[since - first * self.BLOCK:self.n - first
+                                                      * self.BLOCK]
+        return ints, floats
 
 
 _NO_COMMAND = np.full(3, np.nan)
@@ -205,14 +236,14 @@ class Pipeline:
             now = time.perf_counter()
             if (deadline is not None and now >= deadline) or (stop is not None and stop.is_set()):
                 break
-            if max_frames is not None and len(log.seq) >= max_frames:
+            if max_frames is not None and log.n >= max_frames:
                 break
             if (idle_timeout_s is not None and last_frame_at is not None
                     and now - last_frame_at > idle_timeout_s):
                 break
             if progress is not None and now >= next_progress:
                 progress(self._status(log, reported, last))
-                reported = len(log.seq)
+                reported = log.n
                 next_progress += progress_every_s
             frame = self.source.get(timeout=0.05)
             if frame is None:
@@ -241,42 +272,37 @@ class Pipeline:
         for sink in self.sinks:
             sink.accept(sample)
         stamps["done"] = time.perf_counter_ns()
-        log.seq.append(frame.seq)
-        log.t.append(frame.device_time_s)
-        log.values.append(frame.values_mm)
-        log.est.append(angles)
-        log.stamps.append([stamps.get(stage, NOT_STAMPED) for stage in STAGES])
-        log.compute.append(t1 - t0)
         command = sample.command
-        log.commands.append(_NO_COMMAND if command is None else command.joints)
-        log.clamped.append(bool(command is not None and command.clamped.any()))
+        log.add(frame.seq, t1 - t0, [stamps.get(stage, NOT_STAMPED) for stage in STAGES],
+                frame.device_time_s, frame.values_mm, angles,
+                _NO_COMMAND if command is None else command.joints,
+                bool(command is not None and command.clamped.any()))
         return sample
 
     def _status(self, log: _Log, since: int, last: np.ndarray | None) -> Status:
-        stamps = np.asarray(log.stamps[since:], dtype=np.int64).reshape(-1, len(STAGES))
+        ints, floats = log.rows(since)
+        stamps = ints[:, 2:]
         start = np.where(stamps[:, STAGES.index("device_write")] != NOT_STAMPED,
                          stamps[:, STAGES.index("device_write")],
                          stamps[:, STAGES.index("host_receive")])
         end = np.where(stamps[:, STAGES.index("commanded")] != NOT_STAMPED,
                        stamps[:, STAGES.index("commanded")], stamps[:, STAGES.index("done")])
-        n_angles = 0 if last is None else last.shape[0]
-        return Status(len(log.seq), self.source.stats(), last, (end - start) / 1e6,
-                      np.asarray(log.t[since:], dtype=np.float64),
-                      np.asarray(log.est[since:], dtype=np.float64).reshape(-1, n_angles))
+        s, a = log.n_sensors, log.n_angles
+        return Status(log.n, self.source.stats(), last, (end - start) / 1e6,
+                      floats[:, 0].copy(), floats[:, 1 + s:1 + s + a].copy())
 
     def _result(self, log: _Log, wall_s: float) -> PipelineRun:
-        n = len(log.seq)
-        n_angles = log.est[0].shape[0] if n else 0
-        n_sensors = log.values[0].shape[0] if n else 0
+        ints, floats = log.rows()
+        s, a = log.n_sensors, log.n_angles
         return PipelineRun(
-            seq=np.asarray(log.seq, dtype=np.int64),
-            device_time_s=np.asarray(log.t, dtype=np.float64),
-            values=np.asarray(log.values, dtype=np.float64).reshape(n, n_sensors),
-            estimates=np.asarray(log.est, dtype=np.float64).reshape(n, n_angles),
-            stamps=np.asarray(log.stamps, dtype=np.int64).reshape(n, len(STAGES)),
-            compute_ns=np.asarray(log.compute, dtype=np.int64),
-            commands=np.asarray(log.commands, dtype=np.float64).reshape(n, 3),
-            clamped=np.asarray(log.clamped, dtype=bool),
+            seq=ints[:, 0].copy(),
+            device_time_s=floats[:, 0].copy(),
+            values=floats[:, 1:1 + s].copy(),
+            estimates=floats[:, 1 + s:1 + s + a].copy(),
+            stamps=ints[:, 2:].copy(),
+            compute_ns=ints[:, 1].copy(),
+            commands=floats[:, 1 + s + a:4 + s + a].copy(),
+            clamped=floats[:, 4 + s + a] != 0.0,
             link=self.source.stats(),
             wall_s=wall_s,
         )

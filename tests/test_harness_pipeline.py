@@ -136,3 +136,16 @@ def test_progress_reports_the_frames_since_the_previous_status():
     for s in statuses:
         assert s.recent_latency_ms.shape[0] == s.recent_device_time_s.shape[0]
         assert np.all(s.recent_latency_ms >= 0) and s.error_deg is None
+
+
+def test_a_run_longer_than_one_log_block_keeps_every_frame_in_order():
+    n = 9001  # more than two 4096-frame blocks
+    statuses = []
+    run = Pipeline(FakeSource(frames(n)), SumEstimator()).run(
+        max_frames=n, progress=statuses.append, progress_every_s=0.0)
+    assert run.frames == n and np.array_equal(run.seq, np.arange(n))
+    assert np.array_equal(run.estimates[:, 1], np.arange(1, n + 1))
+    assert np.array_equal(run.values[:, 0], np.arange(n, dtype=float))
+    assert run.stamps.shape == (n, len(STAGES)) and np.all(np.isnan(run.commands))
+    seen = np.concatenate([s.recent_device_time_s for s in statuses])
+    assert np.array_equal(seen, run.device_time_s[: seen.size])  # statuses tile the run
