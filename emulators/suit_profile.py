@@ -69,15 +69,21 @@ class SuitProfile:
         return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
 
 
+def read_toml(path: Path, what: str) -> dict:
+    """The TOML table in ``path``; ProfileError naming the file when it is missing (``what``
+    says what was expected there) or unreadable."""
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise ProfileError(f"{path}: no such {what}") from exc
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ProfileError(f"{path}: not a readable TOML file ({exc})") from exc
+
+
 def load_profile(path: str | Path) -> SuitProfile:
     """Read and validate a suit profile TOML file."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise ProfileError(f"{path}: no such suit profile") from exc
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ProfileError(f"{path}: not a readable TOML file ({exc})") from exc
+    data = read_toml(path, "suit profile")
     try:
         return profile_from_dict(data)
     except ProfileError as exc:

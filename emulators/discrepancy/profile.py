@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,7 +28,7 @@ from exohil.emulators.discrepancy.model import (
 from exohil.emulators.discrepancy.workflow import Outcome
 from exohil.emulators.effects import Noise, Signal
 from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory
-from exohil.emulators.suit_profile import ProfileError
+from exohil.emulators.suit_profile import ProfileError, read_toml
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 
 CALIBRATED_SCHEMA = "exohil-calibrated-suit-profile"
@@ -156,12 +155,7 @@ def write_calibrated_profile(path: str | Path, suit: CalibratedSuit, description
 def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
     """Read a calibrated suit profile; one :class:`ProfileError` line on any problem."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise ProfileError(f"{path}: no such calibrated suit profile") from exc
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ProfileError(f"{path}: not a readable TOML file ({exc})") from exc
+    data = read_toml(path, "calibrated suit profile")
     if data.get("schema") != CALIBRATED_SCHEMA or data.get("version") != CALIBRATED_VERSION:
         raise ProfileError(f"{path}: not a calibrated suit profile (schema "
                            f"{CALIBRATED_SCHEMA!r} version {CALIBRATED_VERSION})")
