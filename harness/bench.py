@@ -37,7 +37,7 @@ from __future__ import annotations
 import tomllib
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs
@@ -91,7 +91,6 @@ class BenchConfig:
     rate_hz: float = 250.0
     robots: tuple[str, ...] = ("simulated",)
     record: Path | None = None
-    source: Path | None = field(default=None, compare=False)
 
     def with_overrides(self, **changes: Any) -> BenchConfig:
         """A copy with every non-None value of ``changes`` applied."""
@@ -165,7 +164,6 @@ def load_bench(path: Path) -> BenchConfig:
         rate_hz=float(sensors.get("rate_hz", 250.0)),
         robots=tuple(data.get("teleop", {}).get("robots", ("simulated",))),
         record=rel(data.get("record", {}).get("path")),
-        source=Path(path),
     )
 
 
