@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from mcap.records import Schema
 
+from exohil.formats import strict_json
 from exohil.formats.errors import RecordingError
 from exohil.formats.recording import MOCAP_PREFIX, SENSOR_TOPIC, AngleStream, SensorStream
 from exohil.formats.schemas import SCHEMA_ENCODING
@@ -92,6 +93,8 @@ def decode_sensors(path: Path, messages: list[tuple[int, bytes]], width: int) ->
             f"{path}: non-monotonic seq in {SENSOR_TOPIC}: frame {k} has seq {seq[k]} "
             f"after {seq[k - 1]}"
         )
+    _check_times(path, SENSOR_TOPIC, t)
+    _check_finite(path, SENSOR_TOPIC, values, "sensor value")
     return SensorStream(seq=seq, t=t, values=values)
 
 
@@ -120,7 +123,30 @@ def decode_angles(
         t[k] = sample_t
         rows.append(row)
     angles = np.asarray(rows, dtype=np.float64).reshape(len(messages), len(names))
+    _check_times(path, topic, t)
+    _check_finite(path, topic, angles, "angle")
     return AngleStream(t=t, names=names, angles=angles)
+
+
+def _check_times(path: Path, topic: str, t: np.ndarray) -> None:
+    """Message times (in log-time order) must be finite, ≥ 0 s and never go back."""
+    bad = np.flatnonzero(~np.isfinite(t) | (t < 0))
+    if bad.size:
+        raise RecordingError(f"{path}: {topic} message {int(bad[0])} has time {t[bad[0]]!r}; "
+                             "times must be finite and >= 0 s")
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise RecordingError(f"{path}: {topic} time goes back at message {k}: "
+                             f"{t[k]:.6f} s after {t[k - 1]:.6f} s")
+
+
+def _check_finite(path: Path, topic: str, values: np.ndarray, what: str) -> None:
+    bad = np.argwhere(~np.isfinite(values))
+    if bad.size:
+        k, column = (int(i) for i in bad[0])
+        raise RecordingError(f"{path}: {topic} message {k} has a non-finite {what} "
+                             f"(column {column})")
 
 
 def _schema_angle_names(schema: Schema | None) -> tuple[str, ...]:
@@ -129,7 +155,7 @@ def _schema_angle_names(schema: Schema | None) -> tuple[str, ...]:
     if schema is None or schema.encoding != SCHEMA_ENCODING:
         return ()
     try:
-        declared = json.loads(schema.data)
+        declared = strict_json.loads(schema.data)
         names = declared.get("required") or list(declared.get("properties", {}))
     except (ValueError, AttributeError):
         return ()
@@ -138,7 +164,7 @@ def _schema_angle_names(schema: Schema | None) -> tuple[str, ...]:
 
 def _json_object(path: Path, topic: str, index: int, data: bytes) -> dict[str, Any]:
     try:
-        value = json.loads(data)
+        value = strict_json.loads(data)
     except ValueError as exc:
         raise _schema_error(path, topic, index, f"invalid JSON ({exc})") from exc
     if not isinstance(value, dict):

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from mcap.records import Metadata
 
+from exohil.formats import strict_json
 from exohil.formats.errors import RecordingError
 from exohil.formats.recording import FORMAT_NAME, FORMAT_VERSION, SENSOR_TOPIC, Segment
 
@@ -118,7 +119,7 @@ def sensor_names(
     if not messages:
         return ()
     try:
-        count = len(json.loads(messages[0][1])["values"])
+        count = len(strict_json.loads(messages[0][1])["values"])
     except (ValueError, KeyError, TypeError) as exc:
         raise RecordingError(f"{path}: {SENSOR_TOPIC} message 0 is not a sensor frame") from exc
     names = DEFAULT_SUIT_SENSORS if count == 4 else tuple(f"ch{k}" for k in range(count))
@@ -162,7 +163,7 @@ def segments(path: Path, metadata: dict[str, str]) -> list[Segment]:
     if not text:
         return []
     try:
-        items = json.loads(text)
+        items = strict_json.loads(text)
         found = [Segment(str(s["name"]), float(s["t0"]), float(s["t1"])) for s in items]
     except (ValueError, KeyError, TypeError) as exc:
         raise RecordingError(

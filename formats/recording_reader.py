@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import io
 import math
+import os
+import stat
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -84,12 +86,7 @@ def read_recording(path: str | Path) -> Recording:
 def scan_recording(path: str | Path) -> RecordingScan:
     """Read a recording and report its channels and any notes (ignored channels, defaults)."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot read: {exc.strerror or exc}") from exc
-    if not data.startswith(_MAGIC):
-        raise RecordingError(f"{path}: not an MCAP file (missing MCAP magic bytes)")
+    data = _read_mcap_bytes(path)
     raw = _read_records(path, data)
     notes: list[str] = []
     if raw.cut_at is not None:
@@ -165,6 +162,23 @@ def scan_recording(path: str | Path) -> RecordingScan:
     )
     lost = None if raw.cut_at is None else len(data) - raw.cut_at
     return RecordingScan(recording=recording, channels=channels, notes=notes, lost_bytes=lost)
+
+
+def _read_mcap_bytes(path: Path) -> bytes:
+    """The whole file, after checking that it is a regular file that starts like MCAP (so a
+    device such as /dev/zero, a FIFO or a large file of something else is never read)."""
+    try:
+        if not stat.S_ISREG(path.stat().st_mode):  # before open(): a FIFO would block there
+            raise RecordingError(f"{path}: not a regular file")
+        with open(path, "rb") as stream:
+            if not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
+                raise RecordingError(f"{path}: not a regular file")
+            head = stream.read(len(_MAGIC))
+            if head != _MAGIC:
+                raise RecordingError(f"{path}: not an MCAP file (missing MCAP magic bytes)")
+            return head + stream.read()
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read: {exc.strerror or exc}") from exc
 
 
 @dataclass

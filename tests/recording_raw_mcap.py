@@ -143,6 +143,14 @@ BAD_FILE_CASES = {
     "bad_segments": "'segments' is not a JSON list",
     "bad_rate": "sensor_rate_hz='fast'",
     "angle_unit": "angle unit 'rad' unsupported",
+    "nan_value": "NaN is not a finite number",
+    "infinite_value": "number 1e999 is out of range",
+    "huge_seq": "is out of range",
+    "deep_json": "nested too deeply",
+    "negative_time": "times must be finite and >= 0 s",
+    "time_goes_back": "time goes back at message 2",
+    "deep_segments": "'segments' is not a JSON list",
+    "huge_segment_time": "'segments' is not a JSON list",
 }
 """Bad-file case → the text its RecordingError must contain."""
 
@@ -163,6 +171,14 @@ def write_bad_file(path: Path, case: str) -> Path:
             "missing_seq": [b'{"t": 0.0, "values": [1, 2, 3, 4]}'],
             "wrong_count": [frame(0), frame(1, [1, 2, 3])],
             "non_monotonic": [frame(0), frame(5), frame(3)],
+            "nan_value": [frame(0), b'{"seq": 1, "t": 0.004, "values": [NaN, 2, 3, 4]}'],
+            "infinite_value": [frame(0), b'{"seq": 1, "t": 0.004, "values": [1e999, 2, 3, 4]}'],
+            "huge_seq": [frame(0), b'{"seq": ' + b"9" * 4000 + b', "t": 0.004, "values": [1]}'],
+            "deep_json": [frame(0), b'{"seq": 1, "t": 0.004, "values": ' + b"[" * 100_000
+                          + b"]" * 100_000 + b"}"],
+            "negative_time": [b'{"seq": 0, "t": -1.0, "values": [1, 2, 3, 4]}'],
+            "time_goes_back": [frame(0), frame(1),
+                               b'{"seq": 2, "t": 0.001, "values": [1, 2, 3, 4]}'],
         }.get(case, [frame(0)])
         metadata = {
             "wrong_format": {**GOOD_METADATA, "format": "rosbag"},
@@ -170,6 +186,9 @@ def write_bad_file(path: Path, case: str) -> Path:
             "bad_segments": {**GOOD_METADATA, "segments": "[{name: x}]"},
             "bad_rate": {**GOOD_METADATA, "sensor_rate_hz": "fast"},
             "angle_unit": {**GOOD_METADATA, "units": "mm,rad"},
+            "deep_segments": {**GOOD_METADATA, "segments": "[" * 100_000 + "]" * 100_000},
+            "huge_segment_time": {**GOOD_METADATA,
+                                  "segments": '[{"name": "a", "t0": 0, "t1": 1e999}]'},
         }.get(case)
         name = "exohil.recordings" if case == "no_metadata" else "exohil.recording"
         write_sensor_messages(path, bodies, metadata, metadata_name=name)
