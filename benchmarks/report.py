@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from exohil.formats.atomic import write_text
 from exohil.formats.measurement import Measurement
 from exohil.harness.machine import machine
 
@@ -104,9 +105,7 @@ def document(benchmark: str, measurements: Sequence[Measurement]) -> dict[str, A
 
 def write_json(path: Path, content: Any) -> None:
     """``content`` as JSON in ``path``, written to a temporary name and renamed into place."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(content, indent=2) + "\n", encoding="utf-8")
-    tmp.replace(path)
+    write_text(path, json.dumps(content, indent=2) + "\n")
 
 
 def report(benchmark: str, measurements: Sequence[Measurement],

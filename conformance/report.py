@@ -23,6 +23,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from exohil.formats.atomic import write_text
 from exohil.formats.measurement import Verdict
 from exohil.harness.machine import machine
 
@@ -120,17 +121,11 @@ def final_line(report: dict[str, Any]) -> str:
     return f"FAIL: {bad['name']}: {state}{bad['message']}"
 
 
-def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
-
-
 def write_reports(out: Path, run: Any, results: list[Any]) -> None:
     """conformance.json, summary.md and (when the real-time segment ran) run.mcap in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    _write_text(out / "conformance.json", json.dumps(report_dict(run, results), indent=2) + "\n")
-    _write_text(out / "summary.md", summary_markdown(run, results))
+    write_text(out / "conformance.json", json.dumps(report_dict(run, results), indent=2) + "\n")
+    write_text(out / "summary.md", summary_markdown(run, results))
     session = vars(run).get("session")  # the real-time segment, if a check ran it
     if session is not None:
         from exohil.harness.run_recording import write_run_recording

@@ -14,6 +14,7 @@ version, missing/extra/misshapen weights — raises :class:`CheckpointError` wit
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 from pathlib import Path
 
@@ -23,18 +24,22 @@ from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import TargetSpec
 from exohil.estimator.models import ModelConfig
 from exohil.estimator.trained import Normalisation, TrainedEstimator
+from exohil.formats import strict_json
+from exohil.formats.atomic import replacing
+from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
 
 CHECKPOINT_FORMAT = "exohil-estimator"
 CHECKPOINT_VERSION = 1
 
 
-class CheckpointError(Exception):
+class CheckpointError(InputError):
     """A checkpoint is missing, unreadable, or does not fit the data it is used with."""
 
 
 def save_checkpoint(path: str | Path, est: TrainedEstimator) -> None:
-    """Write ``est`` to ``path`` (an .npz file; the suffix is not enforced)."""
+    """Write ``est`` to ``path`` (an .npz file; the suffix is not enforced), under a temporary
+    name renamed when complete."""
     meta = {
         "format": CHECKPOINT_FORMAT,
         "version": CHECKPOINT_VERSION,
@@ -57,7 +62,7 @@ def save_checkpoint(path: str | Path, est: TrainedEstimator) -> None:
     else:
         for name, array in est.weights(dtype=np.float32).items():
             arrays[f"net/{name}"] = array
-    with open(path, "wb") as fh:
+    with replacing(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, allow_pickle=False, **arrays)
 
 
@@ -74,8 +79,8 @@ def load_checkpoint(path: str | Path) -> TrainedEstimator:
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise CheckpointError(f"{path}: not an exohil estimator checkpoint ({exc})") from None
     try:
-        meta = json.loads(arrays.pop("meta").tobytes().decode())
-    except (KeyError, UnicodeDecodeError, json.JSONDecodeError):
+        meta = strict_json.loads(arrays.pop("meta").tobytes())
+    except (KeyError, ValueError):
         raise CheckpointError(f"{path}: checkpoint has no readable metadata") from None
     if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(f"{path}: not an exohil estimator checkpoint")
@@ -88,6 +93,7 @@ def load_checkpoint(path: str | Path) -> TrainedEstimator:
         est = _from_meta(meta)
     except (KeyError, TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: checkpoint metadata incomplete ({exc})") from None
+    _check_numbers(path, est, arrays)
     if est.kind == "classical":
         _attach_classical(path, est, arrays)
     else:
@@ -127,6 +133,27 @@ def _from_meta(meta: dict) -> TrainedEstimator:
         sensor_rate_hz=float(meta["sensor_rate_hz"]),
         info=dict(meta.get("info", {})),
     )
+
+
+def _check_numbers(path: Path, est: TrainedEstimator, arrays: dict[str, np.ndarray]) -> None:
+    """Every weight array is real numbers, all finite; the normalisation is finite with
+    positive scales; so a damaged checkpoint is refused instead of estimating NaN."""
+    for name, array in arrays.items():
+        if array.dtype.kind not in "fiu":
+            raise CheckpointError(f"{path}: array {name!r} holds {array.dtype} values, not "
+                                  "real numbers")
+        if not np.isfinite(array).all():
+            raise CheckpointError(f"{path}: array {name!r} has non-finite values (NaN or inf)")
+    norm = est.norm
+    for name in ("x_mean", "x_std", "y_mean", "y_std"):
+        if not np.isfinite(getattr(norm, name)).all():
+            raise CheckpointError(f"{path}: normalisation {name} is not finite")
+    if (norm.x_std <= 0).any() or (norm.y_std <= 0).any():
+        raise CheckpointError(f"{path}: normalisation scales must be > 0")
+    if not (math.isfinite(est.sensor_rate_hz) and est.sensor_rate_hz > 0):
+        raise CheckpointError(f"{path}: sensor rate {est.sensor_rate_hz!r} Hz is not positive")
+    if est.offset_frames < 0:
+        raise CheckpointError(f"{path}: offset_frames {est.offset_frames} is negative")
 
 
 def _attach_classical(path: Path, est: TrainedEstimator, arrays: dict[str, np.ndarray]) -> None:

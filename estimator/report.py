@@ -12,6 +12,7 @@ import re
 from pathlib import Path
 
 from exohil.estimator.workflow import ModelResult
+from exohil.formats.atomic import write_text
 
 METHOD_NAMES = {
     "ann": "ANN (memoryless MLP, Varghese 2019 baseline)",
@@ -59,4 +60,4 @@ def write_section(path: Path, name: str, text: str) -> None:
         new = pattern.sub(lambda _m: block, old)
     else:
         new = (old.rstrip("\n") + "\n\n" if old else "") + block + "\n"
-    path.write_text(new, encoding="utf-8")
+    write_text(path, new)

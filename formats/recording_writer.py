@@ -24,6 +24,7 @@ from typing import Any, BinaryIO, Literal
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from exohil.formats.atomic import replacing
 from exohil.formats.errors import RecordingError
 from exohil.formats.recording import MOCAP_PREFIX, SENSOR_TOPIC, Recording, Segment
 from exohil.formats.recording_messages import (
@@ -83,6 +84,8 @@ class RecordingWriter:
             importers of finer data may keep more).
         durable: write the metadata first and close a chunk and sync the file at least every
             :data:`DURABLE_FLUSH_S` s, so a killed writer leaves a readable file (module doc).
+        name: the file as error messages name it (default ``path``; the final name when
+            ``path`` is a temporary one).
     """
 
     def __init__(
@@ -98,17 +101,19 @@ class RecordingWriter:
         compression: Compression = "lz4",
         decimals: int = VALUE_DECIMALS,
         durable: bool = False,
+        name: str | Path | None = None,
     ) -> None:
         self.path = Path(path)
+        self.name = Path(name) if name is not None else self.path
         self.durable = durable
         self.decimals = decimals
         self.sensor_names = tuple(sensor_names)
         self.mocap_joints = {joint: tuple(names) for joint, names in (mocap_joints or {}).items()}
-        _check_names(self.path, self.sensor_names, self.mocap_joints)
+        _check_names(self.name, self.sensor_names, self.mocap_joints)
         if compression not in _COMPRESSION:
             raise ValueError(f"compression must be one of {sorted(_COMPRESSION)}")
         self._metadata = metadata_record(
-            self.path, self.sensor_names, sensor_units, sensor_rate_hz, mocap_rate_hz, metadata
+            self.name, self.sensor_names, sensor_units, sensor_rate_hz, mocap_rate_hz, metadata
         )
         self._segments: list[Segment] = []
         self._last_seq: int | None = None
@@ -167,19 +172,19 @@ class RecordingWriter:
         """Append frames: ``seq`` (N,) ints, ``t`` (N,) s, ``values`` (N, S)."""
         self._check_open()
         if not self.sensor_names:
-            raise RecordingError(f"{self.path}: this recording was opened without sensors")
+            raise RecordingError(f"{self.name}: this recording was opened without sensors")
         seq = np.asarray(seq, dtype=np.int64).reshape(-1)
         values = np.asarray(values, dtype=np.float64)
         if values.ndim != 2 or values.shape != (seq.size, len(self.sensor_names)):
             raise RecordingError(
-                f"{self.path}: sensor frames must be ({seq.size}, {len(self.sensor_names)}), "
+                f"{self.name}: sensor frames must be ({seq.size}, {len(self.sensor_names)}), "
                 f"got {values.shape}"
             )
         previous = np.concatenate(([self._last_seq], seq)) if self._last_seq is not None else seq
         if np.any(np.diff(previous) <= 0):
-            raise RecordingError(f"{self.path}: sensor seq must increase strictly")
-        times = rounded_times(self.path, t, seq.size)
-        rows = rounded_values(self.path, values, self.decimals, "sensor values")
+            raise RecordingError(f"{self.name}: sensor seq must increase strictly")
+        times = rounded_times(self.name, t, seq.size)
+        rows = rounded_values(self.name, values, self.decimals, "sensor values")
         for frame_seq, frame_t, frame_values in zip(seq.tolist(), times, rows, strict=True):
             payload = {"seq": frame_seq, "t": frame_t, "values": frame_values}
             self._emit(self._sensor_channel, frame_t, payload)
@@ -194,15 +199,15 @@ class RecordingWriter:
         """Append samples of ``joint``: ``t`` (M,) s, ``angles`` (M, A) degrees."""
         self._check_open()
         if joint not in self._mocap_channels:
-            raise RecordingError(f"{self.path}: joint {joint!r} was not declared at open")
+            raise RecordingError(f"{self.name}: joint {joint!r} was not declared at open")
         names = self.mocap_joints[joint]
         angles = np.asarray(angles, dtype=np.float64)
-        times = rounded_times(self.path, t, angles.shape[0] if angles.ndim else -1)
+        times = rounded_times(self.name, t, angles.shape[0] if angles.ndim else -1)
         if angles.ndim != 2 or angles.shape[1] != len(names):
             raise RecordingError(
-                f"{self.path}: {joint} angles must be (M, {len(names)}), got {angles.shape}"
+                f"{self.name}: {joint} angles must be (M, {len(names)}), got {angles.shape}"
             )
-        rows = rounded_values(self.path, angles, self.decimals, f"{joint} angles")
+        rows = rounded_values(self.name, angles, self.decimals, f"{joint} angles")
         channel = self._mocap_channels[joint]
         for sample_t, sample in zip(times, rows, strict=True):
             payload = {"t": sample_t, **dict(zip(names, sample, strict=True))}
@@ -214,7 +219,7 @@ class RecordingWriter:
         ``/mocap/*`` (and list them as notes); MCAP tools such as Foxglove show them."""
         self._check_open()
         if topic == SENSOR_TOPIC or topic.startswith(MOCAP_PREFIX):
-            raise RecordingError(f"{self.path}: {topic} is a format v1 topic; use the "
+            raise RecordingError(f"{self.name}: {topic} is a format v1 topic; use the "
                                  "sensor/mocap methods")
         return self._register(topic, schema_name, schema)
 
@@ -224,7 +229,7 @@ class RecordingWriter:
         self._check_open()
         if channel not in self._counts or channel == self._sensor_channel \
                 or channel in self._mocap_channels.values():
-            raise RecordingError(f"{self.path}: channel {channel} was not added by add_channel")
+            raise RecordingError(f"{self.name}: channel {channel} was not added by add_channel")
         self._emit(channel, t, dict(payload))
 
     def add_segment(self, segment: Segment) -> None:
@@ -248,7 +253,7 @@ class RecordingWriter:
 
     def _check_open(self) -> None:
         if self._closed:
-            raise RecordingError(f"{self.path}: writer already closed")
+            raise RecordingError(f"{self.name}: writer already closed")
 
     def close(self) -> None:
         """Write the metadata record and the summary, and close the file (idempotent)."""
@@ -293,11 +298,19 @@ def write_recording(
 ) -> None:
     """Write ``rec`` to ``path``, all streams interleaved in time order (ties: sensors first,
     then mocap joints in dict order). Identical input gives identical bytes. ``compression``
-    and ``decimals`` as for :class:`RecordingWriter`."""
+    and ``decimals`` as for :class:`RecordingWriter`. Written under a temporary name and
+    renamed when complete (:mod:`formats.atomic`): ``path`` is never left half-written."""
+    with replacing(path) as tmp:
+        _write_recording(tmp, Path(path), rec, compression, decimals)
+
+
+def _write_recording(path: Path, name: Path, rec: Recording, compression: Compression,
+                     decimals: int) -> None:
     mocap_items = list(rec.mocap.items())
     with RecordingWriter(
         path,
         rec.sensor_names,
+        name=name,
         mocap_joints={joint: stream.names for joint, stream in mocap_items},
         sensor_units=rec.sensor_units,
         sensor_rate_hz=rec.sensor_rate_hz,

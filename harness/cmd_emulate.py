@@ -11,7 +11,8 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile
+from exohil.formats.atomic import write_text
+from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
 
 
 def _load_recording(path: Path):
@@ -31,10 +32,8 @@ def _load_recording(path: Path):
 
 
 def _write_fault_log(path: Path, emulator) -> None:
-    with path.open("w", encoding="utf-8") as out:
-        for record in emulator.fault_log:
-            out.write(json.dumps({"seq": record.seq, "kind": record.kind,
-                                  "details": record.details}, default=str) + "\n")
+    write_text(path, "".join(json.dumps({"seq": r.seq, "kind": r.kind, "details": r.details},
+                                        default=str) + "\n" for r in emulator.fault_log))
 
 
 def _raise_interrupt(signum: int, frame: object) -> None:
@@ -83,6 +82,7 @@ def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None
     from exohil.emulators.arduino import ArduinoEmulator
     from exohil.emulators.fault_spec import fault_plan
 
+    refuse_overwriting_inputs([("--fault-log", fault_log)], [recording])
     source = _load_recording(recording)
     try:
         plan = fault_plan(faults)

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import shutil
 import tempfile
 from pathlib import Path
 
 import click
 
+from exohil.formats.atomic import write_bytes, write_text
 from exohil.harness.paths import FIXTURES_DIR, SHOULDER_IK_DIR
 
 
@@ -58,8 +58,9 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
             hashes[spec.filename] = sha256_file(built)
         if not check:
             for source, target in SHOULDER_IK_NOTICES.items():
-                shutil.copyfile(shoulder_ik_dir / source, fixtures_dir / target)
-            (fixtures_dir / SUMS_FILE).write_text(format_sums(hashes), encoding="utf-8")
+                notice = (shoulder_ik_dir / source).read_bytes()
+                write_bytes(fixtures_dir / target, notice)
+            write_text(fixtures_dir / SUMS_FILE, format_sums(hashes))
             click.echo(f"wrote {len(hashes)} fixtures and {SUMS_FILE} to {fixtures_dir}", err=True)
             return
     sums_path = fixtures_dir / SUMS_FILE

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile
+from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
 
 
 @click.command("plot")
@@ -44,6 +44,8 @@ def plot_command(
 
         exohil plot rec.mcap --kind timeseries --t0 10 --t1 30 --out ts.png
     """
+    refuse_overwriting_inputs([("--out", out)], [file])
+    from exohil.formats.atomic import write_with
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
     from exohil.harness.recording_plots import plot_hysteresis, plot_timeseries, time_window
@@ -69,7 +71,7 @@ def plot_command(
     except RecordingError as exc:
         raise click.ClickException(str(exc)) from exc
     try:
-        figure.savefig(out, format="png")
+        write_with(out, lambda tmp: figure.savefig(tmp, format="png"))
     except OSError as exc:
         raise click.ClickException(f"{out}: cannot write: {exc.strerror or exc}") from exc
     click.echo(f"wrote {out}", err=True)

@@ -21,13 +21,12 @@ with the Agg backend (files only).
 from __future__ import annotations
 
 import json
-import os
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from exohil.formats.atomic import write_text, write_with
 from exohil.harness.recording_plots import motion_direction
 from exohil.harness.run_recording import write_run_recording
 from exohil.harness.session import SessionResult, latency_samples
@@ -42,18 +41,13 @@ ARM_FRAMES = 4
 GIF_MAX_FRAMES = 120
 
 Files = list[tuple[str, Path]]
-
-
-def _atomic(path: Path, write: Callable[[Path], object]) -> Path:
-    """Run ``write(temporary path)``, then rename the file to ``path``."""
-    tmp = path.with_name(f".{path.name}.partial")
-    write(tmp)
-    os.replace(tmp, path)
-    return path
+#: The report's files whose names are fixed (arm_*.png are numbered).
+REPORT_FILES = ("run.mcap", "summary.json", "summary.md", "angles.png", "latency.png",
+                "hysteresis.png", "arm.gif")
 
 
 def _save(figure: Figure, path: Path) -> Path:
-    return _atomic(path, lambda tmp: figure.savefig(tmp, format="png"))
+    return write_with(path, lambda tmp: figure.savefig(tmp, format="png"))
 
 
 def _figure(rows: int, cols: int = 1, height: float = 2.4) -> tuple[Figure, np.ndarray]:
@@ -146,6 +140,8 @@ def plot_session_hysteresis(result: SessionResult) -> Figure | None:
     if ok.sum() < 10:
         return None
     t, phi, values = run.device_time_s[ok], phi[ok], run.values[ok]
+    if np.std(phi) == 0:  # the arm never moved: no loop to draw
+        return None
     corr = [abs(np.corrcoef(values[:, j], phi)[0, 1]) if np.std(values[:, j]) > 0 else 0.0
             for j in range(values.shape[1])]
     j = int(np.argmax(corr))
@@ -192,10 +188,11 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     est = result.model.estimator
     files: Files = []
     notes: list[str] = []
-    files.append(("run recording", _atomic(out_dir / "run.mcap", lambda tmp: write_run_recording(
-        tmp, result.run, est.sensor_names, est.target.joint, est.target.angles,
+    write_run_recording(
+        out_dir / "run.mcap", result.run, est.sensor_names, est.target.joint, est.target.angles,
         {"generator": "exohil", "source": s["target"] or "", "model_sha256": s["model_sha256"],
-         "latency_ms": json.dumps(s["latency_ms"], separators=(",", ":"))}))))
+         "latency_ms": json.dumps(s["latency_ms"], separators=(",", ":"))})
+    files.append(("run recording", out_dir / "run.mcap"))
     files.append(("angles over time", _save(plot_angles(result), out_dir / "angles.png")))
     files.append(("latency histograms", _save(plot_latency(result), out_dir / "latency.png")))
     hysteresis = plot_session_hysteresis(result)
@@ -207,8 +204,8 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     md = out_dir / "summary.md"
     js = out_dir / "summary.json"
     listed = [*files, ("summary table", md), ("summary JSON", js)]
-    _atomic(md, lambda tmp: tmp.write_text(summary_markdown(s, listed), encoding="utf-8"))
-    _atomic(js, lambda tmp: tmp.write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8"))
+    write_text(md, summary_markdown(s, listed))
+    write_text(js, json.dumps(s, indent=2) + "\n")
     return listed, notes
 
 

@@ -29,6 +29,8 @@ import xml.etree.ElementTree as ET
 from math import cos, sin
 from pathlib import Path
 
+from exohil.formats.atomic import write_text
+from exohil.formats.errors import InputError
 from exohil.harness.paths import FIXTURES_DIR
 
 #: The committed model and the URDF it is generated from.
@@ -47,7 +49,7 @@ _LINK_RADIUS = {"torso": 0.045, "Bicep": 0.02, "ForeArm": 0.018, "wrist": 0.016}
 _HAND_LENGTH = 0.06  # capsule beyond the wrist (m), a stand-in for the hand
 
 
-class UrdfError(ValueError):
+class UrdfError(InputError, ValueError):
     """The URDF lacks a link or joint the model needs, or has a malformed value."""
 
 
@@ -193,9 +195,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 1
     out = Path(args[1])
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(out)
+    write_text(out, text)
     print(f"wrote {out}")
     return 0
 

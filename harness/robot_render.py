@@ -15,7 +15,6 @@ docs/robot.md; it is optional and not used here.
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +22,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from exohil.formats.atomic import replacing, write_with
 from exohil.kinematics import humerus_direction
 from exohil.kinematics.robot import NAO_FROM_ISB
 
@@ -157,9 +157,7 @@ def render_arm_frames(samples: Sequence[ArmSample], out_dir: str | Path, *,
     for k, sample in enumerate(samples):
         figure.draw(sample)
         path = out / f"arm_{k:05d}.png"
-        tmp = path.with_name(path.name + ".partial")
-        figure.fig.savefig(tmp, format="png")
-        os.replace(tmp, path)
+        write_with(path, lambda tmp: figure.fig.savefig(tmp, format="png"))
         paths.append(path)
     return paths
 
@@ -168,7 +166,7 @@ def write_arm_animation(samples: Sequence[ArmSample], path_gif: str | Path, *,
                         fps: float = 10.0, dpi: int = 80) -> Path:
     """Write the samples as an animated GIF (one frame each, ``fps`` frames per second).
 
-    Written to ``<name>.partial.gif`` beside ``path_gif`` and renamed when complete.
+    Written under a temporary name beside ``path_gif`` and renamed when complete.
     """
     from matplotlib.animation import PillowWriter
 
@@ -176,12 +174,10 @@ def write_arm_animation(samples: Sequence[ArmSample], path_gif: str | Path, *,
     if not (math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be positive, got {fps!r}")
     path = Path(path_gif)
-    tmp = path.with_name(path.stem + ".partial.gif")
     figure = _Figure(dpi)
     writer = PillowWriter(fps=fps)  # type: ignore[arg-type]  # Pillow takes a float fps
-    with writer.saving(figure.fig, str(tmp), dpi):
+    with replacing(path) as tmp, writer.saving(figure.fig, str(tmp), dpi):
         for sample in samples:
             figure.draw(sample)
             writer.grab_frame()
-    os.replace(tmp, path)
     return path

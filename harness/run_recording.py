@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from exohil.formats.atomic import replacing
 from exohil.formats.recording_writer import RecordingWriter
 from exohil.harness.pipeline import NOT_STAMPED, STAGES, PipelineRun
 from exohil.kinematics import NAO_JOINTS
@@ -36,32 +37,31 @@ def write_run_recording(path: Path, run: PipelineRun, sensor_names: Sequence[str
                         joint: str, angle_names: Sequence[str],
                         metadata: Mapping[str, str]) -> None:
     """Write ``run`` to ``path`` (see module doc)."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    t = np.maximum(run.device_time_s, 0.0)
-    with RecordingWriter(tmp, sensor_names, metadata=dict(metadata)) as writer:
-        if run.frames:
-            writer.add_sensor_frames(run.seq, t, run.values)
-        estimates = writer.add_channel(f"/estimate/{joint}", f"exohil.Estimate.{joint}",
-                                       _object_schema(f"{joint} estimate", angle_names))
-        robot = writer.add_channel("/robot/nao", "exohil.NaoCommand", _object_schema(
-            "NAO arm command, degrees", NAO_JOINTS,
-            {"clamped": {"type": "boolean"}}))
-        stage_names = [f"{s}_us" for s in STAGES if s != "host_receive"]
-        timing = writer.add_channel("/timing/stages", "exohil.StageTimes", _object_schema(
-            "per-frame stage times, µs after host receive", ["seq", *stage_names]))
-        receive = run.stamps[:, STAGES.index("host_receive")]
-        for i in range(run.frames):
-            ti = float(t[i])
-            writer.add_message(estimates, ti, {"t": ti, **{
-                a: float(v) for a, v in zip(angle_names, run.estimates[i], strict=True)
-                if np.isfinite(v)}})
-            if np.all(np.isfinite(run.commands[i])):
-                writer.add_message(robot, ti, {"t": ti, **{
-                    j: float(np.rad2deg(v)) for j, v in zip(NAO_JOINTS, run.commands[i],
-                                                            strict=True)},
-                    "clamped": bool(run.clamped[i])})
-            stamps = {f"{s}_us": round((int(run.stamps[i, k]) - int(receive[i])) / 1e3, 3)
-                      for k, s in enumerate(STAGES)
-                      if s != "host_receive" and run.stamps[i, k] != NOT_STAMPED}
-            writer.add_message(timing, ti, {"t": ti, "seq": int(run.seq[i]), **stamps})
-    tmp.replace(path)
+    with replacing(path) as tmp:
+        t = np.maximum(run.device_time_s, 0.0)
+        with RecordingWriter(tmp, sensor_names, metadata=dict(metadata), name=path) as writer:
+            if run.frames:
+                writer.add_sensor_frames(run.seq, t, run.values)
+            estimates = writer.add_channel(f"/estimate/{joint}", f"exohil.Estimate.{joint}",
+                                           _object_schema(f"{joint} estimate", angle_names))
+            robot = writer.add_channel("/robot/nao", "exohil.NaoCommand", _object_schema(
+                "NAO arm command, degrees", NAO_JOINTS,
+                {"clamped": {"type": "boolean"}}))
+            stage_names = [f"{s}_us" for s in STAGES if s != "host_receive"]
+            timing = writer.add_channel("/timing/stages", "exohil.StageTimes", _object_schema(
+                "per-frame stage times, µs after host receive", ["seq", *stage_names]))
+            receive = run.stamps[:, STAGES.index("host_receive")]
+            for i in range(run.frames):
+                ti = float(t[i])
+                writer.add_message(estimates, ti, {"t": ti, **{
+                    a: float(v) for a, v in zip(angle_names, run.estimates[i], strict=True)
+                    if np.isfinite(v)}})
+                if np.all(np.isfinite(run.commands[i])):
+                    writer.add_message(robot, ti, {"t": ti, **{
+                        j: float(np.rad2deg(v)) for j, v in zip(NAO_JOINTS, run.commands[i],
+                                                                strict=True)},
+                        "clamped": bool(run.clamped[i])})
+                stamps = {f"{s}_us": round((int(run.stamps[i, k]) - int(receive[i])) / 1e3, 3)
+                          for k, s in enumerate(STAGES)
+                          if s != "host_receive" and run.stamps[i, k] != NOT_STAMPED}
+                writer.add_message(timing, ti, {"t": ti, "seq": int(run.seq[i]), **stamps})

@@ -29,6 +29,7 @@ from exohil.emulators.discrepancy.workflow import Outcome
 from exohil.emulators.effects import Noise, Signal
 from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory
 from exohil.emulators.suit_profile import ProfileError, read_toml
+from exohil.formats.atomic import write_text
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 
 CALIBRATED_SCHEMA = "exohil-calibrated-suit-profile"
@@ -148,8 +149,8 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
 
 def write_calibrated_profile(path: str | Path, suit: CalibratedSuit, description: str = "",
                              ) -> None:
-    """Write ``suit`` as TOML (the caller picks a temporary name and renames it)."""
-    Path(path).write_text(to_toml(profile_dict(suit, description)), encoding="utf-8")
+    """Write ``suit`` as TOML (temporary name, renamed when complete)."""
+    write_text(path, to_toml(profile_dict(suit, description)))
 
 
 def load_calibrated_profile(path: str | Path) -> CalibratedSuit:

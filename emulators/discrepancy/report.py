@@ -7,7 +7,6 @@ under a final name.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -15,19 +14,10 @@ import numpy as np
 from exohil.emulators.discrepancy.localise import motion
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
 from exohil.emulators.discrepancy.workflow import Outcome
+from exohil.formats.atomic import write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
                 "suit_profile.toml")
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def _main_angle(outcome: Outcome) -> int:
@@ -155,6 +145,6 @@ def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str) -> list[Pa
     written = []
     for name in OUTPUT_NAMES:
         path = out_dir / name
-        _write_atomic(path, files[name])
+        write_bytes(path, files[name])
         written.append(path)
     return written
