@@ -11,6 +11,10 @@ from pathlib import Path
 
 import click
 
+from exohil.harness.cli_types import refuse_overwriting_inputs
+
+#: What a run writes into --out.
+REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
 
 @click.command("conform")
 @click.option("--target", default=None,
@@ -50,6 +54,10 @@ def conform(target: str | None, model: Path | None, bench_file: Path | None, pro
 
     if bench_file is None and (target is None or model is None):
         raise click.UsageError("give --target and --model, or a --bench file naming them")
+    target_file = Path(target[len("emulator:"):].partition("?")[0]) if target and \
+        target.startswith("emulator:") else None
+    refuse_overwriting_inputs([("--out", out_dir / name) for name in REPORT_FILES],
+                              [target_file, model, bench_file, baseline, reference])
     out_dir.mkdir(parents=True, exist_ok=True)
     args = ["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
             "-o", "junit_family=xunit1", "-W", "ignore::pytest.PytestAssertRewriteWarning",

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
 import click
+
+from exohil.formats.atomic import same_file
 
 
 class OutputFile(click.Path):
@@ -20,3 +23,18 @@ class OutputFile(click.Path):
         if not folder.is_dir():
             self.fail(f"folder {folder} does not exist (create it first)", param, ctx)
         return path
+
+
+def refuse_overwriting_inputs(outputs: Iterable[tuple[str, Path | None]],
+                              inputs: Iterable[Path | None]) -> None:
+    """Refuse (a usage error naming both) when an output file is one of the input files, by
+    any path to it: a command never replaces what it reads. ``outputs`` holds (option that
+    names it, path) of each output; None paths are ignored."""
+    sources = [path for path in inputs if path is not None]
+    for option, path in outputs:
+        if path is None:
+            continue
+        clash = same_file(path, sources)
+        if clash is not None:
+            raise click.UsageError(f"{option} {path} is the input {clash}; refusing to overwrite "
+                                   "it (choose another output)")

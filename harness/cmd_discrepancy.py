@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from exohil.harness.cli_types import refuse_overwriting_inputs
+
 
 def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
     """The profile's name and the vocabulary effects its model already has."""
@@ -59,11 +61,9 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> Non
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
 
-    inputs = {measured.resolve()} | ({profile_path.resolve()} if profile_path else set())
-    outputs = {(out_dir / name).resolve() for name in OUTPUT_NAMES}
-    if out_dir.resolve() in inputs or inputs & outputs:
-        raise click.ClickException(f"--out {out_dir} would overwrite an input; choose another "
-                                   "folder")
+    refuse_overwriting_inputs([("--out", out_dir), *(("--out", out_dir / name)
+                                                      for name in OUTPUT_NAMES)],
+                              [measured, profile_path])
     if out_dir.exists() and not out_dir.is_dir():
         raise click.ClickException(f"--out {out_dir} is not a folder")
     name, in_model = _in_model(profile_path)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile
+from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
 
 
 @dataclass(frozen=True)
@@ -143,6 +143,8 @@ def import_csv(
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_writer import write_recording
 
+    refuse_overwriting_inputs([("--out", out)], [input_file])
+
     chosen = PRESETS[preset] if preset else None
     rate = rate if rate is not None else (chosen.rate_hz if chosen else None)
     sensor_cols = sensor_cols or (chosen.sensor_cols if chosen else None)
@@ -212,6 +214,8 @@ def import_mot(input_file: Path, out: Path, license_note: str | None) -> None:
     from exohil.formats.mot_import import shoulder_recording_from_mot
     from exohil.formats.opensim_mot import MotError, read_mot
     from exohil.formats.recording_writer import write_recording
+
+    refuse_overwriting_inputs([("--out", out)], [input_file])
 
     try:
         mot = read_mot(input_file)

@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from exohil.harness.cli_types import OutputFile
+from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
 
 
 @click.group("record")
@@ -151,19 +151,13 @@ def recover_command(file: Path, out: Path) -> None:
     from exohil.formats.recording_reader import scan_recording
     from exohil.formats.recording_writer import write_recording
 
-    if out.resolve() == file.resolve():
-        raise click.ClickException(f"refusing to overwrite the input {file}; choose another --out")
+    refuse_overwriting_inputs([("--out", out)], [file])
     try:
         scan = scan_recording(file)
     except RecordingError as exc:
         raise click.ClickException(str(exc)) from exc
     rec = scan.recording
-    tmp = out.with_name(f".{out.name}.tmp")
-    try:
-        write_recording(tmp, rec)
-        tmp.replace(out)
-    finally:
-        tmp.unlink(missing_ok=True)
+    write_recording(out, rec)
     span = (f", {rec.sensors.t[0]:.3f} → {rec.sensors.t[-1]:.3f} s" if len(rec.sensors)
             else "")
     mocap = sum(len(stream) for stream in rec.mocap.values())

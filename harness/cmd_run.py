@@ -14,8 +14,9 @@ from pathlib import Path
 import click
 import numpy as np
 
+from exohil.formats.atomic import write_text
 from exohil.harness.bench import BenchConfig
-from exohil.harness.cli_types import OutputFile
+from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
 from exohil.harness.pipeline import Status
 
 
@@ -51,6 +52,22 @@ def stop_on_signals() -> Iterator[threading.Event]:
             signal.signal(sig, old)
 
 
+def _inputs(config: BenchConfig) -> list[Path | None]:
+    device = config.device
+    return [config.model, getattr(device, "recording", None), getattr(device, "reference", None)]
+
+
+def _outputs(config: BenchConfig, json_out: Path | None,
+             out_dir: Path | None) -> list[tuple[str, Path | None]]:
+    """Every file the run writes, with the option that names it."""
+    from exohil.harness.demo_report import REPORT_FILES
+
+    outputs = [("--record", config.record), ("--json", json_out)]
+    if out_dir is not None:
+        outputs += [("--out", out_dir / name) for name in REPORT_FILES]
+    return outputs
+
+
 def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | None,
                    title: str, out_dir: Path | None = None) -> dict:
     """Run one session on ``config``, print the report, write the JSON and, with ``out_dir``,
@@ -58,6 +75,7 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
     from exohil.harness.session import SessionError, run_session
     from exohil.harness.session_report import session_measurements, summary, summary_lines
 
+    refuse_overwriting_inputs(_outputs(config, json_out, out_dir), _inputs(config))
     if out_dir is not None:  # refused before any work, like the output files
         try:
             out_dir.mkdir(parents=True, exist_ok=True)
@@ -76,9 +94,7 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
     measurements = session_measurements(result)
     s = summary(result, measurements)
     if json_out is not None:
-        tmp = json_out.with_name(f".{json_out.name}.tmp")
-        tmp.write_text(json.dumps(s, indent=2) + "\n", encoding="utf-8")
-        tmp.replace(json_out)
+        write_text(json_out, json.dumps(s, indent=2) + "\n")
     lines = summary_lines(s)
     if config.record is not None:
         lines.append(f"recorded    {config.record}")

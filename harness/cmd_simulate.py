@@ -6,6 +6,12 @@ from pathlib import Path
 
 import click
 
+from exohil.harness.cli_types import refuse_overwriting_inputs
+
+
+def _mot_files(protocol: str) -> list[Path]:
+    return [Path(p) for p in protocol[4:].split(",")] if protocol.startswith("mot:") else []
+
 
 def _trajectory(protocol: str, seed: int):
     from exohil.emulators.protocols import mot_trajectory, paper_protocol
@@ -13,7 +19,7 @@ def _trajectory(protocol: str, seed: int):
     if protocol == "paper":
         return paper_protocol(seed)
     if protocol.startswith("mot:") and protocol[4:]:
-        paths = [Path(p) for p in protocol[4:].split(",")]
+        paths = _mot_files(protocol)
         missing = [str(p) for p in paths if not p.is_file()]
         if missing:
             raise click.BadParameter(f"no such .mot file: {', '.join(missing)}",
@@ -57,6 +63,8 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
     from exohil.emulators.suit_profile import ProfileError, load_default_profile, load_profile
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_writer import write_recording
+
+    refuse_overwriting_inputs([("--out", out_path)], [profile_path, *_mot_files(protocol)])
 
     unknown = sorted(set(without) - set(EFFECT_TYPES))
     if unknown:

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile
+from exohil.formats.atomic import write_text
+from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
 
 MODEL_CHOICES = ("ennet", "lnnet", "ann", "cnn", "classical")
 
@@ -107,6 +108,7 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     from exohil.estimator.evaluation import evaluate
     from exohil.estimator.training import progress_printer, train
 
+    refuse_overwriting_inputs([("--out", out)], recordings)
     wf = _workflow()
     data = _load(recordings, joint, angles)
     split = wf.make_split(data, offset_frames, test_fraction=test_fraction,
@@ -150,6 +152,7 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     from exohil.estimator.evaluation import evaluate
     from exohil.estimator.splits import tail_cut
 
+    refuse_overwriting_inputs([("--json", json_out)], [checkpoint, *recordings])
     try:
         est = load_checkpoint(checkpoint)
     except CheckpointError as exc:
@@ -179,7 +182,7 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     for name, seg in result["per_segment"].items():
         click.echo(f"  {name}: RMSE " + ", ".join(f"{a} {v:.2f}°" for a, v in seg["rmse"].items()))
     if json_out:
-        json_out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+        write_text(json_out, json.dumps(result, indent=2) + "\n")
 
 
 def _angle_limits(items: tuple[str, ...], angles: tuple[str, ...]) -> dict[str, float]:
@@ -234,6 +237,8 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
     from exohil.estimator.report import comparison_markdown, write_section
     from exohil.estimator.training import progress_printer
 
+    refuse_overwriting_inputs([("--out", out), ("--json", json_out)],
+                              [*train_paths, *test_paths])
     kinds = [k.strip() for k in models.split(",") if k.strip()]
     bad = [k for k in kinds if k not in MODEL_CHOICES]
     if bad or not kinds:
@@ -266,7 +271,7 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
             save_checkpoint(save_dir / f"{r.kind}.npz", r.estimator)
     if json_out:
         payload = {r.kind: {"test": r.test, "info": r.estimator.info} for r in results}
-        json_out.write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
+        write_text(json_out, json.dumps(payload, indent=2) + "\n")
 
 
 COMMANDS: list[click.Command] = [train_command, evaluate_command, table_command]

@@ -32,8 +32,9 @@ from exohil.estimator.evaluation import accuracy_measurements, arm_direction_err
 from exohil.estimator.inference import StreamingEstimator, default_backend
 from exohil.estimator.trained import TrainedEstimator
 from exohil.formats.alignment import angles_at
+from exohil.formats.atomic import same_file
 from exohil.formats.digest import sha256_file
-from exohil.formats.errors import RecordingError
+from exohil.formats.errors import InputError, RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import Recording
 from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, SerialDevice, open_device
@@ -54,7 +55,7 @@ LATENCY_INTERVALS = {
 }
 
 
-class SessionError(Exception):
+class SessionError(InputError):
     """A session that cannot start or produced nothing; the message says why (one line)."""
 
 
@@ -203,7 +204,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         except CheckpointError as err:
             raise SessionError(str(err)) from None
     inputs = [p for p in (config.model, ref_path) if p is not None]
-    if config.record is not None and any(_same_file(config.record, p) for p in inputs):
+    if config.record is not None and same_file(config.record, inputs) is not None:
         raise SessionError(f"refusing to record onto an input: {config.record}")
     if progress is not None and reference is not None:
         progress = _with_running_error(progress, reference, est)
@@ -294,10 +295,6 @@ def _with_running_error(progress: Progress, reference: Recording,
         progress(status)
 
     return with_error
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    return Path(a).resolve() == Path(b).resolve()
 
 
 def _is_shoulder(est: TrainedEstimator) -> bool:
@@ -398,6 +395,9 @@ def teleop_measurements(result: SessionResult,
     reference = np.full_like(run.commands, np.nan)
     for i in np.flatnonzero(ok):
         reference[i] = mapping.command_for(truth[i, th], truth[i, ph]).joints
+    if not ok.any():
+        return [Measurement.skipped(n, "deg", "no frame with both a command and the truth",
+                                    limits.get(n)) for n in names]
     err = np.rad2deg(run.commands[ok] - reference[ok])
     note = f"{int(ok.sum())} frames"
     out = [Measurement.judge(n, float(np.sqrt(np.mean(err[:, j] ** 2))), "deg",

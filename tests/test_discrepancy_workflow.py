@@ -137,8 +137,10 @@ def test_cli_errors_are_one_line(tmp_path):
     result = CliRunner().invoke(main, ["discrepancy", str(sensors_only), "--out",
                                        str(tmp_path / "o")])
     assert result.exit_code == 1 and "no motion capture" in result.output
+    before = short.read_bytes()
     result = CliRunner().invoke(main, ["discrepancy", str(short), "--out", str(short)])
-    assert result.exit_code == 1 and "overwrite an input" in result.output
+    assert result.exit_code == 2 and "refusing to overwrite" in result.output
+    assert short.read_bytes() == before
 
 
 def test_profile_effects_already_in_the_model_are_not_proposed(tmp_path):

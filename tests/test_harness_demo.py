@@ -8,6 +8,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 from PIL import Image
 
@@ -98,8 +99,24 @@ def test_demo_refuses_to_record_onto_its_input(tmp_path):
     before = copy.read_bytes()
     result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--recording", str(copy),
                                        "--record", str(copy)])
-    assert result.exit_code != 0 and "refusing to record onto an input" in result.output
+    assert result.exit_code != 0 and "refusing to overwrite it" in result.output
     assert copy.read_bytes() == before
+
+
+def test_a_session_refuses_to_record_onto_its_model(tmp_path):
+    import shutil
+
+    from exohil.harness.bench import BenchConfig, EmulatorDevice
+    from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
+    from exohil.harness.session import SessionError, run_session
+
+    model = tmp_path / "m.npz"
+    shutil.copyfile(MODELS_DIR / "ann.npz", model)
+    config = BenchConfig(device=EmulatorDevice(FIXTURES_DIR / "real_motion_abd_flx.mcap"),
+                         model=model, record=tmp_path / "link.npz")
+    (tmp_path / "link.npz").symlink_to(model)
+    with pytest.raises(SessionError, match="refusing to record onto an input"):
+        run_session(config, 1.0)
 
 
 def test_demo_rejects_a_missing_model_with_one_line(tmp_path):

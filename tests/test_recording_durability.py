@@ -72,7 +72,7 @@ def test_recover_writes_a_clean_copy_and_says_what_was_lost(tmp_path):
                                       str(tmp_path / "again.mcap")])
     assert "lost: nothing" in again.output
     refused = CliRunner().invoke(main, ["record", "recover", str(out), "--out", str(out)])
-    assert refused.exit_code != 0 and "refusing to overwrite the input" in refused.output
+    assert refused.exit_code != 0 and "refusing to overwrite it" in refused.output
 
 
 @pytest.mark.slow
