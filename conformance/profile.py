@@ -32,12 +32,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from exohil.formats.errors import InputError
 from exohil.formats.measurement import Limit, check_unit, convert
 
 PROFILES_DIR = Path(__file__).parent / "profiles"
 
 
-class ProfileError(ValueError):
+class ProfileError(InputError, ValueError):
     """A profile that cannot be used; the message names the file and the problem."""
 
 

@@ -18,13 +18,14 @@ import numpy as np
 
 from exohil.emulators.effects import EffectChain, Signal, effect_from_dict
 from exohil.emulators.suit_geometry import SuitGeometry, Tendon
+from exohil.formats.errors import InputError
 
 PROFILE_SCHEMA = "exohil-suit-profile"
 PROFILE_VERSION = 1
 DEFAULT_PROFILE_PATH = Path(__file__).parent / "profiles" / "default.toml"
 
 
-class ProfileError(ValueError):
+class ProfileError(InputError, ValueError):
     """A suit profile that cannot be used; the message says which file and what is wrong."""
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
 
 #: Default targets for the shoulder suit: MoBL-ARMS elv_angle (θ) and shoulder_elv (φ).
@@ -22,7 +23,7 @@ SHOULDER_JOINT = "shoulder"
 SHOULDER_ANGLES = ("elv_angle", "shoulder_elv")
 
 
-class DatasetError(ValueError):
+class DatasetError(InputError, ValueError):
     """A recording cannot provide the requested sensors or angles."""
 
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from exohil.estimator.classical import ClassicalModel
-from exohil.estimator.dataset import TargetSpec
+from exohil.estimator.dataset import DatasetError, TargetSpec
 from exohil.estimator.evaluation import evaluate
 from exohil.estimator.models import MODEL_KINDS, ModelConfig, build_model
 from exohil.estimator.splits import Split
@@ -31,6 +31,8 @@ from exohil.estimator.trained import Normalisation, TrainedEstimator
 from exohil.estimator.windows import FrameTable
 
 ALL_KINDS = (*MODEL_KINDS, "classical")
+#: Least training data `train` accepts, seconds of frames at the sensor rate.
+MIN_TRAIN_SECONDS = 1.0
 
 
 @dataclass
@@ -70,6 +72,12 @@ def train(
         raise ValueError(f"unknown model kind {cfg.kind!r}; choose from {ALL_KINDS}")
     if not split.train:
         raise ValueError("no training frames")
+    frames = sum(len(b) for b in split.train)
+    if frames < MIN_TRAIN_SECONDS * sensor_rate_hz:
+        raise DatasetError(f"too little data to train: {frames} frames "
+                           f"({frames / sensor_rate_hz:.2f} s) in the training part; need at "
+                           f"least {MIN_TRAIN_SECONDS:g} s ({MIN_TRAIN_SECONDS * sensor_rate_hz:g} "
+                           "frames)")
     norm = Normalisation.fit(split.train)
     model_cfg = ModelConfig(cfg.kind, len(sensor_names), len(target.angles), cfg.window,
                             cfg.dilation, cfg.hidden)

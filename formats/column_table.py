@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from exohil.formats.errors import InputError
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 
 
-class TableError(ValueError):
+class TableError(InputError, ValueError):
     """A CSV table or column specification that cannot be used; the message says why."""
 
 
@@ -62,7 +63,8 @@ def read_table(
         skip_rows: lines to drop before the header/data (e.g. a preamble).
 
     Raises:
-        TableError: unreadable file, missing columns, non-numeric data cells, no data rows.
+        TableError: unreadable file, missing columns, non-numeric or non-finite data cells
+            (NaN, inf), no data rows.
     """
     path = Path(path)
     try:
@@ -90,6 +92,10 @@ def read_table(
             data[r] = [float(row[c]) for c in columns]
         except ValueError as exc:
             raise TableError(f"{path}: data row {r + 1}: {exc}") from exc
+        if not np.isfinite(data[r]).all():
+            c = columns[int(np.flatnonzero(~np.isfinite(data[r]))[0])]
+            raise TableError(f"{path}: data row {r + 1}, column {c}: {row[c].strip()!r} is not a "
+                             "finite number (a recording holds finite values only)")
     return Table(header=header, data=data)
 
 

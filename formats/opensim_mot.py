@@ -14,8 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from exohil.formats.errors import InputError
 
-class MotError(ValueError):
+
+class MotError(InputError, ValueError):
     """A ``.mot`` file that cannot be parsed; the message names the file and the problem."""
 
 

@@ -42,12 +42,13 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs
 
+from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
 from exohil.harness.acquisition import SerialFrameSource
 from exohil.harness.pipeline import DeviceClock
 
 
-class BenchError(ValueError):
+class BenchError(InputError, ValueError):
     """A bench configuration or target that cannot be used; the message says why."""
 
 

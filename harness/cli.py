@@ -11,15 +11,20 @@ from importlib.metadata import entry_points
 import click
 
 from exohil import __version__
+from exohil.formats.errors import InputError
 
 
 class _Group(click.Group):
-    """Turns an operating-system error anywhere in a command (a file that vanished, a full
-    disk, a permission) into one error line and exit code 1 instead of a traceback."""
+    """Turns bad input found anywhere in a command (:class:`InputError`: a recording, a
+    checkpoint, a profile that does not fit the job) and an operating-system error (a file that
+    vanished, a full disk, a permission) into one error line and exit code 1 instead of a
+    traceback."""
 
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
+        except InputError as err:
+            raise click.ClickException(str(err)) from None
         except OSError as err:
             where = f"{err.filename}: " if err.filename else ""
             raise click.ClickException(f"{where}{err.strerror or err}") from None

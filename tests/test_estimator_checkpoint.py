@@ -105,3 +105,54 @@ def test_training_is_deterministic_for_a_seed():
     for (name, pa), pb in zip(a.network.state_dict().items(), b.network.state_dict().values(),
                               strict=True):
         assert (pa == pb).all(), name
+
+
+def _damaged(tmp_path, change) -> str:
+    """The ANN checkpoint with ``change(arrays)`` applied, written back."""
+    _, _, est = _trained("ann")
+    path = tmp_path / "m.npz"
+    save_checkpoint(path, est)
+    with np.load(path) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    change(arrays)
+    np.savez(path, **arrays)
+    return str(path)
+
+
+def _set(name, value):
+    def change(arrays):
+        arrays[name] = value(arrays[name]) if callable(value) else value
+    return change
+
+
+def _nan_weight(array):
+    array = array.copy()
+    array.flat[3] = np.nan
+    return array
+
+
+def _meta(text: str):
+    return np.frombuffer(text.encode(), dtype=np.uint8)
+
+
+@pytest.mark.parametrize(("change", "problem"), [
+    (lambda a: _set(_first_weight(a), _nan_weight)(a), "non-finite values"),
+    (lambda a: _set(_first_weight(a), lambda w: np.full(w.shape, "x"))(a), "not real numbers"),
+    (lambda a: _set(_first_weight(a), lambda w: np.full(w.shape, np.inf, np.float32))(a),
+     "non-finite values"),
+    (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
+        '"x_std": [', '"x_std": [NaN, ')))(a), "no readable metadata"),
+    (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
+        '"x_std": [', '"x_std": [0.0, ').replace('"x_mean": [', '"x_mean": [0.0, ')
+        .replace('"n_sensors": 4', '"n_sensors": 5').replace(
+            '"sensor_names": [', '"sensor_names": ["E", ')))(a), "scales must be > 0"),
+    (lambda a: _set("meta", _meta("[" * 100_000 + "]" * 100_000))(a), "no readable metadata"),
+])
+def test_damaged_checkpoints_are_refused_not_evaluated(tmp_path, change, problem):
+    path = _damaged(tmp_path, change)
+    with pytest.raises(CheckpointError, match=problem):
+        load_checkpoint(path)
+
+
+def _first_weight(arrays) -> str:
+    return next(k for k in sorted(arrays) if k.startswith("net/") and k.endswith("weight"))

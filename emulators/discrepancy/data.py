@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
 
 #: Folds of the blocked cross-validation.
@@ -22,7 +23,7 @@ BLOCK_S = 2.5
 MIN_BLOCK_S = BLOCK_S
 
 
-class DiscrepancyError(ValueError):
+class DiscrepancyError(InputError, ValueError):
     """A recording the workflow cannot use; the message is one line saying why."""
 
 
