@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import refuse_overwriting_inputs
+from exohil.harness.cli_types import OutputFolder, refuse_overwriting_inputs
 
 #: What a run writes into --out.
 REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
@@ -38,7 +38,7 @@ REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
 @click.option("--backend", default=None,
               type=click.Choice(["auto", "numpy", "torch", "torchscript", "onnxruntime"]),
               help="Streaming inference backend [the bench's, else auto].")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", "out_dir", type=OutputFolder(),
               default=Path("conformance-report"), show_default=True,
               help="Folder for junit.xml, conformance.json, summary.md, run.mcap.")
 @click.option("-k", "select", default=None,

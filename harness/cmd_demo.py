@@ -16,7 +16,7 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile
+from exohil.harness.cli_types import OutputFile, OutputFolder
 from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
 
 DEFAULT_RECORDING = FIXTURES_DIR / "paper_protocol_heldout.mcap"
@@ -53,7 +53,7 @@ DEFAULT_ROBOTS = ("mujoco",)
               help="Also write the frames the host received to this recording (MCAP).")
 @click.option("--json", "json_out", type=OutputFile(), default=None,
               help="Also write the summary (summary.json layout) here.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", "out_dir", type=OutputFolder(),
               default=DEFAULT_OUT, show_default=True,
               help="Report folder: summary.json, summary.md, angles/latency/hysteresis PNGs, "
                    "arm.gif and arm_*.png, run.mcap.")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import refuse_overwriting_inputs
+from exohil.harness.cli_types import OutputFolder, refuse_overwriting_inputs
 
 
 def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
@@ -45,7 +45,7 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
               help="Current suit profile (geometric or calibrated TOML): the effects it already "
                    "has are fitted from the start and not proposed again. Its geometry is not "
                    "assumed; the static map is calibrated to the measurement.")
-@click.option("--out", "out_dir", type=click.Path(path_type=Path),
+@click.option("--out", "out_dir", type=OutputFolder(),
               default=Path("discrepancy"), show_default=True,
               help="Output folder: discrepancy.json, report.md, plots, suit_profile.toml.")
 def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> None:
@@ -61,11 +61,8 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> Non
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
 
-    refuse_overwriting_inputs([("--out", out_dir), *(("--out", out_dir / name)
-                                                      for name in OUTPUT_NAMES)],
+    refuse_overwriting_inputs([("--out", out_dir / name) for name in OUTPUT_NAMES],
                               [measured, profile_path])
-    if out_dir.exists() and not out_dir.is_dir():
-        raise click.ClickException(f"--out {out_dir} is not a folder")
     name, in_model = _in_model(profile_path)
     try:
         rec = read_recording(measured)

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from exohil.formats.atomic import write_bytes, write_text
+from exohil.harness.cli_types import OutputFolder
 from exohil.harness.paths import FIXTURES_DIR, SHOULDER_IK_DIR
 
 
@@ -20,7 +21,7 @@ def fixtures_group() -> None:
 @click.option("--check", is_flag=True,
               help="Rebuild into a temporary folder and compare sha256 against "
                    "fixtures/SHA256SUMS (and the committed files); exit 1 on any mismatch.")
-@click.option("--dir", "fixtures_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--dir", "fixtures_dir", type=OutputFolder(),
               default=FIXTURES_DIR, show_default=True, help="Fixtures folder.")
 @click.option("--shoulder-ik", "shoulder_ik_dir", type=click.Path(file_okay=False, path_type=Path),
               default=SHOULDER_IK_DIR, show_default=True,

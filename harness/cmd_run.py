@@ -16,7 +16,7 @@ import numpy as np
 
 from exohil.formats.atomic import write_text
 from exohil.harness.bench import BenchConfig
-from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
+from exohil.harness.cli_types import OutputFile, OutputFolder, refuse_overwriting_inputs
 from exohil.harness.pipeline import Status
 
 
@@ -137,7 +137,7 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
               help="Streaming inference backend [auto].")
 @click.option("--json", "json_out", type=OutputFile(), default=None,
               help="Write the summary JSON here.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", "out_dir", type=OutputFolder(),
               default=None, help="Also write a report folder here (summary, plots, arm "
                                  "pictures with --sink mujoco, run.mcap).")
 def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str, ...],

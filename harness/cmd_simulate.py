@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import refuse_overwriting_inputs
+from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
 
 
 def _mot_files(protocol: str) -> list[Path]:
@@ -44,8 +44,7 @@ def _trajectory(protocol: str, seed: int):
               help="Drop effects of this kind (hysteresis, creep, saturation, lag, drift, noise, "
                    "quantization, dropout) from the profile's chain (repeatable).")
 @click.option("--out", "out_path", required=True,
-              type=click.Path(dir_okay=False, writable=True, path_type=Path),
-              help="Output recording (.mcap).")
+              type=OutputFile(), help="Output recording (.mcap).")
 def simulate_command(protocol: str, profile_path: Path | None, seed: int,
                      without: tuple[str, ...], out_path: Path) -> None:
     """Simulate the suit following a movement and write a recording.

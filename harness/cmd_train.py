@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 
 from exohil.formats.atomic import write_text
-from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
+from exohil.harness.cli_types import OutputFile, OutputFolder, refuse_overwriting_inputs
 
 MODEL_CHOICES = ("ennet", "lnnet", "ann", "cnn", "classical")
 
@@ -219,7 +219,7 @@ def _angle_limits(items: tuple[str, ...], angles: tuple[str, ...]) -> dict[str, 
 @click.option("--title", default="Model comparison", show_default=True, help="Table heading.")
 @click.option("--json", "json_out", type=OutputFile(),
               help="Also write all metrics as JSON.")
-@click.option("--save-dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--save-dir", type=OutputFolder(),
               help="Also save every trained model's checkpoint here.")
 @_common_training_options
 def table_command(train_paths, test_paths, test_fraction, models, out, section, title,

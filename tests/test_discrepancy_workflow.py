@@ -139,7 +139,7 @@ def test_cli_errors_are_one_line(tmp_path):
     assert result.exit_code == 1 and "no motion capture" in result.output
     before = short.read_bytes()
     result = CliRunner().invoke(main, ["discrepancy", str(short), "--out", str(short)])
-    assert result.exit_code == 2 and "refusing to overwrite" in result.output
+    assert result.exit_code == 2 and "is a file" in result.output
     assert short.read_bytes() == before
 
 

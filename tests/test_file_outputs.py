@@ -174,3 +174,19 @@ def test_training_on_too_little_data_is_one_line_and_writes_nothing(tmp_path, fr
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert len(result.output.strip().splitlines()) == 1, result.output
     assert not (tmp_path / "m.npz").exists()
+
+
+@pytest.mark.parametrize("args", [
+    ["simulate", "--out", "{bad}/x.mcap"],
+    ["import", "mot", str(RECORDING), "--out", "{bad}/x.mcap"],
+    ["emulate", str(RECORDING), "--duration", "1", "--fault-log", "{bad}/f.log"],
+    ["discrepancy", str(RECORDING), "--out", "{bad}/d"],
+    ["demo", "--out", "{bad}/report"],
+    ["conform", "--target", f"emulator:{RECORDING}", "--model", str(MODEL), "--out", "{bad}/c"],
+])
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
+def test_an_output_folder_that_takes_no_files_is_refused_before_any_work(args):
+    # /proc exists but no new file can be created in it, even by root
+    result = CliRunner().invoke(main, [a.format(bad="/proc") for a in args])
+    assert result.exit_code == 2, result.output
+    assert "cannot write in folder /proc" in result.output
