@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from exohil.harness.cli_types import InputFile, OutputDir
+
 
 def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
     """The profile's name and the vocabulary effects its model already has."""
@@ -37,14 +39,12 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
 
 
 @click.command("discrepancy")
-@click.argument("measured", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--profile", "profile_path", type=click.Path(exists=True, dir_okay=False,
-                                                           path_type=Path),
+@click.argument("measured", type=InputFile())
+@click.option("--profile", "profile_path", type=InputFile(),
               help="Current suit profile (geometric or calibrated TOML): the effects it already "
                    "has are fitted from the start and not proposed again. Its geometry is not "
                    "assumed; the static map is calibrated to the measurement.")
-@click.option("--out", "out_dir", type=click.Path(path_type=Path),
-              default=Path("discrepancy"), show_default=True,
+@click.option("--out", "out_dir", type=OutputDir(), default=Path("discrepancy"), show_default=True,
               help="Output folder: discrepancy.json, report.md, plots, suit_profile.toml.")
 def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> None:
     """Find what the simulated suit gets wrong on MEASURED (sensors + motion capture), name
@@ -64,8 +64,6 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> Non
     if out_dir.resolve() in inputs or inputs & outputs:
         raise click.ClickException(f"--out {out_dir} would overwrite an input; choose another "
                                    "folder")
-    if out_dir.exists() and not out_dir.is_dir():
-        raise click.ClickException(f"--out {out_dir} is not a folder")
     name, in_model = _in_model(profile_path)
     try:
         rec = read_recording(measured)
