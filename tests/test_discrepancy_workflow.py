@@ -138,7 +138,9 @@ def test_cli_errors_are_one_line(tmp_path):
                                        str(tmp_path / "o")])
     assert result.exit_code == 1 and "no motion capture" in result.output
     result = CliRunner().invoke(main, ["discrepancy", str(short), "--out", str(short)])
-    assert result.exit_code == 1 and "overwrite an input" in result.output
+    # a file as --out (here the input itself) is refused when the command line is parsed
+    assert result.exit_code == 2 and "is a file" in result.output
+    assert len(result.output.strip().splitlines()) == 1
 
 
 def test_profile_effects_already_in_the_model_are_not_proposed(tmp_path):
