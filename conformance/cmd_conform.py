@@ -11,37 +11,78 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFolder, refuse_overwriting_inputs
+from exohil.harness.cli_types import InputFile, Name, OutputDir, Target, refuse_overwriting_inputs
+
+
+class ConformanceProfile(click.ParamType):
+    """A bundled profile's name or a ``.toml`` file, loaded and checked here (unknown checks,
+    settings out of range); the text is returned unchanged."""
+
+    name = "profile"
+
+    def convert(self, value, param, ctx):
+        from exohil.conformance.profile import ProfileError, load_profile
+
+        text = str(value)
+        if not text.strip() or "\x00" in text:
+            self.fail(f"{text!r} is not a profile name or a .toml file", param, ctx)
+        try:
+            load_profile(text)
+        except (ProfileError, OSError) as exc:
+            self.fail(str(exc), param, ctx)
+        return text
+
+
+class KeywordExpression(Name):
+    """A pytest ``-k`` expression (``accuracy and not latency``), parsed here so a malformed
+    one is refused before the suite starts."""
+
+    name = "expression"
+
+    def convert(self, value, param, ctx):
+        text = super().convert(value, param, ctx)
+        try:
+            from _pytest.mark import expression
+        except ImportError:  # pytest moved it: pytest itself will refuse a bad expression
+            return text
+        # pytest >= 8.4 raises SyntaxError; older versions their own ParseError
+        errors = (SyntaxError, getattr(expression, "ParseError", SyntaxError))
+        try:
+            expression.Expression.compile(text)
+        except errors as exc:
+            self.fail(f"{text!r} is not a pytest -k expression: {exc}", param, ctx)
+        return text
+
 
 #: What a run writes into --out.
 REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
 
+
 @click.command("conform")
-@click.option("--target", default=None,
+@click.option("--target", type=Target(), default=None,
               help="emulator:RECORDING[?faults=SPEC&seed=N] (the emulator on a pty, in "
                    "process) or a pyserial URL / device path (/dev/ttyACM0, a pty printed by "
                    "`exohil emulate`, socket://host:port).")
-@click.option("--model", default=None, type=click.Path(path_type=Path),
+@click.option("--model", default=None, type=InputFile(),
               help="Checkpoint under test (.npz).")
-@click.option("--bench", "bench_file", default=None,
-              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+@click.option("--bench", "bench_file", default=None, type=InputFile(),
               help="Bench file (TOML, docs/architecture.md) naming the device and the model; "
                    "--target and --model override it.")
-@click.option("--profile", default="default", show_default=True,
+@click.option("--profile", type=ConformanceProfile(), default="default", show_default=True,
               help="Profile: default, bench, ci, or a .toml file (docs/conformance.md).")
-@click.option("--baseline", type=click.Path(path_type=Path), default=None,
+@click.option("--baseline", type=InputFile(), default=None,
               help="Baseline checkpoint: accuracy and latency must not regress beyond the "
                    "profile's margin and factor.")
-@click.option("--reference", type=click.Path(path_type=Path), default=None,
+@click.option("--reference", type=InputFile(), default=None,
               help="Ground truth recording for a serial device (aligned by device time); "
                    "without it the accuracy checks are skipped, never passed.")
 @click.option("--backend", default=None,
               type=click.Choice(["auto", "numpy", "torch", "torchscript", "onnxruntime"]),
               help="Streaming inference backend [the bench's, else auto].")
-@click.option("--out", "out_dir", type=OutputFolder(),
-              default=Path("conformance-report"), show_default=True,
+@click.option("--out", "out_dir", type=OutputDir(), default=Path("conformance-report"),
+              show_default=True,
               help="Folder for junit.xml, conformance.json, summary.md, run.mcap.")
-@click.option("-k", "select", default=None,
+@click.option("-k", "select", type=KeywordExpression(), default=None,
               help="Run only the checks matching this pytest -k expression.")
 def conform(target: str | None, model: Path | None, bench_file: Path | None, profile: str,
             baseline: Path | None, reference: Path | None, backend: str | None, out_dir: Path,

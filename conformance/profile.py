@@ -26,6 +26,7 @@ Checks not named in a profile do not run (reported as skipped, never as passed).
 
 from __future__ import annotations
 
+import math
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -34,6 +35,7 @@ from typing import Any
 
 from exohil.formats.errors import InputError
 from exohil.formats.measurement import Limit, check_unit, convert
+from exohil.harness.cli_types import MAX_DURATION_S, SEED_MAX
 
 PROFILES_DIR = Path(__file__).parent / "profiles"
 
@@ -134,6 +136,30 @@ class Profile:
         return self.settings.get(name, DEFAULT_SETTINGS[name])
 
 
+#: numeric setting → (low, high), both inclusive; the values are finite.
+_SETTING_RANGES: dict[str, tuple[float, float]] = {
+    "realtime_seconds": (0.0, MAX_DURATION_S), "conversion_examples": (1, 100_000),
+    "seed": (0, SEED_MAX), "regression_accuracy_margin_deg": (0.0, 360.0),
+    "regression_latency_factor": (1.0, 1000.0),
+}
+
+
+def _settings_problem(settings: dict[str, Any]) -> str | None:
+    """What is wrong with the settings' values (range, fault spec), or None."""
+    for key, (low, high) in _SETTING_RANGES.items():
+        value = settings.get(key)
+        if value is not None and not (math.isfinite(value) and low <= value <= high):
+            return f"setting {key} must be within {low:g}..{high:g}, got {value!r}"
+    if settings.get("faults"):
+        from exohil.emulators.fault_spec import fault_plan
+
+        try:
+            fault_plan(settings["faults"])
+        except (ValueError, OSError) as err:
+            return f"setting faults: {err}"
+    return None
+
+
 def profile_path(name_or_path: str) -> Path:
     """A bundled profile by name, or a ``.toml`` path."""
     if name_or_path.endswith(".toml"):
@@ -168,6 +194,9 @@ def load_profile(name_or_path: str) -> Profile:
             raise ProfileError(f"{path}: setting {key} must be a {kind.__name__}")
     if settings.get("replay", "full") not in ("full", "none"):
         raise ProfileError(f"{path}: replay must be 'full' or 'none'")
+    problem = _settings_problem(settings)
+    if problem:
+        raise ProfileError(f"{path}: {problem}")
     checks: dict[str, dict[str, Limit]] = {}
     for check, limits in data.get("checks", {}).items():
         if check not in CHECKS:

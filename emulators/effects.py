@@ -98,6 +98,11 @@ def _sample_period_s(t: np.ndarray) -> float:
     return float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0
 
 
+#: The most play operators a :class:`Hysteresis` takes: its memory grows with frames ×
+#: sensors × operators, and the loop shape is smooth long before this.
+MAX_HYSTERESIS_OPERATORS = 64
+
+
 @dataclass
 class Hysteresis:
     """Rate-independent hysteresis of fabric and skin (Prandtl–Ishlinskii play operators).
@@ -114,7 +119,7 @@ class Hysteresis:
     Attributes:
         width_mm: full loop width, mm (per sensor, ≥ 0).
         span_mm: input travel after a reversal to reach the other branch, mm (per sensor, > 0).
-        operators: number of play operators (≥ 1).
+        operators: number of play operators (1..:data:`MAX_HYSTERESIS_OPERATORS`).
     """
 
     name: ClassVar[str] = "hysteresis"
@@ -125,8 +130,9 @@ class Hysteresis:
     def __post_init__(self) -> None:
         _check(_all(self.width_mm, lambda v: v >= 0), "hysteresis: width_mm must be >= 0")
         _check(_all(self.span_mm, lambda v: v > 0), "hysteresis: span_mm must be > 0")
-        _check(int(self.operators) == self.operators and self.operators >= 1,
-               "hysteresis: operators must be an integer >= 1")
+        _check(int(self.operators) == self.operators
+               and 1 <= self.operators <= MAX_HYSTERESIS_OPERATORS,
+               f"hysteresis: operators must be an integer 1..{MAX_HYSTERESIS_OPERATORS}")
 
     def apply(self, signal: Signal, rng: np.random.Generator) -> Signal:
         x = signal.values

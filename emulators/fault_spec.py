@@ -19,6 +19,7 @@ separated by ``/`` in a spec string (``noise:sigma_mm=0.5/0.5/1/1``).
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -69,17 +70,39 @@ def _value(text: str) -> Any:
     return [_scalar(part) for part in text.split("/")] if "/" in text else _scalar(text)
 
 
+#: The largest magnitude of a fault parameter: far beyond any meaningful rate, duration (s,
+#: ms), width (mm) or count, small enough that no arithmetic on it overflows.
+MAX_PARAMETER = 1e9
+
+
+def _check_number(kind: str, name: str, value: Any) -> None:
+    """ValueError unless ``value`` is a finite number (or a list of them) within
+    ±:data:`MAX_PARAMETER`."""
+    for item in value if isinstance(value, list) and value else [value]:
+        if isinstance(item, bool) or not isinstance(item, int | float):
+            raise ValueError(f"{kind}: {name} must be a number (or a list of numbers), "
+                             f"got {value!r}")
+        if not (math.isfinite(item) and abs(item) <= MAX_PARAMETER):
+            raise ValueError(f"{kind}: {name} must be a finite number within "
+                             f"±{MAX_PARAMETER:g}, got {item!r}")
+
+
 def fault_from_dict(entry: dict[str, Any]) -> FrameFault | Effect:
-    """One fault from ``{"kind": ..., <param>: <value>}``; ValueError names what is wrong."""
+    """One fault from ``{"kind": ..., <param>: <value>}``; ValueError names what is wrong
+    (parameters must be finite numbers within ±:data:`MAX_PARAMETER`)."""
     if "kind" not in entry:
         raise ValueError(f"fault without a 'kind': {entry!r}")
     params = dict(entry)
     kind = params.pop("kind")
+    if not isinstance(kind, str):
+        raise ValueError(f"a fault's kind is a name, got {kind!r}")
+    for name, value in params.items():
+        _check_number(kind, name, value)
     cls = FRAME_FAULT_TYPES.get(kind)
     if cls is None:
         try:
             return effect_from_dict(entry)
-        except ValueError as exc:
+        except (ValueError, TypeError) as exc:
             known = ", ".join(FRAME_FAULT_TYPES)
             raise ValueError(f"{exc} (frame-level fault kinds: {known})") from None
     allowed = {f.name for f in fields(cls)}
@@ -89,7 +112,7 @@ def fault_from_dict(entry: dict[str, Any]) -> FrameFault | Effect:
                          f"allowed: {', '.join(sorted(allowed))}")
     try:
         return cls(**params)
-    except TypeError as exc:
+    except (TypeError, OverflowError) as exc:
         raise ValueError(f"{kind}: {exc}") from None
 
 

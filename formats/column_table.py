@@ -23,6 +23,10 @@ class TableError(InputError, ValueError):
     """A CSV table or column specification that cannot be used; the message says why."""
 
 
+#: The highest column index a spec may name (0-based).
+MAX_COLUMN = 9999
+
+
 def parse_columns(spec: str) -> list[int]:
     """0-based column indices from ``"1-5"``, ``"0"``, ``"1,3,6-8"`` (order kept, no repeats)."""
     columns: list[int] = []
@@ -34,8 +38,9 @@ def parse_columns(spec: str) -> list[int]:
             last = int(high) if dash else first
         except ValueError:
             raise TableError(f"bad column spec {spec!r}: {part!r} is not N or N-M") from None
-        if first < 0 or last < first:
-            raise TableError(f"bad column spec {spec!r}: {part!r} must be 0 <= N <= M")
+        if first < 0 or last < first or last > MAX_COLUMN:
+            raise TableError(f"bad column spec {spec!r}: {part!r} must be "
+                             f"0 <= N <= M <= {MAX_COLUMN}")
         columns.extend(range(first, last + 1))
     if len(set(columns)) != len(columns):
         raise TableError(f"bad column spec {spec!r}: a column appears twice")

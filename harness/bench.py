@@ -45,6 +45,7 @@ from urllib.parse import parse_qs
 from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
 from exohil.harness.acquisition import SerialFrameSource
+from exohil.harness.cli_types import MAX_RATE_HZ, check_seed
 from exohil.harness.pipeline import DeviceClock
 
 
@@ -116,9 +117,9 @@ def parse_target(text: str) -> Device:
     if params.get("loop", "0") not in ("0", "1"):
         raise BenchError(f"loop must be 0 or 1, got {params['loop']!r}")
     try:
-        seed = int(params.get("seed", "0"))
-    except ValueError:
-        raise BenchError(f"seed must be an integer, got {params['seed']!r}") from None
+        seed = check_seed(params.get("seed", "0"))
+    except ValueError as err:
+        raise BenchError(str(err)) from None
     return EmulatorDevice(Path(path), params.get("faults") or None, seed,
                           params.get("loop") == "1")
 
@@ -150,8 +151,9 @@ def load_bench(path: Path) -> BenchConfig:
     if "emulator" in dev and "url" in dev:
         raise BenchError(f"{path}: [device] names both an emulator and a url; pick one")
     if "emulator" in dev:
-        device = EmulatorDevice(where / dev["emulator"], dev.get("faults"),
-                                int(dev.get("seed", 0)), bool(dev.get("loop", False)))
+        device = EmulatorDevice(where / _text(path, dev, "emulator"),
+                                _faults(path, dev),
+                                _seed(path, dev), _flag(path, dev, "loop"))
     elif "url" in dev:
         device = SerialDevice(str(dev["url"]), rel(dev.get("reference")))
     sensors = data.get("sensors", {})
@@ -162,10 +164,54 @@ def load_bench(path: Path) -> BenchConfig:
         model=rel(model.get("checkpoint")),
         backend=str(model.get("backend", "auto")),
         sensor_names=None if names is None else tuple(str(n) for n in names),
-        rate_hz=float(sensors.get("rate_hz", 250.0)),
+        rate_hz=_rate(path, sensors),
         robots=tuple(data.get("teleop", {}).get("robots", ("simulated",))),
         record=rel(data.get("record", {}).get("path")),
     )
+
+
+def _text(path: Path, table: dict[str, Any], key: str) -> str:
+    value = table[key]
+    if not isinstance(value, str) or not value.strip():
+        raise BenchError(f"{path}: {key} must be a non-empty string, got {value!r}")
+    return value
+
+
+def _faults(path: Path, dev: dict[str, Any]) -> str | None:
+    """The [device] faults spec, parsed here so a bad one is named before the run starts."""
+    if "faults" not in dev:
+        return None
+    from exohil.emulators.fault_spec import fault_plan
+
+    spec = _text(path, dev, "faults")
+    try:
+        fault_plan(spec)
+    except (ValueError, OSError) as err:
+        raise BenchError(f"{path}: [device] faults: {err}") from None
+    return spec
+
+
+def _seed(path: Path, dev: dict[str, Any]) -> int:
+    try:
+        return check_seed(dev.get("seed", 0))
+    except ValueError as err:
+        raise BenchError(f"{path}: [device] {err}") from None
+
+
+def _flag(path: Path, dev: dict[str, Any], key: str) -> bool:
+    value = dev.get(key, False)
+    if not isinstance(value, bool):
+        raise BenchError(f"{path}: [device] {key} must be true or false, got {value!r}")
+    return value
+
+
+def _rate(path: Path, sensors: dict[str, Any]) -> float:
+    value = sensors.get("rate_hz", 250.0)
+    if (isinstance(value, bool) or not isinstance(value, int | float)
+            or not 0 < value <= MAX_RATE_HZ):
+        raise BenchError(f"{path}: [sensors] rate_hz must be a number in (0, {MAX_RATE_HZ:g}], "
+                         f"got {value!r}")
+    return float(value)
 
 
 #: A serial device that sends no frame for this long (absent, or gone and not back) ends the

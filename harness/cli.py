@@ -6,7 +6,9 @@ stays fast.
 
 from __future__ import annotations
 
+import os
 from importlib.metadata import entry_points
+from typing import IO, Any
 
 import click
 
@@ -14,20 +16,71 @@ from exohil import __version__
 from exohil.formats.errors import InputError
 
 
+class OneLineError(click.ClickException):
+    """An error shown as one line on stderr, ``Error: MESSAGE``, with exit code ``code``
+    (click's usage errors keep their 2)."""
+
+    def __init__(self, message: str, code: int = 1) -> None:
+        super().__init__(" ".join(line.strip() for line in message.splitlines() if line.strip())
+                         or "failed")
+        self.exit_code = code  # type: ignore[misc]  # a ClassVar in click's annotations
+
+    def show(self, file: IO[Any] | None = None) -> None:
+        click.echo(f"Error: {self.format_message()}", file=file, err=True)
+
+
+#: Set to see the traceback of an unexpected error instead of its one-line summary.
+TRACEBACK_ENV = "EXOHIL_TRACEBACK"
+
+
+#: click >= 8.2 raises this for a group called without a command: its "message" is the help.
+_HELP_ERRORS = (OneLineError, *(
+    (click.exceptions.NoArgsIsHelpError,) if hasattr(click.exceptions, "NoArgsIsHelpError")
+    else ()))
+
+
+def _one_line(err: click.ClickException) -> click.ClickException:
+    if isinstance(err, _HELP_ERRORS):  # help text, or already one line
+        return err
+    return OneLineError(err.format_message(), err.exit_code)
+
+
 class _Group(click.Group):
-    """Turns bad input found anywhere in a command (:class:`InputError`: a recording, a
-    checkpoint, a profile that does not fit the job) and an operating-system error (a file that
-    vanished, a full disk, a permission) into one error line and exit code 1 instead of a
-    traceback."""
+    """Every error a command ends with is one line on stderr, never a traceback:
+
+    * a bad command line (click's usage error: unknown option, bad value) is
+      ``Error: Invalid value for '--seed': ...`` with exit code 2, without click's usage block;
+    * bad input found anywhere in a command (:class:`InputError`: a recording, a checkpoint, a
+      profile that does not fit the job) is ``Error: message`` with exit code 1;
+    * an operating-system error anywhere in a command (a file that vanished, a full disk, a
+      permission) is ``Error: FILE: reason`` with exit code 1;
+    * any other unexpected exception is ``Error: <type>: message`` with exit code 1
+      (``EXOHIL_TRACEBACK=1`` shows the traceback instead).
+    """
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        try:
+            return super().make_context(info_name, args, parent, **extra)
+        except click.ClickException as err:
+            raise _one_line(err) from None
 
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
+        except click.ClickException as err:
+            raise _one_line(err) from None
+        except (click.exceptions.Exit, click.Abort):
+            raise
         except InputError as err:
-            raise click.ClickException(str(err)) from None
+            raise OneLineError(str(err)) from None
         except OSError as err:
             where = f"{err.filename}: " if err.filename else ""
-            raise click.ClickException(f"{where}{err.strerror or err}") from None
+            raise OneLineError(f"{where}{err.strerror or err}") from None
+        except Exception as err:
+            if os.environ.get(TRACEBACK_ENV):
+                raise
+            raise OneLineError(f"unexpected {type(err).__name__}: {err} (set "
+                               f"{TRACEBACK_ENV}=1 for the traceback)") from None
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})

@@ -1,59 +1,233 @@
-"""Shared click parameter types for the ``exohil`` commands."""
+"""Shared click parameter types for the ``exohil`` commands.
+
+Every option and argument is checked here, when the command line is parsed and before any
+work starts, and a bad value is refused with one line naming the value and what is allowed
+(docs/reliability.md, "Bad input"). The ranges are part of the interface:
+
+* seeds: integers ``0 <= seed <= 2**32 - 1`` (:data:`SEED_MAX`), everywhere a seed is taken
+  (command line, bench files, ``emulator:`` targets, conformance profiles);
+* floats: finite (NaN and ±inf are refused; click's ``FloatRange`` lets NaN through) and
+  inside a stated range (:class:`Finite`): durations at most :data:`MAX_DURATION_S`, times
+  within ±:data:`MAX_TIME_S`, rates positive and at most :data:`MAX_RATE_HZ`, fractions
+  inside [0, 1];
+* counts: integers inside a stated range, never unbounded (:class:`Count`);
+* paths: never empty, never with a NUL byte; inputs exist, outputs can be created
+  (:class:`InputFile`, :class:`InputDir`, :class:`OutputFile`, :class:`OutputDir`);
+* names and labels: non-empty, printable, at most :data:`MAX_NAME_LENGTH` characters
+  (:class:`Name`, :class:`NameList`).
+"""
 
 from __future__ import annotations
 
+import math
+import os
 import tempfile
-from collections.abc import Iterable
+import unicodedata
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import click
 
 from exohil.formats.atomic import same_file
 
+#: Seeds are integers 0..SEED_MAX (numpy's legacy seed range, 32 bits).
+SEED_MAX = 2**32 - 1
+#: The longest duration any command takes, s (one day).
+MAX_DURATION_S = 86_400.0
+#: The largest magnitude of a time (a point in a recording, not a duration), s (~31 years).
+MAX_TIME_S = 1e9
+#: The highest rate any command takes, Hz.
+MAX_RATE_HZ = 100_000.0
+#: The longest name or label, characters.
+MAX_NAME_LENGTH = 200
+#: The longest file name (one path component), bytes, as on Linux and macOS.
+MAX_FILE_NAME_BYTES = 255
+
+
+def check_seed(value: Any, what: str = "seed") -> int:
+    """``value`` as a seed (an integer 0..SEED_MAX); ValueError saying what is allowed. For
+    seeds read from files (bench files, conformance profiles) rather than the command line."""
+    if isinstance(value, bool) or not isinstance(value, int | str):
+        raise ValueError(f"{what} must be an integer 0..{SEED_MAX}, got {value!r}")
+    try:
+        seed = int(value)
+    except ValueError:
+        raise ValueError(f"{what} must be an integer 0..{SEED_MAX}, got {value!r}") from None
+    if not 0 <= seed <= SEED_MAX:
+        raise ValueError(f"{what} must be an integer 0..{SEED_MAX}, got {seed}")
+    return seed
+
+
+class Finite(click.FloatRange):
+    """A finite float inside [min, max] (open ends with ``min_open``/``max_open``). Both bounds
+    are required, so every float option states its range; NaN and ±inf are refused."""
+
+    name = "float"
+
+    def __init__(self, min: float, max: float, *, min_open: bool = False,
+                 max_open: bool = False) -> None:
+        super().__init__(min=min, max=max, min_open=min_open, max_open=max_open)
+
+    def convert(self, value, param, ctx):
+        number = click.FLOAT.convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number (allowed: {self._describe_range()})",
+                      param, ctx)
+        return super().convert(number, param, ctx)
+
+
+class Count(click.IntRange):
+    """An integer inside [min, max]; both bounds are required (no count is unbounded)."""
+
+    def __init__(self, min: int, max: int) -> None:
+        super().__init__(min=min, max=max)
+
+
+class Seed(click.IntRange):
+    """A seed: an integer 0..:data:`SEED_MAX`."""
+
+    name = "seed"
+
+    def __init__(self) -> None:
+        super().__init__(min=0, max=SEED_MAX)
+
+
+def _is_control(char: str) -> bool:
+    return unicodedata.category(char) in ("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp")
+
+
+class Name(click.ParamType):
+    """A name or label: non-empty, no control characters, at most :data:`MAX_NAME_LENGTH`
+    characters."""
+
+    name = "text"
+
+    def convert(self, value, param, ctx):
+        text = str(value)
+        if not text.strip():
+            self.fail("an empty value is not allowed (give a name, or leave the option out)",
+                      param, ctx)
+        if any(_is_control(c) for c in text):
+            self.fail(f"{text!r} contains control characters (allowed: printable text)",
+                      param, ctx)
+        if len(text) > MAX_NAME_LENGTH:
+            self.fail(f"{text[:20]!r}... is {len(text)} characters long (at most "
+                      f"{MAX_NAME_LENGTH})", param, ctx)
+        return text
+
+
+class NameList(Name):
+    """Comma-separated names, each a :class:`Name` (and one of ``choices`` when given); the
+    text is returned unchanged."""
+
+    name = "names"
+
+    def __init__(self, choices: Sequence[str] | None = None) -> None:
+        self.choices = tuple(choices) if choices is not None else None
+
+    def convert(self, value, param, ctx):
+        text = super().convert(value, param, ctx)
+        names = [part.strip() for part in text.split(",")]
+        if not all(names):
+            self.fail(f"{text!r} has an empty name (allowed: NAME[,NAME...])", param, ctx)
+        if self.choices is not None:
+            unknown = [n for n in names if n not in self.choices]
+            if unknown:
+                self.fail(f"unknown {', '.join(map(repr, unknown))} (choose from "
+                          f"{', '.join(self.choices)})", param, ctx)
+        return text
+
+
+def _fail_unusable_path(kind: click.ParamType, value, param, ctx) -> None:
+    """Refuse what no file system accepts: an empty path, a NUL byte, an over-long name."""
+    text = os.fspath(value)
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    if not text.strip():
+        kind.fail("an empty path is not allowed", param, ctx)
+    if "\x00" in text:
+        kind.fail(f"{text!r} contains a NUL byte", param, ctx)
+    for part in Path(text).parts:
+        if len(os.fsencode(part)) > MAX_FILE_NAME_BYTES:
+            kind.fail(f"{part[:20]!r}... is longer than {MAX_FILE_NAME_BYTES} bytes, the "
+                      "longest file name allowed", param, ctx)
+
+
+def _existing_ancestor(path: Path) -> Path:
+    for folder in (path, *path.parents):
+        if folder.exists():
+            return folder
+    return Path.cwd()
+
+
+class InputFile(click.Path):
+    """A file the command reads: it must exist and be a file."""
+
+    def __init__(self) -> None:
+        super().__init__(exists=True, dir_okay=False, path_type=Path)
+
+    def convert(self, value, param, ctx):
+        _fail_unusable_path(self, value, param, ctx)
+        return super().convert(value, param, ctx)
+
+
+class InputDir(click.Path):
+    """A folder the command reads: it must exist and be a folder."""
+
+    def __init__(self) -> None:
+        super().__init__(exists=True, file_okay=False, path_type=Path)
+
+    def convert(self, value, param, ctx):
+        _fail_unusable_path(self, value, param, ctx)
+        return super().convert(value, param, ctx)
+
 
 class OutputFile(click.Path):
-    """A file the command will write: its folder must exist and take new files, checked when
-    the command line is parsed, so a long run (training, streaming) cannot fail only at the
-    end."""
+    """A file the command will write: its folder must exist, checked when the command line is
+    parsed, so a long run (training, streaming) cannot fail only at the end."""
 
     def __init__(self) -> None:
         super().__init__(dir_okay=False, path_type=Path)
 
     def convert(self, value, param, ctx):
+        _fail_unusable_path(self, value, param, ctx)
         path = super().convert(value, param, ctx)
-        folder = Path(path).resolve().parent
+        if Path(path).name in ("", ".", ".."):
+            self.fail(f"{os.fspath(path)!r} is not a file name", param, ctx)
+        folder = Path(path).parent
         if not folder.is_dir():
-            self.fail(f"folder {folder} does not exist (create it first)", param, ctx)
+            self.fail(f"folder {folder.absolute()} does not exist (create it first)", param, ctx)
         problem = _cannot_write_in(folder)
         if problem:
-            self.fail(f"cannot write in folder {folder}: {problem}", param, ctx)
+            self.fail(f"cannot write in folder {folder.absolute()}: {problem}", param, ctx)
         return path
 
 
-class OutputFolder(click.Path):
-    """A folder the command will write files into (created when missing): it, or the nearest
-    folder above it that exists, must take new files; checked when the command line is
-    parsed."""
+class OutputDir(click.Path):
+    """A folder the command will create (with its parents) or fill: it must not be a file,
+    nor lie inside one, and it (or the nearest folder above it that exists) must take new
+    files."""
 
     def __init__(self) -> None:
         super().__init__(file_okay=False, path_type=Path)
 
     def convert(self, value, param, ctx):
+        _fail_unusable_path(self, value, param, ctx)
         path = super().convert(value, param, ctx)
-        existing = Path(path).resolve()
-        while not existing.exists():
-            existing = existing.parent
-        if not existing.is_dir():
-            self.fail(f"{existing} is not a folder", param, ctx)
-        problem = _cannot_write_in(existing)
+        ancestor = _existing_ancestor(Path(path).absolute())
+        if not ancestor.is_dir():
+            self.fail(f"{os.fspath(path)!r} lies inside {os.fspath(ancestor)!r}, which is "
+                      "not a folder", param, ctx)
+        problem = _cannot_write_in(ancestor)
         if problem:
-            self.fail(f"cannot write in folder {existing}: {problem}", param, ctx)
+            self.fail(f"cannot write in folder {ancestor}: {problem}", param, ctx)
         return path
 
 
 def _cannot_write_in(folder: Path) -> str | None:
-    """Why a new file cannot be created in ``folder`` (tried with a temporary file, which is
-    removed at once), or None."""
+    """Why a new file cannot be created in ``folder`` (tried with a temporary file, removed at
+    once; a permission check alone would pass for root), or None."""
     try:
         with tempfile.TemporaryFile(dir=folder):
             pass
@@ -75,3 +249,123 @@ def refuse_overwriting_inputs(outputs: Iterable[tuple[str, Path | None]],
         if clash is not None:
             raise click.UsageError(f"{option} {path} is the input {clash}; refusing to overwrite "
                                    "it (choose another output)")
+
+
+class FaultSpec(click.ParamType):
+    """An emulator fault spec string or TOML file (docs/emulator.md), parsed here so a bad one
+    is refused before the emulator starts; the text is returned unchanged."""
+
+    name = "faults"
+
+    def convert(self, value, param, ctx):
+        from exohil.emulators.fault_spec import fault_plan
+
+        text = str(value)
+        if not text.strip():
+            self.fail("an empty fault spec is not allowed (leave the option out for none)",
+                      param, ctx)
+        if "\x00" in text:
+            self.fail(f"{text!r} contains a NUL byte", param, ctx)
+        try:
+            fault_plan(text)
+        except (ValueError, OSError) as exc:
+            self.fail(str(exc), param, ctx)
+        return text
+
+
+#: Robot sinks (``--sink``): the fixed names and ``udp:HOST:PORT``.
+ROBOT_NAMES = ("simulated", "mujoco", "none")
+
+
+class Robot(click.ParamType):
+    """A robot sink: ``simulated``, ``mujoco``, ``none`` or ``udp:HOST:PORT`` (port 1..65535)."""
+
+    name = "robot"
+
+    def convert(self, value, param, ctx):
+        text = str(value)
+        if text in ROBOT_NAMES:
+            return text
+        if text.startswith("udp:"):
+            host, _, port = text.removeprefix("udp:").rpartition(":")
+            host = host.removeprefix("[").removesuffix("]")
+            if (host.strip() and not any(_is_control(c) or c.isspace() for c in host)
+                    and port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
+                return text
+            self.fail(f"bad robot address {text!r}: expected udp:HOST:PORT with a port "
+                      "1..65535, e.g. udp:127.0.0.1:9000", param, ctx)
+        self.fail(f"unknown robot {text!r}; available: {', '.join(ROBOT_NAMES)}, "
+                  "udp:HOST:PORT", param, ctx)
+
+
+def _url_problem(url: str) -> str | None:
+    """Why ``url`` cannot be a pyserial URL or device path, or None."""
+    if not url.strip():
+        return "the device URL is empty"
+    if any(_is_control(c) for c in url):
+        return f"{url!r} contains control characters"
+    if "://" in url:
+        import importlib.util
+
+        scheme, _, rest = url.partition("://")
+        scheme = scheme.lower()
+        known = ("alt", "cp2110", "hwgrep", "loop", "rfc2217", "socket", "spy")
+        try:
+            found = scheme.isidentifier() and importlib.util.find_spec(
+                f"serial.urlhandler.protocol_{scheme}") is not None
+        except (ImportError, ValueError):
+            found = False
+        if not found:
+            return f"{url!r}: unknown URL scheme {scheme!r} (pyserial knows {', '.join(known)})"
+        if scheme in ("socket", "rfc2217"):
+            host, _, port = rest.partition("?")[0].rpartition(":")
+            if not host or not (port.isascii() and port.isdigit()
+                                and 1 <= int(port) <= 65535):
+                return f"{url!r} is not {scheme}://HOST:PORT with a port 1..65535"
+    return None
+
+
+class DeviceUrl(click.ParamType):
+    """A serial device: a path (``/dev/ttyACM0``, a pty printed by ``exohil emulate``) or a
+    pyserial URL whose scheme pyserial knows (``socket://HOST:PORT``, ``loop://``, ...). A
+    path that does not exist yet is allowed: the device may be plugged in (the run waits for
+    frames, docs/architecture.md)."""
+
+    name = "url"
+
+    def convert(self, value, param, ctx):
+        text = str(value)
+        problem = _url_problem(text)
+        if problem:
+            self.fail(problem, param, ctx)
+        return text
+
+
+class Target(click.ParamType):
+    """A conformance target: ``emulator:RECORDING[?faults=SPEC&seed=N&loop=1]`` (the
+    recording must exist, the faults parse, the seed be 0..SEED_MAX) or a :class:`DeviceUrl`;
+    the text is returned unchanged."""
+
+    name = "target"
+
+    def convert(self, value, param, ctx):
+        from exohil.harness.bench import BenchError, EmulatorDevice, parse_target
+
+        text = str(value)
+        if not text.startswith("emulator:"):
+            problem = _url_problem(text)
+            if problem:
+                self.fail(f"{problem} (or use emulator:RECORDING[?faults=SPEC&seed=N])",
+                          param, ctx)
+            return text
+        try:
+            device = parse_target(text)
+        except BenchError as exc:
+            self.fail(str(exc), param, ctx)
+        assert isinstance(device, EmulatorDevice)
+        _fail_unusable_path(self, device.recording, param, ctx)
+        if not device.recording.is_file():
+            self.fail(f"no recording {os.fspath(device.recording)!r}", param, ctx)
+        if device.faults is not None:
+            FaultSpec().convert(device.faults, param, ctx)
+        return text

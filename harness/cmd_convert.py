@@ -10,6 +10,7 @@ import json
 import click
 import numpy as np
 
+from exohil.harness.cli_types import Finite
 from exohil.kinematics import (
     NAO_JOINTS,
     humerus_to_nao,
@@ -28,6 +29,9 @@ _SOURCES = {
     "isb": ("plane_of_elevation", "elevation", "axial_rotation"),
     "quat": ("x", "y", "z", "w"),
 }
+#: The largest magnitude of an input value (degrees, or a quaternion component): far beyond
+#: any angle, small enough that no conversion step overflows.
+MAX_VALUE = 1e6
 #: Decimal places in the JSON output (1e-9 deg, far below any physical meaning).
 _DECIMALS = 9
 
@@ -90,31 +94,26 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
               help="MS → rotation with ideal ISB axes or the MoBL-ARMS model file's axes.")
 @click.option("--side", type=click.Choice(["right", "left"]), default="right", show_default=True,
               help="Arm side for --to nao.")
-@click.option("--hint", type=float, default=0.0, show_default=True,
+@click.option("--hint", type=Finite(-360.0, 360.0), default=0.0, show_default=True,
               help="Degrees used at singularities: plane of elevation (ms/isb), yaw (zyx), "
                    "pitch (nao).")
-@click.argument("values", nargs=-1, required=True)
+@click.argument("values", nargs=-1, required=True, type=Finite(-MAX_VALUE, MAX_VALUE))
 def convert(source: str, target: str, convention: Convention, axes: Axes, side: Side,
             hint: float,
-            values: tuple[str, ...]) -> None:
-    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w).
+            values: tuple[float, ...]) -> None:
+    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w), each
+    finite and within ±1e6.
 
     Example: exohil convert --from ms --to nao 90 90 0
     """
     expected = len(_SOURCES[source])
-    try:
-        numbers = np.array([float(v) for v in values])
-    except ValueError as err:
-        raise click.BadParameter(f"VALUES must be numbers ({err})", param_hint="VALUES") from None
+    numbers = np.array(values, dtype=np.float64)
     if numbers.size != expected:
         raise click.BadParameter(
             f"--from {source} takes {expected} numbers "
             f"({' '.join(_SOURCES[source])}), got {len(values)}",
             param_hint="VALUES",
         )
-    if not np.all(np.isfinite(numbers)):
-        bad = ", ".join(v for v, n in zip(values, numbers, strict=True) if not np.isfinite(n))
-        raise click.BadParameter(f"values must be finite, got {bad}", param_hint="VALUES")
     try:
         q = _to_quat(source, numbers, convention, axes)
     except ValueError as err:

@@ -16,7 +16,16 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile, OutputFolder
+from exohil.harness.cli_types import (
+    MAX_DURATION_S,
+    FaultSpec,
+    Finite,
+    InputFile,
+    OutputDir,
+    OutputFile,
+    Robot,
+    Seed,
+)
 from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
 
 DEFAULT_RECORDING = FIXTURES_DIR / "paper_protocol_heldout.mcap"
@@ -30,21 +39,20 @@ DEFAULT_ROBOTS = ("mujoco",)
 
 
 @click.command("demo")
-@click.option("--bench", "bench_file", type=click.Path(exists=True, dir_okay=False,
-                                                       path_type=Path),
-              default=None, help="Bench configuration (TOML, docs/architecture.md); the options "
-                                 "below override it.")
-@click.option("--recording", type=click.Path(path_type=Path), default=None,
+@click.option("--bench", "bench_file", type=InputFile(), default=None,
+              help="Bench configuration (TOML, docs/architecture.md); the options below "
+                   "override it.")
+@click.option("--recording", type=InputFile(), default=None,
               help=f"Recording the emulator replays [default: {DEFAULT_RECORDING.name}, "
                    "held out from the reference models' training].")
-@click.option("--model", type=click.Path(path_type=Path), default=None,
+@click.option("--model", type=InputFile(), default=None,
               help=f"Estimator checkpoint [default: {DEFAULT_MODEL}].")
-@click.option("--seconds", type=click.FloatRange(min=1.0, max=86400.0), default=15.0,
+@click.option("--seconds", type=Finite(1.0, MAX_DURATION_S), default=15.0,
               show_default=True, help="Device time to stream (the device runs in real time).")
-@click.option("--faults", default=None,
+@click.option("--faults", type=FaultSpec(), default=None,
               help=f"Emulator fault spec (docs/emulator.md) [default: {DEFAULT_FAULTS!r}].")
 @click.option("--no-faults", is_flag=True, help="Stream without injected faults.")
-@click.option("--seed", type=click.IntRange(min=0), default=None, help="Seed for faults [0].")
+@click.option("--seed", type=Seed(), default=None, help="Seed for faults [0].")
 @click.option("--backend", type=click.Choice(["auto", "numpy", "torch", "torchscript",
                                               "onnxruntime"]),
               default=None, help="Streaming inference backend [auto: onnxruntime when "
@@ -53,11 +61,10 @@ DEFAULT_ROBOTS = ("mujoco",)
               help="Also write the frames the host received to this recording (MCAP).")
 @click.option("--json", "json_out", type=OutputFile(), default=None,
               help="Also write the summary (summary.json layout) here.")
-@click.option("--out", "out_dir", type=OutputFolder(),
-              default=DEFAULT_OUT, show_default=True,
+@click.option("--out", "out_dir", type=OutputDir(), default=DEFAULT_OUT, show_default=True,
               help="Report folder: summary.json, summary.md, angles/latency/hysteresis PNGs, "
                    "arm.gif and arm_*.png, run.mcap.")
-@click.option("--sink", "sinks", multiple=True,
+@click.option("--sink", "sinks", type=Robot(), multiple=True,
               help="Robot the commands go to (repeatable): mujoco (NAO's arms in MuJoCo), "
                    "simulated, udp:HOST:PORT or none [default: the bench's robots with "
                    "--bench, else mujoco].")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFolder, refuse_overwriting_inputs
+from exohil.harness.cli_types import InputFile, OutputDir, refuse_overwriting_inputs
 
 
 def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
@@ -39,14 +39,12 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
 
 
 @click.command("discrepancy")
-@click.argument("measured", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--profile", "profile_path", type=click.Path(exists=True, dir_okay=False,
-                                                           path_type=Path),
+@click.argument("measured", type=InputFile())
+@click.option("--profile", "profile_path", type=InputFile(),
               help="Current suit profile (geometric or calibrated TOML): the effects it already "
                    "has are fitted from the start and not proposed again. Its geometry is not "
                    "assumed; the static map is calibrated to the measurement.")
-@click.option("--out", "out_dir", type=OutputFolder(),
-              default=Path("discrepancy"), show_default=True,
+@click.option("--out", "out_dir", type=OutputDir(), default=Path("discrepancy"), show_default=True,
               help="Output folder: discrepancy.json, report.md, plots, suit_profile.toml.")
 def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> None:
     """Find what the simulated suit gets wrong on MEASURED (sensors + motion capture), name

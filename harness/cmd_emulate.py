@@ -12,7 +12,16 @@ from pathlib import Path
 import click
 
 from exohil.formats.atomic import write_text
-from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
+from exohil.harness.cli_types import (
+    MAX_DURATION_S,
+    MAX_RATE_HZ,
+    FaultSpec,
+    Finite,
+    InputFile,
+    OutputFile,
+    Seed,
+    refuse_overwriting_inputs,
+)
 
 
 def _load_recording(path: Path):
@@ -41,21 +50,21 @@ def _raise_interrupt(signum: int, frame: object) -> None:
 
 
 @click.command("emulate")
-@click.argument("recording", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=250.0,
+@click.argument("recording", type=InputFile())
+@click.option("--rate", type=Finite(0.0, MAX_RATE_HZ, min_open=True), default=250.0,
               show_default=True, help="Frame rate, Hz.")
 @click.option("--loop", is_flag=True, help="Replay the recording cyclically.")
-@click.option("--faults", default=None, metavar="SPEC|FILE.toml",
+@click.option("--faults", type=FaultSpec(), default=None, metavar="SPEC|FILE.toml",
               help="Faults to inject, e.g. 'noise:sigma_mm=0.5;drop:rate=0.01,burst=3;"
                    "corrupt:rate=0.001;truncate:rate=0.001;stall:every_s=5,duration_ms=40;"
                    "disconnect:at_s=10,for_s=0.5' or a TOML file of [[fault]] tables "
                    "(see docs/emulator.md).")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=Seed(), default=0, show_default=True,
               help="Seed for every random fault.")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--duration", type=Finite(0.0, MAX_DURATION_S, min_open=True), default=None,
               help="Stop after this many seconds of device time (default: end of the "
                    "recording, or never with --loop).")
-@click.option("--spin-ms", "spin_ms", type=click.FloatRange(min=0, max=100), default=0.3,
+@click.option("--spin-ms", "spin_ms", type=Finite(0.0, 100.0), default=0.3,
               show_default=True,
               help="Spin on the clock for this long before each deadline (absorbs late "
                    "wake-ups on a loaded machine, costs CPU).")

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from exohil.formats.atomic import write_bytes, write_text
-from exohil.harness.cli_types import OutputFolder
+from exohil.harness.cli_types import InputDir, OutputDir
 from exohil.harness.paths import FIXTURES_DIR, SHOULDER_IK_DIR
 
 
@@ -21,9 +21,9 @@ def fixtures_group() -> None:
 @click.option("--check", is_flag=True,
               help="Rebuild into a temporary folder and compare sha256 against "
                    "fixtures/SHA256SUMS (and the committed files); exit 1 on any mismatch.")
-@click.option("--dir", "fixtures_dir", type=OutputFolder(),
+@click.option("--dir", "fixtures_dir", type=OutputDir(),
               default=FIXTURES_DIR, show_default=True, help="Fixtures folder.")
-@click.option("--shoulder-ik", "shoulder_ik_dir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("--shoulder-ik", "shoulder_ik_dir", type=InputDir(),
               default=SHOULDER_IK_DIR, show_default=True,
               help="Folder of the shoulder-ik .mot trials (real motion, CC BY 4.0).")
 def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> None:
@@ -43,9 +43,9 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
         parse_sums,
     )
 
-    if not shoulder_ik_dir.is_dir():
-        raise click.ClickException(f"shoulder-ik data not found at {shoulder_ik_dir} "
-                                   f"(pass --shoulder-ik DIR)")
+    if check and not (fixtures_dir / SUMS_FILE).is_file():
+        raise click.BadParameter(f"{fixtures_dir} has no {SUMS_FILE} to check against",
+                                 param_hint="--dir")
     with tempfile.TemporaryDirectory(prefix="exohil-fixtures-") as tmp:
         out_dir = Path(tmp) if check else fixtures_dir
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,19 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
+from exohil.harness.cli_types import (
+    MAX_RATE_HZ,
+    Count,
+    Finite,
+    InputFile,
+    Name,
+    NameList,
+    OutputFile,
+    refuse_overwriting_inputs,
+)
+
+#: The most lines ``--skip-rows`` drops.
+MAX_SKIP_ROWS = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -51,10 +63,32 @@ def import_group() -> None:
     """Convert other tools' files into recordings (format v1 MCAP)."""
 
 
-def _one_character(ctx: click.Context, param: click.Parameter, value: str) -> str:
-    if len(value) != 1:
-        raise click.BadParameter(f"must be exactly one character, got {value!r}")
-    return value
+class Delimiter(click.ParamType):
+    """One field-separator character: printable or a tab, not a quote or a line break."""
+
+    name = "char"
+
+    def convert(self, value, param, ctx):
+        text = str(value)
+        if len(text) != 1 or text in "\r\n\"" or (not text.isprintable() and text != "\t"):
+            self.fail(f"must be exactly one character (printable or a tab, not a quote), "
+                      f"got {text!r}", param, ctx)
+        return text
+
+
+class Columns(click.ParamType):
+    """0-based column indices, ``'1-5'``, ``'1,3,6-8'``; the text is returned unchanged."""
+
+    name = "columns"
+
+    def convert(self, value, param, ctx):
+        from exohil.formats.column_table import TableError, parse_columns
+
+        try:
+            parse_columns(str(value))
+        except TableError as exc:
+            self.fail(str(exc), param, ctx)
+        return str(value)
 
 
 def _names(text: str | None) -> tuple[str, ...] | None:
@@ -93,25 +127,29 @@ def _command_line() -> str:
 
 
 @import_group.command("csv")
-@click.argument("input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("input_file", type=InputFile())
 @click.option("--out", "out", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)),
               help="Fill the mapping for a known layout (graphene-knee: ../shared/realdata).")
-@click.option("--rate", type=float, help="Row rate, Hz (rows are equally spaced).")
-@click.option("--sensor-cols", help="0-based sensor columns: '1-5', '1,3,6-8'.")
-@click.option("--angle-cols", help="0-based angle columns (degrees), e.g. '0'.")
-@click.option("--sensor-names", help="Comma-separated sensor names (default: header or cN).")
-@click.option("--angle-names", help="Comma-separated angle names (default: header or angleN).")
-@click.option("--joint", help="Mocap joint (topic /mocap/<joint>); default 'joint'.")
-@click.option("--sensor-units", help="Unit of the sensor values; default 'mm'.")
-@click.option("--skip-rows", type=click.IntRange(min=0), default=0, show_default=True,
+@click.option("--rate", type=Finite(0.0, MAX_RATE_HZ, min_open=True),
+              help="Row rate, Hz (rows are equally spaced).")
+@click.option("--sensor-cols", type=Columns(), help="0-based sensor columns: '1-5', '1,3,6-8'.")
+@click.option("--angle-cols", type=Columns(), help="0-based angle columns (degrees), e.g. '0'.")
+@click.option("--sensor-names", type=NameList(),
+              help="Comma-separated sensor names (default: header or cN).")
+@click.option("--angle-names", type=NameList(),
+              help="Comma-separated angle names (default: header or angleN).")
+@click.option("--joint", type=Name(), help="Mocap joint (topic /mocap/<joint>); default 'joint'.")
+@click.option("--sensor-units", type=Name(), help="Unit of the sensor values; default 'mm'.")
+@click.option("--skip-rows", type=Count(0, MAX_SKIP_ROWS), default=0, show_default=True,
               help="Lines to drop before the header/data.")
-@click.option("--delimiter", default=",", show_default=True, callback=_one_character,
+@click.option("--delimiter", type=Delimiter(), default=",", show_default=True,
               help="Field separator (one character).")
-@click.option("--decimals", type=click.IntRange(0, 9), default=6, show_default=True,
+@click.option("--decimals", type=Count(0, 9), default=6, show_default=True,
               help="Decimal places kept for sensor values and angles.")
-@click.option("--license", "license_note", help="License note stored in the metadata.")
+@click.option("--license", "license_note", type=Name(),
+              help="License note stored in the metadata.")
 def import_csv(
     input_file: Path,
     out: Path,
@@ -199,10 +237,11 @@ def import_csv(
 
 
 @import_group.command("mot")
-@click.argument("input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("input_file", type=InputFile())
 @click.option("--out", "out", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
-@click.option("--license", "license_note", help="License note stored in the metadata.")
+@click.option("--license", "license_note", type=Name(),
+              help="License note stored in the metadata.")
 def import_mot(input_file: Path, out: Path, license_note: str | None) -> None:
     """Import an OpenSim .mot (e.g. inverse kinematics) as a mocap-only recording:
     /mocap/shoulder with plane_elv → elv_angle, shoulder_elv → shoulder_elv,

@@ -6,25 +6,32 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
+from exohil.harness.cli_types import (
+    MAX_TIME_S,
+    Finite,
+    InputFile,
+    Name,
+    OutputFile,
+    refuse_overwriting_inputs,
+)
 
 
 @click.command("plot")
-@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("file", type=InputFile())
 @click.option("--kind", type=click.Choice(["hysteresis", "timeseries"]), required=True,
               help="hysteresis: one sensor against a mocap angle, coloured by direction of "
               "motion; timeseries: sensors and angles against time.")
-@click.option("--sensor", "sensors", multiple=True,
+@click.option("--sensor", "sensors", type=Name(), multiple=True,
               help="Sensor name (hysteresis: default SF or the first; timeseries: repeat to "
               "choose, default all).")
-@click.option("--joint", default=None,
+@click.option("--joint", type=Name(), default=None,
               help="Mocap joint (hysteresis; default: shoulder, or the recording's only joint).")
-@click.option("--angle", default=None,
+@click.option("--angle", type=Name(), default=None,
               help="Mocap angle on the x axis (hysteresis; default: shoulder_elv, or the "
                    "joint's only angle).")
-@click.option("--segment", help="Keep only the spans of this labelled segment.")
-@click.option("--t0", type=float, help="Start of the time window, s.")
-@click.option("--t1", type=float, help="End of the time window, s.")
+@click.option("--segment", type=Name(), help="Keep only the spans of this labelled segment.")
+@click.option("--t0", type=Finite(-MAX_TIME_S, MAX_TIME_S), help="Start of the time window, s.")
+@click.option("--t1", type=Finite(-MAX_TIME_S, MAX_TIME_S), help="End of the time window, s.")
 @click.option("--out", required=True, type=OutputFile(),
               help="Output PNG file.")
 def plot_command(

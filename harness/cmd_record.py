@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
+from exohil.harness.cli_types import InputFile, OutputFile, refuse_overwriting_inputs
 
 
 @click.group("record")
@@ -19,7 +19,7 @@ def record_group() -> None:
 
 
 @record_group.command("info")
-@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("file", type=InputFile())
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of text.")
 def info_command(file: Path, as_json: bool) -> None:
     """Summarise FILE: duration, channels (topic, schema, messages, mean rate), sequence gaps,
@@ -140,7 +140,7 @@ def _as_text(summary: dict[str, Any]) -> str:
 
 
 @record_group.command("recover")
-@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("file", type=InputFile())
 @click.option("--out", "out", type=OutputFile(), required=True,
               help="The clean copy (must not be FILE).")
 def recover_command(file: Path, out: Path) -> None:

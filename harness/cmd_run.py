@@ -16,7 +16,16 @@ import numpy as np
 
 from exohil.formats.atomic import write_text
 from exohil.harness.bench import BenchConfig
-from exohil.harness.cli_types import OutputFile, OutputFolder, refuse_overwriting_inputs
+from exohil.harness.cli_types import (
+    MAX_DURATION_S,
+    DeviceUrl,
+    Finite,
+    InputFile,
+    OutputDir,
+    OutputFile,
+    Robot,
+    refuse_overwriting_inputs,
+)
 from exohil.harness.pipeline import Status
 
 
@@ -115,31 +124,30 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
 
 
 @click.command("run")
-@click.argument("url")
-@click.option("--model", type=click.Path(path_type=Path), default=None,
+@click.argument("url", type=DeviceUrl())
+@click.option("--model", type=InputFile(), default=None,
               help="Estimator checkpoint [default: the bench's, else the reference ENNet].")
-@click.option("--bench", "bench_file", type=click.Path(exists=True, dir_okay=False,
-                                                       path_type=Path),
-              default=None, help="Bench configuration (TOML); URL and options override it.")
-@click.option("--sink", "sinks", multiple=True,
+@click.option("--bench", "bench_file", type=InputFile(), default=None,
+              help="Bench configuration (TOML); URL and options override it.")
+@click.option("--sink", "sinks", type=Robot(), multiple=True,
               help="Robot the commands go to (repeatable): simulated (bookkeeping only, the "
                    "default), mujoco (NAO's arms simulated in MuJoCo), udp:HOST:PORT (one JSON "
                    "datagram per command, docs/robot.md), or none.")
-@click.option("--reference", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              default=None, help="Ground truth recording of this session (aligned by device "
-                                 "time); without it accuracy is not measured.")
+@click.option("--reference", type=InputFile(), default=None,
+              help="Ground truth recording of this session (aligned by device time); without "
+                   "it accuracy is not measured.")
 @click.option("--record", "record_path", type=OutputFile(), default=None,
               help="Write the frames the host received to this recording (MCAP).")
-@click.option("--duration", type=click.FloatRange(min=0.1, max=86400.0), default=None,
+@click.option("--duration", type=Finite(0.1, MAX_DURATION_S), default=None,
               help="Seconds to run [default: until Ctrl-C].")
 @click.option("--backend", type=click.Choice(["auto", "numpy", "torch", "torchscript",
                                               "onnxruntime"]), default=None,
               help="Streaming inference backend [auto].")
 @click.option("--json", "json_out", type=OutputFile(), default=None,
               help="Write the summary JSON here.")
-@click.option("--out", "out_dir", type=OutputFolder(),
-              default=None, help="Also write a report folder here (summary, plots, arm "
-                                 "pictures with --sink mujoco, run.mcap).")
+@click.option("--out", "out_dir", type=OutputDir(), default=None,
+              help="Also write a report folder here (summary, plots, arm pictures with --sink "
+                   "mujoco, run.mcap).")
 def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str, ...],
         reference: Path | None, record_path: Path | None, duration: float | None,
         backend: str | None, json_out: Path | None, out_dir: Path | None) -> None:
@@ -148,8 +156,6 @@ def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str,
     from exohil.harness.bench import BenchError, SerialDevice, load_bench
     from exohil.harness.paths import MODELS_DIR
 
-    if not url.strip():
-        raise click.BadParameter("the device URL is empty", param_hint="URL")
     try:
         config = load_bench(bench_file) if bench_file else BenchConfig()
     except BenchError as err:

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import OutputFile, refuse_overwriting_inputs
+from exohil.emulators.effects import EFFECT_TYPES
+from exohil.harness.cli_types import InputFile, OutputFile, Seed, refuse_overwriting_inputs
 
 
 def _mot_files(protocol: str) -> list[Path]:
@@ -18,33 +19,54 @@ def _trajectory(protocol: str, seed: int):
 
     if protocol == "paper":
         return paper_protocol(seed)
-    if protocol.startswith("mot:") and protocol[4:]:
-        paths = _mot_files(protocol)
-        missing = [str(p) for p in paths if not p.is_file()]
-        if missing:
-            raise click.BadParameter(f"no such .mot file: {', '.join(missing)}",
-                                     param_hint="--protocol")
-        try:
-            return mot_trajectory(paths)
-        except ValueError as exc:
-            raise click.ClickException(str(exc)) from exc
-    raise click.BadParameter(f"{protocol!r}: use 'paper' or 'mot:FILE[,FILE...]'",
-                             param_hint="--protocol")
+    try:
+        return mot_trajectory([Path(p) for p in protocol[4:].split(",")])
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from exc
+
+
+class Protocol(click.ParamType):
+    """``paper`` or ``mot:FILE[,FILE...]`` with every .mot file present."""
+
+    name = "protocol"
+
+    def convert(self, value, param, ctx):
+        text = str(value)
+        if text == "paper":
+            return text
+        if not text.startswith("mot:") or not text[4:]:
+            self.fail(f"{text!r}: use 'paper' or 'mot:FILE[,FILE...]'", param, ctx)
+        for name in text[4:].split(","):
+            if not name.strip() or "\x00" in name or not Path(name).is_file():
+                self.fail(f"no such .mot file: {name!r}", param, ctx)
+        return text
+
+
+class EffectKind(click.Choice):
+    """One of the effect kinds of :data:`~exohil.emulators.effects.EFFECT_TYPES`."""
+
+    def __init__(self) -> None:
+        super().__init__(list(EFFECT_TYPES))
+
+    def get_invalid_choice_message(self, value, ctx) -> str:
+        return f"unknown effect kind {value!r}; known: {', '.join(EFFECT_TYPES)}"
 
 
 @click.command("simulate")
-@click.option("--protocol", default="paper", show_default=True, metavar="paper|mot:FILE[,FILE]",
+@click.option("--protocol", type=Protocol(), default="paper", show_default=True,
+              metavar="paper|mot:FILE[,FILE]",
               help="Movement: the paper's Table III protocol (seeded), or real motion from "
                    "OpenSim .mot files (comma-separated, concatenated in order).")
-@click.option("--profile", "profile_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Suit profile TOML (default: the packaged default profile).")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--profile", "profile_path", type=InputFile(), default=None,
+              help="Suit profile TOML (default: the packaged default profile).")
+@click.option("--seed", type=Seed(), default=0, show_default=True,
               help="Seed for the protocol and every random effect.")
 @click.option("--without", "without", multiple=True, metavar="KIND",
+              type=EffectKind(),
               help="Drop effects of this kind (hysteresis, creep, saturation, lag, drift, noise, "
                    "quantization, dropout) from the profile's chain (repeatable).")
-@click.option("--out", "out_path", required=True,
-              type=OutputFile(), help="Output recording (.mcap).")
+@click.option("--out", "out_path", required=True, type=OutputFile(),
+              help="Output recording (.mcap).")
 def simulate_command(protocol: str, profile_path: Path | None, seed: int,
                      without: tuple[str, ...], out_path: Path) -> None:
     """Simulate the suit following a movement and write a recording.
@@ -57,18 +79,12 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
       exohil simulate --protocol paper --seed 7 --out paper.mcap
       exohil simulate --protocol mot:ABD01.mot,FLX01.mot --without noise --out real.mcap
     """
-    from exohil.emulators.effects import EFFECT_TYPES
     from exohil.emulators.simulate import simulate
     from exohil.emulators.suit_profile import ProfileError, load_default_profile, load_profile
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_writer import write_recording
 
     refuse_overwriting_inputs([("--out", out_path)], [profile_path, *_mot_files(protocol)])
-
-    unknown = sorted(set(without) - set(EFFECT_TYPES))
-    if unknown:
-        raise click.BadParameter(f"unknown effect kind(s) {', '.join(unknown)}; "
-                                 f"known: {', '.join(EFFECT_TYPES)}", param_hint="--without")
     try:
         profile = load_default_profile() if profile_path is None else load_profile(profile_path)
     except ProfileError as exc:

@@ -6,19 +6,50 @@ from __future__ import annotations
 import json
 import shlex
 import sys
-from pathlib import Path
 
 import click
 
 from exohil.formats.atomic import write_text
-from exohil.harness.cli_types import OutputFile, OutputFolder, refuse_overwriting_inputs
+from exohil.harness.cli_types import (
+    MAX_DURATION_S,
+    Count,
+    Finite,
+    InputFile,
+    Name,
+    NameList,
+    OutputDir,
+    OutputFile,
+    Seed,
+    refuse_overwriting_inputs,
+)
 
 MODEL_CHOICES = ("ennet", "lnnet", "ann", "cnn", "classical")
 
-_recordings = click.argument(
-    "recordings", nargs=-1, required=True,
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-)
+_recordings = click.argument("recordings", nargs=-1, required=True, type=InputFile())
+
+#: Bounds of the training options (docs/reliability.md): far beyond any useful value, small
+#: enough that a typo cannot exhaust memory or run for years.
+MAX_HIDDEN = 4096
+MAX_EPOCHS = 1_000_000
+MAX_WINDOW = 1000
+MAX_DILATION = 100
+MAX_OFFSET_FRAMES = 1_000_000
+
+
+class AngleLimit(click.ParamType):
+    """``ANGLE=DEG``: an angle name and a finite number of degrees within ±360; the text is
+    returned unchanged (whether the model has that angle is checked once it is loaded)."""
+
+    name = "angle=deg"
+
+    def convert(self, value, param, ctx):
+        text = str(value)
+        name, sep, number = text.partition("=")
+        if not sep or not name.strip():
+            self.fail(f"{text!r} is not ANGLE=DEG", param, ctx)
+        Name().convert(name, param, ctx)
+        Finite(-360.0, 360.0).convert(number, param, ctx)
+        return text
 
 
 def _angles(text: str | None) -> tuple[str, ...] | None:
@@ -27,26 +58,26 @@ def _angles(text: str | None) -> tuple[str, ...] | None:
 
 def _common_training_options(fn):
     options = [
-        click.option("--seed", type=int, default=0, show_default=True,
+        click.option("--seed", type=Seed(), default=0, show_default=True,
                      help="Seed of initialisation and shuffling."),
-        click.option("--time-budget", type=click.FloatRange(min=1), default=600.0,
+        click.option("--time-budget", type=Finite(1.0, MAX_DURATION_S), default=600.0,
                      show_default=True, help="Wall-clock limit per model, seconds."),
-        click.option("--max-epochs", type=click.IntRange(min=1), default=10_000,
+        click.option("--max-epochs", type=Count(1, MAX_EPOCHS), default=10_000,
                      show_default=True, help="Epoch limit (use for bit-reproducible runs)."),
-        click.option("--patience", type=click.IntRange(min=1), default=25, show_default=True,
+        click.option("--patience", type=Count(1, MAX_EPOCHS), default=25, show_default=True,
                      help="Early stopping: epochs without validation improvement."),
-        click.option("--window", type=click.IntRange(min=1), default=10, show_default=True,
+        click.option("--window", type=Count(1, MAX_WINDOW), default=10, show_default=True,
                      help="Frames per window (n)."),
-        click.option("--dilation", type=click.IntRange(min=1), default=1, show_default=True,
+        click.option("--dilation", type=Count(1, MAX_DILATION), default=1, show_default=True,
                      help="Frame step inside the window (window spans (n-1)·dilation+1 frames)."),
-        click.option("--joint", help="Mocap joint to estimate (default: shoulder, or the "
-                     "recording's only joint)."),
-        click.option("--angles", help="Comma-separated angle fields (default: elv_angle,"
-                     "shoulder_elv for the shoulder; all fields otherwise)."),
-        click.option("--offset-frames", type=click.IntRange(min=0), default=0,
+        click.option("--joint", type=Name(), help="Mocap joint to estimate (default: "
+                     "shoulder, or the recording's only joint)."),
+        click.option("--angles", type=NameList(), help="Comma-separated angle fields "
+                     "(default: elv_angle,shoulder_elv for the shoulder; all fields otherwise)."),
+        click.option("--offset-frames", type=Count(0, MAX_OFFSET_FRAMES), default=0,
                      show_default=True, help="Subtract each recording's initial rest value "
                      "(causal mean of its first N frames) from the sensors; 0 = off."),
-        click.option("--val-fraction", type=click.FloatRange(0.01, 0.9), default=0.15,
+        click.option("--val-fraction", type=Finite(0.01, 0.9), default=0.15,
                      show_default=True, help="End of each training piece used for validation."),
     ]
     for option in reversed(options):
@@ -87,9 +118,9 @@ def _command_line() -> str:
 @_recordings
 @click.option("--out", required=True, type=OutputFile(),
               help="Checkpoint file to write (.npz).")
-@click.option("--hidden", type=click.IntRange(min=1), help="LSTM hidden size (per sensor for "
+@click.option("--hidden", type=Count(1, MAX_HIDDEN), help="LSTM hidden size (per sensor for "
               "LNNet) or CNN channels; default ennet 64, lnnet 32, cnn 32.")
-@click.option("--test-fraction", type=click.FloatRange(0.0, 0.9), default=0.0,
+@click.option("--test-fraction", type=Finite(0.0, 0.9), default=0.0,
               show_default=True, help="Hold out the end of every movement piece as a test set "
               "and store its metrics in the checkpoint (0 = train on everything).")
 @_common_training_options
@@ -131,14 +162,14 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
 
 
 @click.command("evaluate")
-@click.argument("checkpoint", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("checkpoint", type=InputFile())
 @_recordings
 @click.option("--json", "json_out", type=OutputFile(),
               help="Also write the metrics as JSON to this file.")
-@click.option("--test-fraction", type=click.FloatRange(0.0, 0.9), default=0.0,
+@click.option("--test-fraction", type=Finite(0.0, 0.9), default=0.0,
               show_default=True, help="Score only the last fraction of each movement piece "
               "(the part `train --test-fraction` held out); 0 = whole recordings.")
-@click.option("--min", "min_angle", multiple=True, metavar="ANGLE=DEG",
+@click.option("--min", "min_angle", type=AngleLimit(), multiple=True, metavar="ANGLE=DEG",
               help="Score only frames whose true ANGLE ≥ DEG (repeatable), e.g. "
               "shoulder_elv=20 where the plane of elevation is observable.")
 def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle):
@@ -201,25 +232,25 @@ def _angle_limits(items: tuple[str, ...], angles: tuple[str, ...]) -> dict[str, 
 
 
 @click.command("table")
-@click.option("--train", "train_paths", multiple=True, required=True,
-              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+@click.option("--train", "train_paths", multiple=True, required=True, type=InputFile(),
               help="Training recording (repeat the option for several).")
-@click.option("--test", "test_paths", multiple=True,
-              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+@click.option("--test", "test_paths", multiple=True, type=InputFile(),
               help="Test recording(s) (across-trial split); without them the end of each "
               "training movement piece is the test set (--test-fraction).")
-@click.option("--test-fraction", type=click.FloatRange(0.05, 0.9), default=0.3,
+@click.option("--test-fraction", type=Finite(0.05, 0.9), default=0.3,
               show_default=True, help="Within-recording split: test = last fraction.")
-@click.option("--models", default=",".join(("ann", "classical", "cnn", "lnnet", "ennet")),
+@click.option("--models", type=NameList(MODEL_CHOICES),
+              default=",".join(("ann", "classical", "cnn", "lnnet", "ennet")),
               show_default=True, help="Comma-separated model kinds, in table order.")
 @click.option("--out", type=OutputFile(),
               help="Markdown file to put the table into (e.g. docs/results.md).")
-@click.option("--section", default="comparison", show_default=True,
+@click.option("--section", type=Name(), default="comparison", show_default=True,
               help="Name of the table section inside --out (replaced when present).")
-@click.option("--title", default="Model comparison", show_default=True, help="Table heading.")
+@click.option("--title", type=Name(), default="Model comparison", show_default=True,
+              help="Table heading.")
 @click.option("--json", "json_out", type=OutputFile(),
               help="Also write all metrics as JSON.")
-@click.option("--save-dir", type=OutputFolder(),
+@click.option("--save-dir", type=OutputDir(),
               help="Also save every trained model's checkpoint here.")
 @_common_training_options
 def table_command(train_paths, test_paths, test_fraction, models, out, section, title,
@@ -239,11 +270,7 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
 
     refuse_overwriting_inputs([("--out", out), ("--json", json_out)],
                               [*train_paths, *test_paths])
-    kinds = [k.strip() for k in models.split(",") if k.strip()]
-    bad = [k for k in kinds if k not in MODEL_CHOICES]
-    if bad or not kinds:
-        raise click.ClickException(f"--models: unknown model(s) {bad}; choose from "
-                                   f"{', '.join(MODEL_CHOICES)}")
+    kinds = [k.strip() for k in models.split(",")]
     wf = _workflow()
     data = _load(train_paths, joint, angles)
     test_data = _load(test_paths, data.target.joint, ",".join(data.target.angles),

@@ -93,6 +93,12 @@ def test_bundled_profiles_load():
     ('[checks.latency]\n"latency.end_to_end.max" = "about 3 ms"\n', "is not"),
     ('[settings]\nrealtime_secs = 3\n', "unknown setting"),
     ('colour = "red"\n', "unknown key"),
+    ('[settings]\nseed = -1\n', "setting seed must be within"),
+    ('[settings]\nseed = 4294967296\n', "setting seed must be within"),
+    ('[settings]\nrealtime_seconds = nan\n', "setting realtime_seconds must be within"),
+    ('[settings]\nrealtime_seconds = inf\n', "setting realtime_seconds must be within"),
+    ('[settings]\nconversion_examples = 0\n', "setting conversion_examples must be within"),
+    ('[settings]\nfaults = "drop:rate=nan"\n', "setting faults: drop"),
 ])
 def test_bad_profiles_are_clear_errors(tmp_path, text, message):
     path = tmp_path / "p.toml"

@@ -139,7 +139,9 @@ def test_cli_errors_are_one_line(tmp_path):
     assert result.exit_code == 1 and "no motion capture" in result.output
     before = short.read_bytes()
     result = CliRunner().invoke(main, ["discrepancy", str(short), "--out", str(short)])
+    # a file as --out (here the input itself) is refused when the command line is parsed
     assert result.exit_code == 2 and "is a file" in result.output
+    assert len(result.output.strip().splitlines()) == 1
     assert short.read_bytes() == before
 
 

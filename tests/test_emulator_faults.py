@@ -225,7 +225,13 @@ def test_spec_string_and_toml_give_the_same_plan(tmp_path) -> None:
 
 @pytest.mark.parametrize("bad", ["drop:rate=2", "warp:speed=9", "drop:rate", "drop:rat=0.1",
                                  "stall:every_s=1,duration_ms=2000", "noise:sigma_mm=-1",
-                                 "drop:rate=abc", "noise:sigma_mm=1/x"])
+                                 "drop:rate=abc", "noise:sigma_mm=1/x",
+                                 # non-finite or huge numbers (issue 13)
+                                 "drop:rate=nan", "drop:burst=inf", "drop:burst=1e400",
+                                 "stall:every_s=-inf", "disconnect:at_s=1e10",
+                                 "noise:sigma_mm=nan", "lag:clock_offset_s=-inf",
+                                 "noise:sigma_mm=1/nan", "hysteresis:operators=1e9",
+                                 "drop:rate=true"])
 def test_bad_specs_raise_value_error_naming_the_problem(bad: str) -> None:
     with pytest.raises(ValueError, match=bad.split(":")[0]):
         parse_fault_spec(bad)

@@ -48,7 +48,7 @@ def test_evaluate_writes_the_documented_json(files):
 def test_missing_checkpoint(files):
     line = _one_line_error(CliRunner().invoke(
         main, ["evaluate", str(files["dir"] / "none.npz"), str(files["good"])]))
-    assert "not found" in line
+    assert "none.npz" in line and "does not exist" in line
 
 
 def test_corrupt_checkpoint(files):

@@ -32,6 +32,8 @@ def test_targets_parse():
     ("emulator:", "without a recording"),
     ("emulator:r.mcap?speed=2", "unknown emulator option"),
     ("emulator:r.mcap?seed=x", "seed must be an integer"),
+    ("emulator:r.mcap?seed=-1", "seed must be an integer 0..4294967295"),
+    ("emulator:r.mcap?seed=4294967296", "seed must be an integer 0..4294967295"),
     ("", "empty target"),
 ])
 def test_bad_targets_are_one_clear_error(text, message):
@@ -57,6 +59,14 @@ def test_a_bench_file_names_device_model_sensors_robots(tmp_path):
     ("[device]\nport = 'x'\n", "unknown key"),
     ("[device]\nemulator = 'a.mcap'\nurl = '/dev/x'\n", "pick one"),
     ("[device\n", "bench.toml"),
+    ("[device]\nemulator = 'a.mcap'\nseed = -1\n", "seed must be an integer"),
+    ("[device]\nemulator = 'a.mcap'\nseed = 'x'\n", "seed must be an integer"),
+    ("[device]\nemulator = 'a.mcap'\nseed = 1.5\n", "seed must be an integer"),
+    ("[device]\nemulator = 'a.mcap'\nfaults = 'drop:rate=nan'\n", "faults: drop"),
+    ("[device]\nemulator = 'a.mcap'\nloop = 'yes'\n", "loop must be true or false"),
+    ("[device]\nemulator = 3\n", "emulator must be a non-empty string"),
+    ("[sensors]\nrate_hz = nan\n", "rate_hz must be a number"),
+    ("[sensors]\nrate_hz = -250\n", "rate_hz must be a number"),
 ])
 def test_bad_bench_files_are_one_clear_error(tmp_path, text, message):
     path = tmp_path / "bench.toml"

@@ -122,7 +122,7 @@ def test_a_session_refuses_to_record_onto_its_model(tmp_path):
 def test_demo_rejects_a_missing_model_with_one_line(tmp_path):
     result = CliRunner().invoke(main, ["demo", "--model", str(tmp_path / "nope.npz")])
     assert result.exit_code != 0
-    assert "checkpoint not found" in result.output
+    assert "nope.npz" in result.output and "does not exist" in result.output
     assert "Traceback" not in result.output
 
 

@@ -180,7 +180,7 @@ def test_simulate_command_writes_a_readable_recording(tmp_path):
     (["--protocol", "walk"], "use 'paper' or 'mot:FILE"),
     (["--protocol", "mot:/nonexistent.mot"], "no such .mot file"),
     (["--without", "glue"], "unknown effect kind"),
-    (["--profile", "/nonexistent.toml"], "no such suit profile"),
+    (["--profile", "/nonexistent.toml"], "does not exist"),
 ])
 def test_simulate_command_bad_input_is_one_clear_error(tmp_path, args, message):
     result = CliRunner().invoke(main, ["simulate", *args, "--out", str(tmp_path / "x.mcap")])
