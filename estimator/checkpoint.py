@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from exohil.estimator.architecture import ModelConfig
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import TargetSpec
-from exohil.estimator.models import ModelConfig
 from exohil.estimator.trained import Normalisation, TrainedEstimator
 from exohil.formats import strict_json
 from exohil.formats.atomic import replacing

@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from exohil.estimator.architecture import ModelConfig
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import Block, TargetSpec
-from exohil.estimator.models import ModelConfig
 from exohil.estimator.windows import block_windows
 
 #: Frames per forward pass when predicting a long block.
