@@ -56,6 +56,24 @@ class Normalisation:
         angles += self.y_mean
         return angles
 
+    def fold_x(self, w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The input normalisation folded into linear maps that read the normalised sensors:
+        (w', b') with x·w' + b' = z·w + b for z = (x − x_mean) / x_std.
+
+        ``w`` (G, I, K) and ``b`` (G, K): G maps that each read I of the S = G·I sensors, in
+        sensor order (G = 1: one map over every sensor; I = 1: one map per sensor).
+        """
+        groups, width = w.shape[:2]
+        std = self.x_std.reshape(groups, width, 1)
+        shift = (self.x_mean / self.x_std).reshape(groups, 1, width)
+        return w / std, b - (shift @ w)[:, 0]
+
+    def fold_y(self, w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The output de-normalisation folded into the layer that gives the normalised angles:
+        (w', b') with w'·a + b' = (w·a + b) · y_std + y_mean, for ``w`` (A, n) and ``b`` (A,)
+        (torch ``Linear`` layout)."""
+        return w * self.y_std[:, None], b * self.y_std + self.y_mean
+
 
 @dataclass
 class TrainedEstimator:
