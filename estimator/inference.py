@@ -22,9 +22,10 @@ fastest back to back, level with numpy at the live 250 Hz pace, docs/estimator.m
   de-normalisation are folded into the weights (layers from :mod:`exohil.estimator.weights`,
   folding by :class:`~exohil.estimator.trained.Normalisation`). The input projection
   x·W_ih + b of each frame is computed once, when the frame arrives, and kept in the ring with
-  the frame. ENNet, LNNet
-  (S independent LSTMs, batched), ANN and classical run here; CNN does not (use ``torch``).
-- ``torch``: the checkpoint's module in eager mode under ``inference_mode``, one thread.
+  the frame. ENNet, LNNet (S independent LSTMs, batched), ANN and classical run here; CNN does
+  not (use ``torch``). Neither this nor ``onnxruntime`` imports torch.
+- ``torch``: the checkpoint's module (built from its weights then, importing torch) in eager
+  mode under ``inference_mode``, one thread.
 - ``torchscript``: the same module traced with ``torch.jit.trace``.
 
 ``push`` returns a view of an internal buffer that the next call overwrites; copy it to keep it.

@@ -75,7 +75,7 @@ def build_onnx_model(est: TrainedEstimator):
     import onnx
     from onnx import TensorProto, helper
 
-    if est.kind == "classical" or est.network is None:
+    if est.kind == "classical" or not est.has_network:
         raise ValueError("the classical model has no ONNX graph; use backend='numpy'")
     shape = input_shape(est)
     state = est.weights()
