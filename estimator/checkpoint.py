@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from exohil.estimator.architecture import ModelConfig, check_state, state_shapes
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import TargetSpec
-from exohil.estimator.models import ModelConfig
 from exohil.estimator.trained import Normalisation, TrainedEstimator
 from exohil.formats import strict_json
 from exohil.formats.atomic import replacing
@@ -171,21 +171,16 @@ def _attach_classical(path: Path, est: TrainedEstimator, arrays: dict[str, np.nd
 
 
 def _attach_network(path: Path, est: TrainedEstimator, arrays: dict[str, np.ndarray]) -> None:
-    import torch
-
-    from exohil.estimator.models import build_model
-
+    """The network's weights as NumPy arrays, checked against the architecture without torch
+    (the torch module is built from them only when something asks for it)."""
     try:
-        net = build_model(est.config)
-    except (ValueError, RuntimeError) as exc:
+        state_shapes(est.config)
+    except ValueError as exc:  # an unknown kind, a size that is not positive
         raise CheckpointError(f"{path}: {exc}") from None
-    state = {k[len("net/"):]: torch.from_numpy(np.ascontiguousarray(v))
-             for k, v in arrays.items() if k.startswith("net/")}
+    state = {k[len("net/"):]: v.astype(np.float32) for k, v in arrays.items()
+             if k.startswith("net/")}
     try:
-        net.load_state_dict(state, strict=True)
-    except RuntimeError as exc:
-        first = str(exc).strip().splitlines()
-        detail = " ".join(line.strip() for line in first[:2])
-        raise CheckpointError(f"{path}: weights do not match the architecture ({detail})") from None
-    net.eval()
-    est.network = net
+        check_state(est.config, {k: v.shape for k, v in state.items()})
+    except ValueError as exc:
+        raise CheckpointError(f"{path}: weights do not match the architecture ({exc})") from None
+    est.set_weights(state)

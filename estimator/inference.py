@@ -19,10 +19,13 @@ fastest back to back, level with numpy at the live 250 Hz pace, docs/estimator.m
   optional ``onnxruntime`` and ``onnx`` packages.
 - ``numpy`` (fallback): hand-written float32 LSTM/MLP with preallocated buffers — no
   array allocation per frame in steady state; input normalisation, biases and output
-  de-normalisation are folded into the weights. The input projection x·W_ih + b of each frame is
-  computed once, when the frame arrives, and kept in the ring with the frame. ENNet, LNNet
-  (S independent LSTMs, batched), ANN and classical run here; CNN does not (use ``torch``).
-- ``torch``: the checkpoint's module in eager mode under ``inference_mode``, one thread.
+  de-normalisation are folded into the weights (layers from :mod:`exohil.estimator.weights`,
+  folding by :class:`~exohil.estimator.trained.Normalisation`). The input projection
+  x·W_ih + b of each frame is computed once, when the frame arrives, and kept in the ring with
+  the frame. ENNet, LNNet (S independent LSTMs, batched), ANN and classical run here; CNN does
+  not (use ``torch``). Neither this nor ``onnxruntime`` imports torch.
+- ``torch``: the checkpoint's module (built from its weights then, importing torch) in eager
+  mode under ``inference_mode``, one thread.
 - ``torchscript``: the same module traced with ``torch.jit.trace``.
 
 ``push`` returns a view of an internal buffer that the next call overwrites; copy it to keep it.
@@ -36,6 +39,7 @@ from functools import partial
 import numpy as np
 
 from exohil.estimator.trained import TrainedEstimator
+from exohil.estimator.weights import dense_layers, lstm_weights
 
 BACKENDS = ("numpy", "torch", "torchscript", "onnxruntime")
 
@@ -146,13 +150,11 @@ class _FoldedHead:
 
     Every activation buffer carries a trailing constant 1, so a layer is one ``dot`` (bias =
     the last weight row) plus one in-place ReLU. The output de-normalisation (·y_std + y_mean)
-    is folded into the last layer.
+    is folded into the last layer (:func:`~exohil.estimator.weights.dense_layers`).
     """
 
-    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]], y_mean: np.ndarray,
-                 y_std: np.ndarray) -> None:
-        w_last, b_last = layers[-1]
-        layers = [*layers[:-1], (w_last * y_std[:, None], b_last * y_std + y_mean)]
+    def __init__(self, est: TrainedEstimator, state: dict[str, np.ndarray]) -> None:
+        layers = dense_layers(state, est.norm)
         self.weights = [np.ascontiguousarray(np.vstack([w.T, b[None, :]]), dtype=np.float32)
                         for w, b in layers]
         self.bufs = [np.ones(w.shape[1] + 1, dtype=np.float32) for w in self.weights]
@@ -171,11 +173,6 @@ class _FoldedHead:
         return self.out
 
 
-def _head_layers(state: dict, prefix: str = "head.") -> list[tuple[np.ndarray, np.ndarray]]:
-    idx = sorted({int(k.split(".")[1]) for k in state if k.startswith(prefix)})
-    return [(state[f"{prefix}{i}.weight"], state[f"{prefix}{i}.bias"]) for i in idx]
-
-
 class _NumpyRecurrentRunner:
     """ENNet (G = 1 LSTM over all sensors) or LNNet (G = S one-input LSTMs) in float32.
 
@@ -191,29 +188,17 @@ class _NumpyRecurrentRunner:
 
         self.expit = expit
         state = est.weights()
-        mean, std = est.norm.x_mean, est.norm.x_std
-        if est.kind == "ennet":
-            w_ih = state["lstm.weight_ih_l0"].T[None]  # (1, S, 4H)
-            w_hh = state["lstm.weight_hh_l0"].T[None]  # (1, H, 4H)
-            bias = (state["lstm.bias_ih_l0"] + state["lstm.bias_hh_l0"])[None]
-            # z = (x − mean)/std folded: x·(W/std) + (b − (mean/std)·W)
-            bias = bias - (mean / std) @ w_ih[0]
-            w_ih = w_ih / std[None, :, None]
-        else:  # lnnet: GroupedLSTM, sensor s drives group s only
-            w_ih = state["lstm.weight_ih"][:, None, :]  # (S, 1, 4H)
-            w_hh = state["lstm.weight_hh"].transpose(0, 2, 1)  # (S, H, 4H)
-            bias = state["lstm.bias"] - (mean / std)[:, None] * w_ih[:, 0, :]
-            w_ih = w_ih / std[:, None, None]
-        hidden = w_hh.shape[1]
-        order = np.r_[2 * hidden : 3 * hidden, hidden : 2 * hidden, 0:hidden,
-                      3 * hidden : 4 * hidden]  # PyTorch [i, f, g, o] → [g, f, i, o]
-        self.groups, self.hidden = w_hh.shape[0], hidden
+        # ENNet: G = 1 LSTM reading all S sensors; LNNet: G = S, sensor s drives LSTM s only.
+        # Input normalisation folded in; gates reordered [i, f, g, o] → [g, f, i, o].
+        lstm = lstm_weights(est.kind, state).folded(est.norm).gates("gfio")
+        hidden = lstm.hidden
+        self.groups, self.hidden = lstm.w_hh.shape[0], hidden
         self.grouped = self.groups > 1
         f32 = np.float32
-        self.w_ih = np.ascontiguousarray(w_ih[:, :, order], dtype=f32)
+        self.w_ih = np.ascontiguousarray(lstm.w_ih, dtype=f32)  # (G, I, 4H)
         self.w_ih_sensorwise = np.ascontiguousarray(self.w_ih[:, 0, :])
-        self.w_hh = np.ascontiguousarray(w_hh[:, :, order], dtype=f32)
-        self.bias = np.ascontiguousarray(bias[:, order], dtype=f32)
+        self.w_hh = np.ascontiguousarray(lstm.w_hh, dtype=f32)  # (G, H, 4H)
+        self.bias = np.ascontiguousarray(lstm.bias, dtype=f32)  # (G, 4H)
         self.ring = _Ring(est.config.window, est.config.dilation, (self.groups, 4 * hidden))
         h = hidden
         self.buf = np.zeros((self.groups, 5 * h), dtype=f32)
@@ -229,7 +214,7 @@ class _NumpyRecurrentRunner:
         self.h3, self.g3 = self.h[:, None, :], self.gates[:, None, :]
         self.xp = np.zeros((self.groups, 4 * h), dtype=f32)
         self.x32 = np.zeros(est.config.n_sensors, dtype=f32)
-        self.head = _FoldedHead(_head_layers(state), est.norm.y_mean, est.norm.y_std)
+        self.head = _FoldedHead(est, state)
         # h·W_hh into the gate slots: one batched matmul over the groups (LNNet), or a plain
         # vector-matrix dot for the single LSTM (ENNet), which is the cheaper call.
         # (The output array is passed positionally: keyword arguments would cost a dict merge
@@ -282,8 +267,7 @@ class _NumpyANNRunner:
     def __init__(self, est: TrainedEstimator) -> None:
         self.norm = _Normaliser(est)
         self.z_aug = np.ones(est.config.n_sensors + 1, dtype=np.float32)
-        self.head = _FoldedHead(_head_layers(est.weights()), est.norm.y_mean,
-                                est.norm.y_std)
+        self.head = _FoldedHead(est, est.weights())
 
     def reset(self) -> None:
         """Memoryless: nothing to forget."""

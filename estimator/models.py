@@ -2,7 +2,8 @@
 
 All map a normalised sensor window (B, n, S) — oldest frame first, newest last — to normalised
 angles (B, A). Normalisation (per-sensor and per-angle mean/std) lives outside the network, in
-the checkpoint (:mod:`exohil.estimator.checkpoint`).
+the checkpoint (:mod:`exohil.estimator.checkpoint`). The configuration and the parameter shapes
+of each kind are in :mod:`exohil.estimator.architecture`, which needs no torch.
 
 - ENNet (early fusion, Varghese et al.): one LSTM over all S sensors per time step, its last
   hidden state → dense 512-256-128-64-32 (ReLU) → linear A outputs.
@@ -15,45 +16,13 @@ the checkpoint (:mod:`exohil.estimator.checkpoint`).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
-
 import torch
 from torch import nn
 
-MODEL_KINDS = ("ennet", "lnnet", "ann", "cnn")
-DENSE_STACK = (512, 256, 128, 64, 32)
+from exohil.estimator.architecture import CONV_KERNEL, MODEL_KINDS, ModelConfig
 
-
-@dataclass
-class ModelConfig:
-    """Architecture of one network; stored verbatim in checkpoints.
-
-    Attributes:
-        kind: one of MODEL_KINDS.
-        n_sensors / n_angles: input and output widths.
-        window: frames per window (n); dilation: frame step inside the window.
-        hidden: LSTM hidden size (ENNet; per sensor for LNNet); CNN channels.
-        dense: widths of the ReLU layers after the temporal encoder.
-    """
-
-    kind: str
-    n_sensors: int
-    n_angles: int
-    window: int = 10
-    dilation: int = 1
-    hidden: int = 64
-    dense: tuple[int, ...] = field(default=DENSE_STACK)
-
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["dense"] = list(self.dense)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> ModelConfig:
-        d = dict(d)
-        d["dense"] = tuple(d.get("dense", DENSE_STACK))
-        return cls(**d)
+__all__ = ["ANN", "CNN", "ENNet", "GroupedLSTM", "LNNet", "MODEL_KINDS", "ModelConfig",
+           "build_model", "dense_head"]
 
 
 def dense_head(n_in: int, widths: tuple[int, ...], n_out: int) -> nn.Sequential:
@@ -140,8 +109,8 @@ class CNN(nn.Module):
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__()
         self.conv = nn.Sequential(
-            nn.Conv1d(cfg.n_sensors, cfg.hidden, 3, padding=1), nn.ReLU(),
-            nn.Conv1d(cfg.hidden, cfg.hidden, 3, padding=1), nn.ReLU(),
+            nn.Conv1d(cfg.n_sensors, cfg.hidden, CONV_KERNEL, padding=CONV_KERNEL // 2), nn.ReLU(),
+            nn.Conv1d(cfg.hidden, cfg.hidden, CONV_KERNEL, padding=CONV_KERNEL // 2), nn.ReLU(),
         )
         self.head = dense_head(cfg.hidden * cfg.window, cfg.dense, cfg.n_angles)
 

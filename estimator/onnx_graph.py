@@ -11,11 +11,13 @@ Graph input ``window``, per kind (batch of one, frames oldest first):
 - ``ann``: (1, S), the newest frame only.
 Graph output ``angles``: (1, A) float32, degrees.
 
+The weights come as layers from :mod:`exohil.estimator.weights` (shared with the NumPy engine).
 Gate order: PyTorch stores LSTM gates [i, f, g, o]; ONNX wants [i, o, f, c] (c = the cell
-candidate g) and two biases Wb, Rb. LNNet's S independent one-input LSTMs become one ONNX LSTM
-of hidden size S·H with block-diagonal weights: unit s·H + k belongs to sensor s only, and the
-zero blocks add exact zeros, so the maths is unchanged and the final hidden state is already
-sensor-major, as ``GroupedLSTM`` returns it.
+candidate g) and two biases Wb, Rb (here Wb = b_ih + b_hh, Rb = 0). LNNet's S independent
+one-input LSTMs become one ONNX LSTM of hidden size S·H with block-diagonal weights
+(:meth:`~exohil.estimator.weights.LSTMWeights.merged`): unit s·H + k belongs to sensor s only,
+and the zero blocks add exact zeros, so the maths is unchanged and the final hidden state is
+already sensor-major, as ``GroupedLSTM`` returns it.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from exohil.estimator.trained import TrainedEstimator
+from exohil.estimator.weights import conv_layers, dense_layers, lstm_weights
 
 #: ONNX opset the graphs are written for (LSTM, Gemm, Relu, Conv, Flatten, Squeeze).
 OPSET = 17
@@ -72,7 +75,7 @@ def build_onnx_model(est: TrainedEstimator):
     import onnx
     from onnx import TensorProto, helper
 
-    if est.kind == "classical" or est.network is None:
+    if est.kind == "classical" or not est.has_network:
         raise ValueError("the classical model has no ONNX graph; use backend='numpy'")
     shape = input_shape(est)
     state = est.weights()
@@ -83,7 +86,7 @@ def build_onnx_model(est: TrainedEstimator):
         features = _conv_nodes(state, g)
     else:
         features = INPUT_NAME
-    _head_nodes(state, est.norm.y_mean, est.norm.y_std, features, g)
+    _head_nodes(est, state, features, g)
     graph = helper.make_graph(
         g.nodes, f"exohil_{est.kind}",
         [helper.make_tensor_value_info(INPUT_NAME, TensorProto.FLOAT, list(shape))],
@@ -96,42 +99,13 @@ def build_onnx_model(est: TrainedEstimator):
     return model
 
 
-def _to_onnx_gates(w: np.ndarray, hidden: int) -> np.ndarray:
-    """Reorder the leading 4H axis from PyTorch [i, f, g, o] to ONNX [i, o, f, c]."""
-    i, f, g, o = (w[k * hidden : (k + 1) * hidden] for k in range(4))
-    return np.concatenate([i, o, f, g])
-
-
-def _lstm_weights(est: TrainedEstimator, state: dict) -> tuple[np.ndarray, ...]:
-    """(W (4U, S), R (4U, U), Wb (4U,), Rb (4U,)) in PyTorch gate order, U hidden units."""
-    if est.kind == "ennet":
-        return (state["lstm.weight_ih_l0"], state["lstm.weight_hh_l0"],
-                state["lstm.bias_ih_l0"], state["lstm.bias_hh_l0"])
-    # lnnet: sensor s owns units s·H … s·H + H − 1 of every gate
-    w_ih, w_hh, bias = state["lstm.weight_ih"], state["lstm.weight_hh"], state["lstm.bias"]
-    n_sensors, four_h = w_ih.shape
-    h = four_h // 4
-    units = n_sensors * h
-    w = np.zeros((4 * units, n_sensors))
-    r = np.zeros((4 * units, units))
-    b = np.zeros(4 * units)
-    for gate in range(4):
-        src = slice(gate * h, (gate + 1) * h)
-        for s in range(n_sensors):
-            rows = slice(gate * units + s * h, gate * units + (s + 1) * h)
-            w[rows, s] = w_ih[s, src]
-            r[rows, s * h : (s + 1) * h] = w_hh[s, src]
-            b[rows] = bias[s, src]
-    return w, r, b, np.zeros_like(b)
-
-
 def _lstm_nodes(est: TrainedEstimator, state: dict, g: _Graph) -> str:
-    w, r, wb, rb = _lstm_weights(est, state)
-    units = r.shape[1]
-    w, r = _to_onnx_gates(w, units), _to_onnx_gates(r, units)
-    b = np.concatenate([_to_onnx_gates(wb, units), _to_onnx_gates(rb, units)])
-    inputs = [INPUT_NAME, g.const("lstm_W", w[None]), g.const("lstm_R", r[None]),
-              g.const("lstm_B", b[None])]
+    # ONNX wants [i, o, f, c] with c = PyTorch's g; W (4U, S), R (4U, U) and the two biases
+    w, r, b = lstm_weights(est.kind, state).gates("iofg").merged()
+    bias = np.concatenate([b, np.zeros_like(b)])  # Wb = b_ih + b_hh, Rb = 0
+    units = r.shape[0]
+    inputs = [INPUT_NAME, g.const("lstm_W", w.T[None]), g.const("lstm_R", r.T[None]),
+              g.const("lstm_B", bias[None])]
     # outputs: Y (all steps) unused; Y_h (1 direction, 1 batch, U) → (1, U)
     g.node("LSTM", inputs, ["", "lstm_h"], hidden_size=units)
     return g.node("Squeeze", ["lstm_h", g.const("axis0", np.array([0]), np.int64)],
@@ -140,21 +114,17 @@ def _lstm_nodes(est: TrainedEstimator, state: dict, g: _Graph) -> str:
 
 def _conv_nodes(state: dict, g: _Graph) -> str:
     a = INPUT_NAME
-    for k, idx in enumerate((0, 2)):  # nn.Sequential: conv, relu, conv, relu
-        w, b = state[f"conv.{idx}.weight"], state[f"conv.{idx}.bias"]
+    for k, (w, b) in enumerate(conv_layers(state)):  # 'same' padding
         a = g.node("Conv", [a, g.const(f"conv{k}_W", w), g.const(f"conv{k}_B", b)],
-                   [f"conv{k}"], kernel_shape=[w.shape[2]], pads=[1, 1])
+                   [f"conv{k}"], kernel_shape=[w.shape[2]], pads=[w.shape[2] // 2] * 2)
         a = g.node("Relu", [a], [f"conv{k}_relu"])
     return g.node("Flatten", [a], ["features"], axis=1)  # channel-major, as torch flatten(1)
 
 
-def _head_nodes(state: dict, y_mean: np.ndarray, y_std: np.ndarray, a: str, g: _Graph) -> None:
-    idx = sorted({int(k.split(".")[1]) for k in state if k.startswith("head.")})
-    last = len(idx) - 1
-    for k, i in enumerate(idx):
-        w, b = state[f"head.{i}.weight"], state[f"head.{i}.bias"]
-        if k == last:  # fold angle = ŷ·y_std + y_mean
-            w, b = w * y_std[:, None], b * y_std + y_mean
+def _head_nodes(est: TrainedEstimator, state: dict, a: str, g: _Graph) -> None:
+    layers = dense_layers(state, est.norm)  # the last gives degrees
+    last = len(layers) - 1
+    for k, (w, b) in enumerate(layers):
         out = OUTPUT_NAME if k == last else f"dense{k}"
         a = g.node("Gemm", [a, g.const(f"dense{k}_W", w), g.const(f"dense{k}_B", b)], [out],
                    transB=1)

@@ -10,13 +10,13 @@ Pipeline for one block of sensor frames (recording units, e.g. mm):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
+from exohil.estimator.architecture import ModelConfig
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import Block, TargetSpec
-from exohil.estimator.models import ModelConfig
 from exohil.estimator.windows import block_windows
 
 #: Frames per forward pass when predicting a long block.
@@ -56,8 +56,25 @@ class Normalisation:
         angles += self.y_mean
         return angles
 
+    def fold_x(self, w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The input normalisation folded into linear maps that read the normalised sensors:
+        (w', b') with x·w' + b' = z·w + b for z = (x − x_mean) / x_std.
 
-@dataclass
+        ``w`` (G, I, K) and ``b`` (G, K): G maps that each read I of the S = G·I sensors, in
+        sensor order (G = 1: one map over every sensor; I = 1: one map per sensor).
+        """
+        groups, width = w.shape[:2]
+        std = self.x_std.reshape(groups, width, 1)
+        shift = (self.x_mean / self.x_std).reshape(groups, 1, width)
+        return w / std, b - (shift @ w)[:, 0]
+
+    def fold_y(self, w: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The output de-normalisation folded into the layer that gives the normalised angles:
+        (w', b') with w'·a + b' = (w·a + b) · y_std + y_mean, for ``w`` (A, n) and ``b`` (A,)
+        (torch ``Linear`` layout)."""
+        return w * self.y_std[:, None], b * self.y_std + self.y_mean
+
+
 class TrainedEstimator:
     """Everything a checkpoint holds.
 
@@ -68,27 +85,83 @@ class TrainedEstimator:
         norm: normalisation statistics.
         offset_frames: 0 = raw sensors; k > 0 = subtract the causal mean of the first k frames.
         sensor_rate_hz: nominal rate of the training data (frames per second).
-        network: the torch module (neural kinds) — None for classical.
+        network: the torch module (neural kinds) — None for classical; see below.
         classical: the fitted classical model — None for neural kinds.
         info: training provenance and metrics (JSON-serialisable).
+
+    A network's weights are held one of two ways: as NumPy arrays by torch ``state_dict`` name
+    (``state``, what :func:`~exohil.estimator.checkpoint.load_checkpoint` gives: no torch
+    needed to read, check or run them on the NumPy and ONNX Runtime engines), or as the torch
+    module (``network``, what training gives). Reading ``network`` when only the arrays are
+    held builds the module from them then (importing torch); from then on the module is the
+    weights, so what is done to it (training on, perturbing) is what :meth:`weights` returns.
     """
 
-    config: ModelConfig
-    sensor_names: tuple[str, ...]
-    target: TargetSpec
-    norm: Normalisation
-    offset_frames: int = 0
-    sensor_rate_hz: float = 250.0
-    network: object | None = None
-    classical: ClassicalModel | None = None
-    info: dict = field(default_factory=dict)
+    def __init__(
+        self,
+        config: ModelConfig,
+        sensor_names: tuple[str, ...],
+        target: TargetSpec,
+        norm: Normalisation,
+        offset_frames: int = 0,
+        sensor_rate_hz: float = 250.0,
+        network: object | None = None,
+        classical: ClassicalModel | None = None,
+        info: dict | None = None,
+        *,
+        state: dict[str, np.ndarray] | None = None,
+    ) -> None:
+        self.config = config
+        self.sensor_names = sensor_names
+        self.target = target
+        self.norm = norm
+        self.offset_frames = offset_frames
+        self.sensor_rate_hz = sensor_rate_hz
+        self.classical = classical
+        self.info: dict = {} if info is None else info
+        self._network = network
+        self._state = None if network is not None else state
+
+    def __repr__(self) -> str:
+        held = ("classical" if self.classical is not None else
+                "torch module" if self._network is not None else
+                "numpy weights" if self._state is not None else "no model")
+        return (f"TrainedEstimator({self.kind}, sensors={list(self.sensor_names)}, "
+                f"target={self.target}, {held})")
 
     @property
     def kind(self) -> str:
         return self.config.kind
 
+    @property
+    def network(self) -> object | None:
+        """The torch module, built from the NumPy weights at the first read (imports torch);
+        None for the classical model."""
+        if self._network is None and self._state is not None:
+            self._network = _torch_module(self.config, self._state)
+            self._state = None  # the module holds the weights from now on
+        return self._network
+
+    @network.setter
+    def network(self, module: object | None) -> None:
+        self._network = module
+        self._state = None
+
+    def set_weights(self, state: dict[str, np.ndarray]) -> None:
+        """Hold the network's weights as these arrays (by torch ``state_dict`` name, already
+        checked against the architecture), in place of any module."""
+        self._network = None
+        self._state = state
+
+    @property
+    def has_network(self) -> bool:
+        """True when a network's weights are held (as arrays or as the module), without
+        building the module."""
+        return self._network is not None or self._state is not None
+
     def predict_block(self, block: Block) -> np.ndarray:
-        """(N, A) angle estimates in degrees for every frame of one block."""
+        """(N, A) angle estimates in degrees for every frame of one block (the network runs in
+        torch)."""
         z = self.norm.x(block.x)
         if self.classical is not None:
             return self.norm.y_inverse(self.classical.predict(z))
@@ -109,12 +182,28 @@ class TrainedEstimator:
         return [self.predict_block(b) for b in blocks]
 
     def weights(self, dtype: type = np.float64) -> dict[str, np.ndarray]:
-        """The network's parameters as NumPy arrays, by torch ``state_dict`` name (neural kinds
-        only; raises ValueError for the classical model)."""
-        if self.network is None:
+        """The network's parameters as NumPy arrays (new copies), by torch ``state_dict`` name
+        (neural kinds only; raises ValueError for the classical model). Needs torch only when
+        the module is what holds them."""
+        if self._network is not None:
+            state = self._network.state_dict()  # type: ignore[attr-defined]
+            return {name: t.detach().cpu().numpy().astype(dtype) for name, t in state.items()}
+        if self._state is None:
             raise ValueError(f"{self.kind} has no network weights")
-        state = self.network.state_dict()  # type: ignore[attr-defined]
-        return {name: t.detach().cpu().numpy().astype(dtype) for name, t in state.items()}
+        return {name: array.astype(dtype) for name, array in self._state.items()}
+
+
+def _torch_module(config: ModelConfig, state: dict[str, np.ndarray]) -> object:
+    """The torch module of ``config`` holding ``state`` (checked against the architecture
+    when it was loaded), in eval mode."""
+    import torch
+
+    from exohil.estimator.models import build_model
+
+    net = build_model(config)
+    net.load_state_dict({k: torch.from_numpy(np.array(v, dtype=np.float32))
+                         for k, v in state.items()}, strict=True)
+    return net.eval()
 
 
 def _safe_std(a: np.ndarray) -> np.ndarray:

@@ -1,5 +1,9 @@
 """Checkpoint round trip for every model kind, and one clear CheckpointError for bad files."""
 
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from estimator_synth import shoulder_recording
@@ -147,6 +151,10 @@ def _meta(text: str):
         .replace('"n_sensors": 4', '"n_sensors": 5').replace(
             '"sensor_names": [', '"sensor_names": ["E", ')))(a), "scales must be > 0"),
     (lambda a: _set("meta", _meta("[" * 100_000 + "]" * 100_000))(a), "no readable metadata"),
+    (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
+        '"kind": "ann"', '"kind": "rnn"')))(a), "unknown model kind 'rnn'"),
+    (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
+        '"hidden": 8', '"hidden": 0')))(a), "hidden = 0 is not a positive"),
 ])
 def test_damaged_checkpoints_are_refused_not_evaluated(tmp_path, change, problem):
     path = _damaged(tmp_path, change)
@@ -156,3 +164,61 @@ def test_damaged_checkpoints_are_refused_not_evaluated(tmp_path, change, problem
 
 def _first_weight(arrays) -> str:
     return next(k for k in sorted(arrays) if k.startswith("net/") and k.endswith("weight"))
+
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Load the fixture checkpoints and stream frames through the default and numpy engines in a
+#: fresh interpreter; print the modules of torch that got imported (none, it is hoped).
+_TORCH_FREE = """
+import sys
+import numpy as np
+from exohil.estimator.checkpoint import load_checkpoint
+from exohil.estimator.inference import StreamingEstimator, onnxruntime_available
+
+frames = np.random.default_rng(0).normal(550.0, 30.0, size=(40, 4))
+for name in ("ennet", "ann"):
+    est = load_checkpoint(f"fixtures/models/{name}.npz")
+    for backend in (None, "numpy"):
+        engine = StreamingEstimator(est, backend)
+        out = np.array([engine.push(v).copy() for v in frames])
+        assert out.shape == (40, 2) and np.isfinite(out).all(), (name, backend)
+        print(name, engine.backend)
+print("ort", onnxruntime_available())
+print("torch:", sorted(m for m in sys.modules if m == "torch" or m.startswith("torch.")))
+"""
+
+
+def test_checkpoints_load_and_stream_without_torch():
+    done = subprocess.run([sys.executable, "-c", _TORCH_FREE], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[-1] == "torch: []", done.stdout
+    if lines[-2] == "ort True":  # the default engine then is ONNX Runtime, also torch-free
+        assert "ennet onnxruntime" in lines and "ann onnxruntime" in lines
+
+
+def test_loaded_weights_become_the_module_when_torch_is_asked_for(tmp_path):
+    import torch
+
+    est = load_checkpoint(ROOT / "fixtures" / "models" / "ann.npz")
+    assert est.has_network and "has no network" not in repr(est)
+    arrays = est.weights(np.float32)
+    net = est.network  # built now, from the arrays
+    assert isinstance(net, torch.nn.Module) and not net.training
+    for name, tensor in net.state_dict().items():
+        np.testing.assert_array_equal(tensor.numpy(), arrays[name])
+    with torch.no_grad():
+        net.state_dict()["head.0.bias"].add_(1.0)  # the module holds the weights from now on
+    np.testing.assert_array_equal(est.weights(np.float32)["head.0.bias"],
+                                  arrays["head.0.bias"] + 1.0)
+    save_checkpoint(tmp_path / "changed.npz", est)
+    back = load_checkpoint(tmp_path / "changed.npz")
+    np.testing.assert_array_equal(back.weights(np.float32)["head.0.bias"],
+                                  arrays["head.0.bias"] + 1.0)
+
+
+def test_weights_are_copies():
+    est = load_checkpoint(ROOT / "fixtures" / "models" / "ann.npz")
+    est.weights()["head.0.bias"][:] = 0.0
+    assert est.weights()["head.0.bias"].any()
