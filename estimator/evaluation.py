@@ -83,6 +83,64 @@ def arm_direction_error_deg(theta_est, phi_est, theta_true, phi_true) -> np.ndar
     return np.rad2deg(np.arccos(cos))
 
 
+class AccuracyTally:
+    """Streaming form of :func:`accuracy_measurements`: sums of squared errors and counts,
+    added block by block (:meth:`add`), so a run of any length is scored in fixed memory.
+    One :meth:`add` of all frames gives exactly :func:`accuracy_measurements`'s values; more
+    blocks give the same up to the rounding of their sums."""
+
+    def __init__(self, angles: Sequence[str]) -> None:
+        self.angles = tuple(angles)
+        self.shoulder = "elv_angle" in self.angles and "shoulder_elv" in self.angles
+        self.scored = 0  #: frames with finite truth and estimate
+        self.kept = 0  #: of those, the ones each angle is scored on (elevation >= 20 deg)
+        self.squares = np.zeros(len(self.angles))  #: Σ error² per angle over ``kept``, deg²
+        self.direction_squares = 0.0  #: Σ arm-direction error² over ``scored``, deg²
+
+    def add(self, estimates: np.ndarray, truth: np.ndarray) -> None:
+        """Score more frames: (N, A) estimates and truth, degrees, columns in ``angles``
+        order; frames whose truth or estimate is not finite are not scored."""
+        ok = np.all(np.isfinite(truth), axis=1) & np.all(np.isfinite(estimates), axis=1)
+        est, true = estimates[ok], truth[ok]
+        self.scored += int(ok.sum())
+        keep = np.ones(true.shape[0], dtype=bool)
+        if self.shoulder:
+            keep = true[:, self.angles.index("shoulder_elv")] >= OBSERVABLE_ELEVATION_DEG
+        self.kept += int(keep.sum())
+        for j in range(len(self.angles)):
+            self.squares[j] += float(np.sum((est[keep, j] - true[keep, j]) ** 2))
+        if self.shoulder and true.shape[0]:
+            th, ph = self.angles.index("elv_angle"), self.angles.index("shoulder_elv")
+            err = arm_direction_error_deg(est[:, th], est[:, ph], true[:, th], true[:, ph])
+            self.direction_squares += float(np.sum(err**2))
+
+    def measurements(self, limits: Mapping[str, Limit] | None = None) -> list[Measurement]:
+        """The measurements of :func:`accuracy_measurements` over every frame added."""
+        limits = limits or {}
+        out = [Measurement.judge("accuracy.frames_scored", self.scored, "count",
+                                 limits.get("accuracy.frames_scored"))]
+        note = "all frames"
+        if self.shoulder:
+            note = (f"{self.kept} frames where elevation >= {OBSERVABLE_ELEVATION_DEG:g} deg "
+                    "(the plane of elevation is undefined with the arm hanging)")
+        for j, name in enumerate(self.angles):
+            key = f"accuracy.rmse.{name}"
+            if not self.kept:
+                out.append(Measurement.skipped(key, "deg", "no frame to score", limits.get(key)))
+                continue
+            rmse = float(np.sqrt(self.squares[j] / self.kept))
+            out.append(Measurement.judge(key, rmse, "deg", limits.get(key), note))
+        if self.shoulder:
+            key = "accuracy.direction_rmse"
+            if not self.scored:
+                out.append(Measurement.skipped(key, "deg", "no frame to score", limits.get(key)))
+            else:
+                out.append(Measurement.judge(
+                    key, float(np.sqrt(self.direction_squares / self.scored)), "deg",
+                    limits.get(key), f"{self.scored} frames, every pose"))
+        return out
+
+
 def accuracy_measurements(estimates: np.ndarray, truth: np.ndarray, angles: Sequence[str],
                           limits: Mapping[str, Limit] | None = None) -> list[Measurement]:
     """exohil's one accuracy definition, as measurements (degrees).
@@ -92,39 +150,12 @@ def accuracy_measurements(estimates: np.ndarray, truth: np.ndarray, angles: Sequ
     :data:`OBSERVABLE_ELEVATION_DEG`, and ``accuracy.direction_rmse``, the RMSE of the angle
     between estimated and true humerus axis over all frames. For other joints: the RMSE per
     angle over all frames. Frames whose truth is not finite are not scored. ``limits`` maps a
-    measurement name to its limit.
+    measurement name to its limit. A stream of frames is scored block by block with
+    :class:`AccuracyTally`, which this is one block of.
 
     Args:
         estimates / truth: (N, A) degrees, columns in ``angles`` order.
     """
-    limits = limits or {}
-    ok = np.all(np.isfinite(truth), axis=1) & np.all(np.isfinite(estimates), axis=1)
-    est, true = estimates[ok], truth[ok]
-    out = [Measurement.judge("accuracy.frames_scored", int(ok.sum()), "count",
-                             limits.get("accuracy.frames_scored"))]
-    shoulder = "elv_angle" in angles and "shoulder_elv" in angles
-    keep = np.ones(true.shape[0], dtype=bool)
-    note = "all frames"
-    if shoulder:
-        phi = list(angles).index("shoulder_elv")
-        keep = true[:, phi] >= OBSERVABLE_ELEVATION_DEG
-        note = (f"{int(keep.sum())} frames where elevation >= {OBSERVABLE_ELEVATION_DEG:g} deg "
-                "(the plane of elevation is undefined with the arm hanging)")
-    for j, name in enumerate(angles):
-        key = f"accuracy.rmse.{name}"
-        if not keep.any():
-            out.append(Measurement.skipped(key, "deg", "no frame to score", limits.get(key)))
-            continue
-        rmse = float(np.sqrt(np.mean((est[keep, j] - true[keep, j]) ** 2)))
-        out.append(Measurement.judge(key, rmse, "deg", limits.get(key), note))
-    if shoulder:
-        key = "accuracy.direction_rmse"
-        th, ph = list(angles).index("elv_angle"), list(angles).index("shoulder_elv")
-        if true.shape[0] == 0:
-            out.append(Measurement.skipped(key, "deg", "no frame to score", limits.get(key)))
-        else:
-            err = arm_direction_error_deg(est[:, th], est[:, ph], true[:, th], true[:, ph])
-            out.append(Measurement.judge(key, float(np.sqrt(np.mean(err**2))), "deg",
-                                         limits.get(key),
-                                         f"{true.shape[0]} frames, every pose"))
-    return out
+    tally = AccuracyTally(angles)
+    tally.add(estimates, truth)
+    return tally.measurements(limits)

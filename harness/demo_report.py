@@ -4,7 +4,8 @@
 * ``summary.md``: every measurement as a table, and the list of files;
 * ``angles.png``: estimated and true angles (deg) over device time (s), shaded where the true
   elevation is below 20° (θ undefined with the arm hanging), as in the paper's figure;
-* ``latency.png``: per-stage latency histograms (ms, log scale) on one monotonic clock;
+* ``latency.png``: per-stage latency histograms (ms, log scale) on one monotonic clock, of
+  every frame (the run's own fixed-size histograms);
 * ``hysteresis.png``: the sensor most correlated with the true elevation against it (mm vs
   deg), coloured by the elevation's direction of motion;
 * ``arm.gif``, ``arm_0000k.png``: the simulated NAO (MuJoCo) beside the true human upper arm,
@@ -13,6 +14,12 @@
   (``run_recording``); its metadata entry ``latency_ms`` holds the summary's p50/p99/max per
   stage, ``robot_step`` included (the robot keeps only a histogram of its step times, so
   they are not per frame).
+
+A run keeps per-frame rows only for its first and last frames (about a minute each, see
+``pipeline.PipelineRun``), so memory stays bounded however long it runs: ``angles.png``,
+``hysteresis.png`` and ``run.mcap`` show those frames (a left and a right column in
+``angles.png`` when there is a gap between them; a note says so), while ``summary.json`` and
+``latency.png`` cover every frame. ``exohil demo --record`` writes every frame as it goes.
 
 Every file is written under a temporary name and renamed when complete. Matplotlib draws
 with the Agg backend (files only).
@@ -27,9 +34,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from exohil.formats.atomic import write_text, write_with
+from exohil.harness.pipeline import PipelineRun
 from exohil.harness.recording_plots import motion_direction
+from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.run_recording import write_run_recording
-from exohil.harness.session import SessionResult, latency_samples
+from exohil.harness.session import SessionResult, latency_histograms
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -60,60 +69,81 @@ def _figure(rows: int, cols: int = 1, height: float = 2.4) -> tuple[Figure, np.n
     return figure, np.atleast_1d(figure.subplots(rows, cols, squeeze=False).ravel())
 
 
+def segments(run: PipelineRun) -> list[slice]:
+    """The kept rows as runs of consecutive frames: one slice, or two (the run's first frames
+    and its last) when frames between them were not kept."""
+    if run.head >= run.retained:
+        return [slice(0, run.retained)]
+    return [slice(0, run.head), slice(run.head, run.retained)]
+
+
 def plot_angles(result: SessionResult) -> Figure:
-    """Estimated (solid) and true (dashed) angles over device time, one panel per angle."""
+    """Estimated (solid) and true (dashed) angles over device time, one panel per angle (one
+    column per segment of kept frames, see :func:`segments`)."""
     run, est = result.run, result.model.estimator
     angles = est.target.angles
-    figure, axes = _figure(len(angles))
-    t = run.device_time_s
-    low = None
-    if result.truth is not None and "shoulder_elv" in angles:
-        low = result.truth[:, angles.index("shoulder_elv")] < LOW_ELEVATION_DEG
-    for k, (ax, name) in enumerate(zip(axes, angles, strict=True)):
-        if low is not None:
-            ax.fill_between(t, 0, 1, where=low, transform=ax.get_xaxis_transform(),
-                            color="0.88", lw=0, label=f"elevation < {LOW_ELEVATION_DEG:g}°")
-        if result.truth is not None:
-            ax.plot(t, result.truth[:, k], "--", color="black", lw=1.2, label="true (mocap)")
-        ax.plot(t, run.estimates[:, k], "-", color="tab:red", lw=1.0, label=f"{est.kind} estimate")
-        ax.set_ylabel(f"{name} (deg)")
-        ax.grid(True, alpha=0.3)
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[-1].set_xlabel("device time (s)")
-    axes[0].set_title(f"{est.target.joint}: estimated vs true angles")
+    parts = segments(run)
+    figure, axes = _figure(len(angles), len(parts))
+    for c, part in enumerate(parts):
+        t = run.device_time_s[part]
+        truth = None if result.truth is None else result.truth[part]
+        low = None
+        if truth is not None and "shoulder_elv" in angles:
+            low = truth[:, angles.index("shoulder_elv")] < LOW_ELEVATION_DEG
+        for k, name in enumerate(angles):
+            ax = axes[k * len(parts) + c]
+            if low is not None:
+                ax.fill_between(t, 0, 1, where=low, transform=ax.get_xaxis_transform(),
+                                color="0.88", lw=0, label=f"elevation < {LOW_ELEVATION_DEG:g}°")
+            if truth is not None:
+                ax.plot(t, truth[:, k], "--", color="black", lw=1.2, label="true (mocap)")
+            ax.plot(t, run.estimates[part, k], "-", color="tab:red", lw=1.0,
+                    label=f"{est.kind} estimate")
+            if c == 0:
+                ax.set_ylabel(f"{name} (deg)")
+            ax.grid(True, alpha=0.3)
+        axes[(len(angles) - 1) * len(parts) + c].set_xlabel("device time (s)")
+    axes[len(parts) - 1].legend(loc="upper right", fontsize=8)
+    title = f"{est.target.joint}: estimated vs true angles"
+    if len(parts) > 1:
+        title += (f" (first {run.head} and last {run.retained - run.head} of {run.frames} "
+                  "frames)")
+    figure.suptitle(title)
     return figure
 
 
+def _shown_from(hist: LogHistogram) -> float:
+    """The smallest value ``hist`` shows: its first non-empty bin's lower edge (upper edge
+    when that is 0)."""
+    lower, upper, _ = hist.bins()
+    return float(lower[0] if lower[0] > 0 else upper[0])
+
+
 def plot_latency(result: SessionResult) -> Figure:
-    """One histogram per stage interval (ms, log x, one shared range), with p50/p99/max in
-    the title; the robot's command → stepped delay from its own histogram when it ran."""
+    """One histogram per stage interval (ms, log x, one shared range) of every frame, with
+    p50/p99/max in the title; the robot's command → stepped delay from its own histogram when
+    it ran. The histograms are the run's own (200 bins per decade), drawn on 60 bins."""
     from matplotlib.ticker import NullFormatter
 
-    stages = {name.removeprefix("latency."): ms for name, (ms, _) in
-              latency_samples(result.run).items() if ms.size}
+    stages = {name.removeprefix("latency."): hist for name, (hist, _) in
+              latency_histograms(result.run).items() if hist.count}
     robot = next((r.command_delay_ms for r in result.robots
                   if hasattr(r, "command_delay_ms") and r.command_delay_ms.count), None)
-    panels = len(stages) + (robot is not None)
+    if robot is not None:
+        stages["robot_step (to MuJoCo stepped)"] = robot
+    panels = len(stages)
     figure, axes = _figure((panels + 1) // 2, 2, height=2.2)
-    every = np.concatenate(list(stages.values()))
-    low = max(1e-3, float(np.min(every[every > 0]))) if np.any(every > 0) else 1e-3
-    high = float(np.max(every)) if every.size else 1.0
-    if robot is not None:
-        high = max(high, robot.max)
+    low = max(1e-3, min((_shown_from(h) for h in stages.values()), default=1e-3))
+    high = max((h.max for h in stages.values()), default=1.0)
     bins = np.logspace(np.log10(low) - 0.05, np.log10(max(high, low * 10)) + 0.05, 60)
-    for ax, (name, ms) in zip(axes, stages.items(), strict=False):
-        ms = np.clip(ms[np.isfinite(ms)], low, None)
-        ax.hist(ms, bins=bins, color="tab:blue")
-        p50, p99 = np.percentile(ms, [50, 99])
-        ax.set_title(f"{name}: p50 {p50:.3g}  p99 {p99:.3g}  max {ms.max():.3g} ms", fontsize=8)
-    if robot is not None:
-        ax = axes[len(stages)]
-        lower, upper, counts = robot.bins()
-        centre = np.sqrt(np.maximum(lower, low) * upper)  # rebinned onto the shared bins
-        ax.hist(centre, bins=bins, weights=counts, color="tab:green")
-        s = robot.summary(3)
-        ax.set_title(f"robot_step (to MuJoCo stepped): p50 {s['p50']:.3g}  "
-                     f"p99 {s['p99']:.3g}  max {s['max']:.3g} ms", fontsize=8)
+    for ax, (name, hist) in zip(axes, stages.items(), strict=False):
+        lower, upper, counts = hist.bins()
+        centre = np.sqrt(np.maximum(lower, low) * np.maximum(upper, low))  # onto the 60 bins
+        ax.hist(centre, bins=bins, weights=counts,
+                color="tab:green" if hist is robot else "tab:blue")
+        s = hist.summary(3)
+        ax.set_title(f"{name}: p50 {s['p50']:.3g}  p99 {s['p99']:.3g}  max {s['max']:.3g} ms",
+                     fontsize=8)
     for ax in axes[:panels]:
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -139,13 +169,15 @@ def plot_session_hysteresis(result: SessionResult) -> Figure | None:
     ok = np.isfinite(phi)
     if ok.sum() < 10:
         return None
-    t, phi, values = run.device_time_s[ok], phi[ok], run.values[ok]
+    # the direction of motion within each segment of consecutive frames
+    direction = np.concatenate([motion_direction(run.device_time_s[part][ok[part]],
+                                                 phi[part][ok[part]]) for part in segments(run)])
+    phi, values = phi[ok], run.values[ok]
     if np.std(phi) == 0:  # the arm never moved: no loop to draw
         return None
     corr = [abs(np.corrcoef(values[:, j], phi)[0, 1]) if np.std(values[:, j]) > 0 else 0.0
             for j in range(values.shape[1])]
     j = int(np.argmax(corr))
-    direction = motion_direction(t, phi)
     figure, (ax,) = _figure(1, height=5.0)
     for value, colour, label in ((0, "#b0b0b0", "still"), (1, "#d62728", "rising"),
                                  (-1, "#1f77b4", "falling")):
@@ -188,6 +220,11 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     est = result.model.estimator
     files: Files = []
     notes: list[str] = []
+    run = result.run
+    if not run.complete:
+        notes.append(f"angles.png, hysteresis.png and run.mcap hold the first {run.head} and "
+                     f"the last {run.retained - run.head} of the {run.frames} frames (bounded "
+                     "memory); the summary and latency.png cover every frame")
     write_run_recording(
         out_dir / "run.mcap", result.run, est.sensor_names, est.target.joint, est.target.angles,
         {"generator": "exohil", "source": s["target"] or "", "model_sha256": s["model_sha256"],

@@ -1,7 +1,9 @@
-"""Bounded-memory streaming statistics for long robot runs: a log-spaced histogram.
+"""Bounded-memory streaming statistics for long runs: a log-spaced histogram.
 
-A run may last hours at 500 physics steps per second, so per-sample lists are out. A
-:class:`LogHistogram` keeps a fixed number of counters; its quantiles are exact to one bin
+A run may last hours (500 robot physics steps per second, 250 pipeline frames per second), so
+per-sample lists are out: the robots' step times and tracking errors and the pipeline's
+per-stage latencies are kept as histograms. A :class:`LogHistogram` keeps a fixed number of
+counters; its quantiles are exact to one bin
 (relative width ``10 ** (1 / bins_per_decade)``; 1.2 % at the default 200 per decade), and
 its count, mean and maximum are exact. Units are whatever the caller adds (degrees, ms).
 """
@@ -46,6 +48,51 @@ class LogHistogram:
         self.total += value
         if value > self.max:
             self.max = value
+
+    def add_many(self, values: np.ndarray) -> None:
+        """Add every value of ``values`` (any shape), binned as :meth:`add` bins them (a value
+        within rounding of a bin edge may land in the neighbouring bin; the sum, hence the
+        mean, may differ in the last bits). Negative or non-finite values raise ValueError and
+        add nothing."""
+        v = np.asarray(values, dtype=np.float64).ravel()
+        if v.size == 0:
+            return
+        if not np.all(np.isfinite(v)) or np.any(v < 0.0):
+            raise ValueError("histogram samples must be finite and >= 0")
+        index = np.zeros(v.size, dtype=np.int64)
+        positive = v > 0.0
+        # truncation toward zero, as int() in add()
+        index[positive] = ((np.log10(v[positive]) - self._log_low) * self._scale).astype(
+            np.int64) + 1
+        np.clip(index, 0, len(self._counts) - 1, out=index)
+        self._counts += np.bincount(index, minlength=len(self._counts))
+        self.count += int(v.size)
+        self.total += float(v.sum())
+        self.max = max(self.max, float(v.max()))
+
+    def merge(self, other: LogHistogram) -> None:
+        """Add ``other``'s counts (a histogram with the same range and bins; ValueError if
+        not)."""
+        if (other._log_low, other._scale, len(other._counts)) != (
+                self._log_low, self._scale, len(self._counts)):
+            raise ValueError("can only merge histograms with the same range and bins")
+        self._counts += other._counts
+        self.count += other.count
+        self.total += other.total
+        self.max = max(self.max, other.max)
+
+    def copy(self) -> LogHistogram:
+        """An independent histogram with the same counts."""
+        out = LogHistogram.__new__(LogHistogram)
+        out._log_low, out._scale = self._log_low, self._scale
+        out._counts = self._counts.copy()
+        out.count, out.total, out.max = self.count, self.total, self.max
+        return out
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its counters (fixed at construction)."""
+        return int(self._counts.nbytes)
 
     def quantile(self, q: float) -> float | None:
         """Upper edge of the bin holding the ``q``-quantile (0 ≤ q ≤ 1), at most the maximum;

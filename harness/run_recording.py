@@ -36,11 +36,12 @@ def _object_schema(title: str, numbers: Sequence[str],
 def write_run_recording(path: Path, run: PipelineRun, sensor_names: Sequence[str],
                         joint: str, angle_names: Sequence[str],
                         metadata: Mapping[str, str]) -> None:
-    """Write ``run`` to ``path`` (see module doc)."""
+    """Write ``run``'s kept rows to ``path`` (see module doc): every frame of a run that fits
+    the pipeline's window, else its first and last frames."""
     with replacing(path) as tmp:
         t = np.maximum(run.device_time_s, 0.0)
         with RecordingWriter(tmp, sensor_names, metadata=dict(metadata), name=path) as writer:
-            if run.frames:
+            if run.retained:
                 writer.add_sensor_frames(run.seq, t, run.values)
             estimates = writer.add_channel(f"/estimate/{joint}", f"exohil.Estimate.{joint}",
                                            _object_schema(f"{joint} estimate", angle_names))
@@ -51,7 +52,7 @@ def write_run_recording(path: Path, run: PipelineRun, sensor_names: Sequence[str
             timing = writer.add_channel("/timing/stages", "exohil.StageTimes", _object_schema(
                 "per-frame stage times, µs after host receive", ["seq", *stage_names]))
             receive = run.stamps[:, STAGES.index("host_receive")]
-            for i in range(run.frames):
+            for i in range(run.retained):
                 ti = float(t[i])
                 writer.add_message(estimates, ti, {"t": ti, **{
                     a: float(v) for a, v in zip(angle_names, run.estimates[i], strict=True)

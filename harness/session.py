@@ -13,6 +13,15 @@ define a figure differently:
 * :func:`teleop_measurements`: robot commands against those computed from the true angles;
 * :func:`robot_measurements`: what a simulated robot did: command → stepped delay
   (``latency.robot_step``), joint tracking and its upper-arm axis against the true humerus.
+
+Memory is bounded whatever the session's length: the pipeline keeps per-frame rows only for
+the first and last frames of the run (``PipelineRun``) and folds every frame, as the run goes,
+into fixed-size totals: its latency histograms, and the observers built here, which score the
+estimates against the reference (:class:`TruthTally`) and check the frames against what the
+emulator sent (:class:`LinkTally`). Only two things grow, and only with what the emulator
+injected or the reference holds: the sequence gaps kept for the link reconciliation, and the
+frames with ground truth whose robot commands are scored at the end (at most
+:data:`TELEOP_MAX_FRAMES`).
 """
 
 from __future__ import annotations
@@ -28,7 +37,7 @@ import numpy as np
 
 from exohil.emulators.faults import LOSING_KINDS
 from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
-from exohil.estimator.evaluation import accuracy_measurements, arm_direction_error_deg
+from exohil.estimator.evaluation import AccuracyTally, arm_direction_error_deg
 from exohil.estimator.inference import StreamingEstimator, default_backend
 from exohil.estimator.trained import TrainedEstimator
 from exohil.formats.alignment import angles_at
@@ -38,7 +47,8 @@ from exohil.formats.errors import InputError, RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import Recording
 from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, SerialDevice, open_device
-from exohil.harness.pipeline import STAGES, Pipeline, PipelineRun, Sink, Status
+from exohil.harness.pipeline import FrameRows, Pipeline, PipelineRun, RowsObserver, Sink, Status
+from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.robot_trace import RobotTrace, RobotTraceSink
 from exohil.harness.teleop import SHOULDER_ANGLES, SimulatedNao, TeleopSink
 from exohil.kinematics import NAO_JOINTS
@@ -53,6 +63,12 @@ LATENCY_INTERVALS = {
     "latency.queue_and_estimate": ("decoded", "estimated"),
     "latency.command": ("estimated", "commanded"),
 }
+
+
+#: Frames with ground truth whose robot commands are kept to be scored at the end of a session
+#: (``teleop.rmse.*``): 2**20, 70 min at 250 Hz, 40 MiB. Mapping a true pose to its command
+#: takes ~0.3 ms, too long for the pipeline's thread, so it is done after the run.
+TELEOP_MAX_FRAMES = 1 << 20
 
 
 class SessionError(InputError):
@@ -150,9 +166,102 @@ def _build_robot(name: str) -> Any:
     raise BenchError(f"unknown robot {name!r}; available: simulated, mujoco, udp:HOST:PORT")
 
 
+class TruthTally:
+    """Scores every frame against the reference as the run goes (a pipeline observer).
+
+    Accuracy is summed block by block (:class:`~exohil.estimator.evaluation.AccuracyTally`).
+    With teleoperation, the robot command and the true (θ, φ) of the frames with ground truth
+    are kept (at most :data:`TELEOP_MAX_FRAMES`, the first ones) and compared at the end with
+    the commands the same mapping gives for the true angles (:meth:`teleop_errors_deg`).
+    """
+
+    def __init__(self, reference: Recording, est: TrainedEstimator, teleop: bool) -> None:
+        self.reference, self.est = reference, est
+        self.accuracy = AccuracyTally(est.target.angles)
+        self.teleop = teleop
+        angles = est.target.angles
+        self._shoulder = [angles.index(a) for a in SHOULDER_ANGLES] if teleop else []
+        self._commands: list[np.ndarray] = []
+        self._truth: list[np.ndarray] = []
+        self.teleop_frames = 0  #: frames with ground truth and a command
+        self.teleop_kept = 0  #: of those, the ones kept to score (the first ones)
+        self._errors: np.ndarray | None = None
+
+    def __call__(self, rows: FrameRows) -> None:
+        truth = truth_at(self.reference, self.est, rows.device_time_s)
+        self.accuracy.add(rows.estimates, truth)
+        if not self.teleop:
+            return
+        ok = np.all(np.isfinite(truth), axis=1) & np.all(np.isfinite(rows.commands), axis=1)
+        count = int(ok.sum())
+        self.teleop_frames += count
+        take = np.flatnonzero(ok)[:max(0, TELEOP_MAX_FRAMES - self.teleop_kept)]
+        if take.size:
+            self._commands.append(rows.commands[take].copy())
+            self._truth.append(truth[take][:, self._shoulder])
+            self.teleop_kept += int(take.size)
+
+    def teleop_errors_deg(self) -> np.ndarray:
+        """(K, 3) robot command minus the command for the true angles, deg, of the kept frames
+        (computed once)."""
+        if self._errors is None:
+            commands = (np.concatenate(self._commands) if self._commands
+                        else np.empty((0, 3)))
+            truth = np.concatenate(self._truth) if self._truth else np.empty((0, 2))
+            mapping = TeleopSink([], SHOULDER_ANGLES)
+            reference = np.array([mapping.command_for(theta, phi).joints
+                                  for theta, phi in truth]).reshape(-1, 3)
+            self._errors = np.rad2deg(commands - reference)
+        return self._errors
+
+
+class LinkTally:
+    """The frames the host processed against those the emulator sent (a pipeline observer):
+    counts frames whose values differ from what it sent for that sequence number, and keeps
+    the gaps in the sequence numbers, to reconcile with its fault log at the end
+    (:meth:`lost_on_host`). A frame older than one already processed (never on a serial link)
+    fills no gap; it is counted in ``late``."""
+
+    def __init__(self, wire_values_mm: np.ndarray, seq0: int) -> None:
+        self.wire, self.seq0 = wire_values_mm, seq0
+        self.bad = 0  #: frames whose values differ from what the device sent
+        self.late = 0  #: frames whose seq is not above every one before
+        self._high: int | None = None  # the highest seq so far
+        self._gaps: list[np.ndarray] = []  # (G, 2): first and last missing seq
+
+    def __call__(self, rows: FrameRows) -> None:
+        seq = rows.seq
+        wire = self.wire[(seq - self.seq0) % self.wire.shape[0]]
+        self.bad += int(np.count_nonzero(np.any(np.abs(rows.values - wire) > 1e-9, axis=1)))
+        before = np.maximum.accumulate(np.concatenate((
+            [seq[0] - 1 if self._high is None else self._high], seq[:-1])))
+        self.late += int(np.count_nonzero(seq <= before))
+        gap = seq > before + 1
+        if gap.any():
+            self._gaps.append(np.column_stack((before[gap] + 1, seq[gap] - 1)))
+        self._high = int(max(before[-1], seq[-1]))
+
+    def release(self) -> None:
+        """Let go of the device's values (as long as the run) once the run is over."""
+        self.wire = np.empty((1, self.wire.shape[1]))
+
+    def lost_on_host(self, logged_lost: np.ndarray) -> int:
+        """Sequence numbers missing between the processed frames and not among
+        ``logged_lost`` (sorted unique seqs the device logged as lost)."""
+        if not self._gaps:
+            return 0
+        gaps = np.concatenate(self._gaps)
+        logged = (np.searchsorted(logged_lost, gaps[:, 1], side="right")
+                  - np.searchsorted(logged_lost, gaps[:, 0], side="left"))
+        return int(np.sum(gaps[:, 1] - gaps[:, 0] + 1 - logged))
+
+
 @dataclass
 class SessionResult:
-    """Everything one session produced (see :func:`run_session`)."""
+    """Everything one session produced (see :func:`run_session`).
+
+    ``truth`` holds the true angles at the device times of the run's kept rows (``run``'s
+    per-frame attributes); ``scoring`` and ``link_tally`` were folded over every frame."""
 
     config: BenchConfig
     model: LoadedModel
@@ -160,12 +269,15 @@ class SessionResult:
     truth: np.ndarray | None
     fault_log: list[Any] | None
     emulator_seq0: int | None
-    wire_values_mm: np.ndarray | None
     clipped_values: int
     robots: list[Any] = field(default_factory=list)
     robot_trace: RobotTrace | None = None
     #: why the device stopped before the run's end (a device that never came back), or None
     device_lost: str | None = None
+    #: accuracy and teleoperation against the reference (None without one)
+    scoring: TruthTally | None = None
+    #: the host's frames against the emulator's (None for another device)
+    link_tally: LinkTally | None = None
 
     @property
     def fault_counts(self) -> dict[str, int] | None:
@@ -177,7 +289,8 @@ class SessionResult:
 def run_session(config: BenchConfig, seconds: float | None, *,
                 progress: Progress | None = None,
                 stop: threading.Event | None = None, extra_sinks: Sequence[Sink] = (),
-                realtime: bool = False) -> SessionResult:
+                realtime: bool = False, keep_frames: tuple[int, int] | None = None
+                ) -> SessionResult:
     """Stream ``seconds`` of the bench's device through its model into its sinks.
 
     An emulator streams exactly ``seconds`` of device time and the run ends once every frame
@@ -185,7 +298,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     frames; a serial device is read for ``seconds`` of wall time. ``seconds=None`` runs until
     ``stop`` is set (or, for the emulator, to the end of its recording; for a serial device with
     a reference, until the device's clock passes the reference's end). Setting ``stop`` ends
-    any run early, and the result covers what was processed.
+    any run early, and the result covers what was processed. ``keep_frames`` = (first, last)
+    sets how many per-frame rows the run keeps (default: the pipeline's); every figure covers
+    every frame regardless.
     """
     if config.device is None:
         raise SessionError("no device: give a target (emulator:RECORDING or a serial URL)")
@@ -211,6 +326,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     robots: list[Any] = []
     sinks: list[Sink] = []
     tracer = None
+    scoring = None
+    link_tally = None
     try:  # every sink built is closed below; a bad robot name (BenchError) is a ValueError
         robots = build_robots(config.robots) if _is_shoulder(est) else []
         if robots:
@@ -226,9 +343,19 @@ def run_session(config: BenchConfig, seconds: float | None, *,
             sinks.append(RecorderSink(config.record, est.sensor_names, metadata={
                 "generator": "exohil", "source": config.device.describe(),
                 "model_sha256": model.sha256}))
+        observers: list[RowsObserver] = []
+        if reference is not None:
+            scoring = TruthTally(reference, est, teleop=bool(robots))
+            observers.append(scoring)
         with open_device(config.device, len(est.sensor_names), realtime=realtime,
                          duration_s=seconds, recording=reference) as opened:
-            pipeline = Pipeline(opened.source, model.engine(), sinks, opened.device_clock)
+            if opened.emulator is not None:
+                link_tally = LinkTally(opened.emulator.wire_values_mm, opened.emulator.seq0)
+                observers.append(link_tally)
+            keep = {} if keep_frames is None else {"keep_first": keep_frames[0],
+                                                   "keep_last": keep_frames[1]}
+            pipeline = Pipeline(opened.source, model.engine(), sinks, opened.device_clock,
+                                observers=observers, **keep)
             if opened.emulator is not None:
                 # until every frame the emulator sent is processed, outages included
                 limit = None if seconds is None else seconds + 30.0
@@ -252,13 +379,14 @@ def run_session(config: BenchConfig, seconds: float | None, *,
             emulator = opened.emulator
             fault_log = None if emulator is None else emulator.fault_log
             seq0 = None if emulator is None else emulator.seq0
-            wire = None if emulator is None else emulator.wire_values_mm
             clipped = 0 if emulator is None else emulator.clipped_values
     except (ValueError, RecordingError) as err:
         raise SessionError(str(err)) from None
     finally:
         for sink in sinks:
             sink.close()
+        if link_tally is not None:
+            link_tally.release()
     if run.frames == 0:
         stats = run.link
         hint = (f" ({stats.decode_errors} packets of another shape: does the device send "
@@ -271,8 +399,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         angles = truth_at(reference, est, trace.device_time_s)
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
-    return SessionResult(config, model, run, truth, fault_log, seq0, wire, clipped, robots,
-                         trace, device_lost)
+    return SessionResult(config, model, run, truth, fault_log, seq0, clipped, robots,
+                         trace, device_lost, scoring, link_tally)
 
 
 def _with_running_error(progress: Progress, reference: Recording,
@@ -307,28 +435,43 @@ def _stat_limits(limits: Limits, name: str) -> dict[str, Limit]:
             if f"{name}.{stat}" in limits}
 
 
-def latency_samples(run: PipelineRun) -> dict[str, tuple[np.ndarray, str]]:
-    """Per-frame samples (ms) of each latency measurement, by name, with what they span: the
-    stage intervals, the estimator's compute, and end to end from the device's write (when
-    known, else host receive) to the robot command (else the sinks done)."""
-    out = {name: (run.interval_ms(a, b), f"{a} → {b}")
+def latency_histograms(run: PipelineRun) -> dict[str, tuple[LogHistogram, str]]:
+    """Every frame's time (ms) of each latency measurement, as a histogram, by name, with what
+    it spans: the stage intervals, the estimator's compute, and end to end from the device's
+    write (when known, else host receive) to the robot command (else the sinks done)."""
+    out = {name: (run.interval_histogram(a, b), f"{a} → {b}")
            for name, (a, b) in LATENCY_INTERVALS.items()}
-    out["latency.estimator"] = (run.compute_ns / 1e6, "estimator compute per frame")
-    first = run.stamps[:, STAGES.index("device_write")]
-    start_stage = "device_write" if np.any(first >= 0) else "host_receive"
-    end_stage = "commanded" if np.any(run.stamps[:, STAGES.index("commanded")] >= 0) else "done"
-    out["latency.end_to_end"] = (run.interval_ms(start_stage, end_stage),
+    out["latency.estimator"] = (run.compute_ms, "estimator compute per frame")
+    start_stage = "device_write" if run.stamped["device_write"] else "host_receive"
+    end_stage = "commanded" if run.stamped["commanded"] else "done"
+    out["latency.end_to_end"] = (run.interval_histogram(start_stage, end_stage),
                                  f"{start_stage} → {end_stage}")
     return out
 
 
+def histogram_distribution(name: str, hist: LogHistogram, unit: str,
+                           limits: Mapping[str, Limit] | None = None,
+                           note: str = "") -> list[Measurement]:
+    """p50, p99 and max of ``hist`` as measurements ``name.p50`` etc. (as
+    ``measurement.distribution`` gives them for samples); the quantiles are exact to one bin
+    (1.2 %), the maximum exact. Skipped when empty."""
+    limits = limits or {}
+    if hist.count == 0:
+        return [Measurement.skipped(f"{name}.{stat}", unit, "no samples", limits.get(stat))
+                for stat in DISTRIBUTION_STATS]
+    values = {"p50": hist.quantile(0.5), "p99": hist.quantile(0.99), "max": hist.max}
+    counted = f"{hist.count} samples" + (f"; {note}" if note else "")
+    return [Measurement.judge(f"{name}.{stat}", float(values[stat] or 0.0), unit,
+                              limits.get(stat), counted) for stat in DISTRIBUTION_STATS]
+
+
 def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list[Measurement]:
-    """p50/p99/max, ms, of each of :func:`latency_samples`. ``limits`` maps e.g.
-    ``latency.end_to_end.max`` to its limit."""
+    """p50/p99/max, ms, of each of :func:`latency_histograms` (every frame of the run).
+    ``limits`` maps e.g. ``latency.end_to_end.max`` to its limit."""
     limits = limits or {}
     out: list[Measurement] = []
-    for name, (ms, note) in latency_samples(run).items():
-        out += distribution(name, ms, "ms", _stat_limits(limits, name), note)
+    for name, (hist, note) in latency_histograms(run).items():
+        out += histogram_distribution(name, hist, "ms", _stat_limits(limits, name), note)
     return out
 
 
@@ -349,30 +492,30 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
     def m(name: str, value: float, unit: str = "count", note: str = "") -> Measurement:
         return Measurement.judge(name, value, unit, limits.get(name), note)
 
-    span = float(run.device_time_s[-1] - run.device_time_s[0]) if run.frames > 1 else 0.0
+    span = run.last_device_time_s - run.first_device_time_s if run.frames > 1 else 0.0
     rate = (run.frames - 1) / span if span > 0 else float("nan")
     out = [m("link.frames", run.frames),
            m("link.rate", rate, "Hz", note="frames received per second of device time"),
            m("link.dropped", link.dropped, note="sequence gaps seen by the host"),
            m("link.crc_errors", link.crc_errors), m("link.decode_errors", link.decode_errors),
            m("link.overflow", link.overflow, note="frames the host buffer discarded")]
-    if result.fault_log is None or result.wire_values_mm is None or result.emulator_seq0 is None:
+    tally = result.link_tally
+    if (result.fault_log is None or tally is None or run.first_seq is None
+            or run.last_seq is None):
         why = "no device fault log (not the in-process emulator)"
         for name in ("link.lost_on_host", "link.bad_frames_delivered",
                      "link.dropped_unexplained"):
             out.append(Measurement.skipped(name, "count", why, limits.get(name)))
         return out
-    first, last = int(run.seq[0]), int(run.seq[-1])
+    first, last = run.first_seq, run.last_seq
     lost = {r.seq for r in result.fault_log if r.kind in LOSING_KINDS and first <= r.seq <= last}
-    received = set(run.seq.tolist())
-    expected = set(range(first, last + 1)) - lost
-    wire = result.wire_values_mm
-    rows = (run.seq - result.emulator_seq0) % wire.shape[0]
-    bad = int(np.count_nonzero(np.any(np.abs(run.values - wire[rows]) > 1e-9, axis=1)))
+    expected = last - first + 1 - len(lost)
+    late = f"; {tally.late} frames arrived out of order" if tally.late else ""
     out += [
-        m("link.lost_on_host", len(expected - received),
-          note=f"{len(expected)} frames the device delivered in seq {first}..{last}"),
-        m("link.bad_frames_delivered", bad, note="values differ from what the device sent"),
+        m("link.lost_on_host", tally.lost_on_host(np.array(sorted(lost), dtype=np.int64)),
+          note=f"{expected} frames the device delivered in seq {first}..{last}{late}"),
+        m("link.bad_frames_delivered", tally.bad,
+          note="values differ from what the device sent"),
         m("link.dropped_unexplained", link.dropped - len(lost),
           note=f"host {link.dropped} vs device log {len(lost)} in the received span"),
     ]
@@ -382,27 +525,26 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
 def teleop_measurements(result: SessionResult,
                         limits: Limits | None = None) -> list[Measurement]:
     """Robot commands from the estimates against the commands the same mapping gives for the
-    true angles: RMSE per joint (deg) and the share of clamped commands."""
+    true angles: RMSE per joint (deg, over the frames with ground truth, at most
+    :data:`TELEOP_MAX_FRAMES`) and the share of clamped commands (every frame)."""
     limits = limits or {}
-    run, truth, est = result.run, result.truth, result.model.estimator
+    run, scoring = result.run, result.scoring
     names = [f"teleop.rmse.{j}" for j in NAO_JOINTS]
-    if truth is None or not result.robots or np.all(np.isnan(run.commands)):
-        why = "no reference" if truth is None else "no teleoperation (not a shoulder model)"
+    if scoring is None or not result.robots or run.commanded == 0:
+        why = "no reference" if scoring is None else "no teleoperation (not a shoulder model)"
         return [Measurement.skipped(n, "deg", why, limits.get(n)) for n in names]
-    mapping = TeleopSink([], est.target.angles)
-    th, ph = est.target.angles.index("elv_angle"), est.target.angles.index("shoulder_elv")
-    ok = np.all(np.isfinite(truth), axis=1) & np.all(np.isfinite(run.commands), axis=1)
-    reference = np.full_like(run.commands, np.nan)
-    for i in np.flatnonzero(ok):
-        reference[i] = mapping.command_for(truth[i, th], truth[i, ph]).joints
-    if not ok.any():
+    err = scoring.teleop_errors_deg()
+    if err.shape[0] == 0:
         return [Measurement.skipped(n, "deg", "no frame with both a command and the truth",
                                     limits.get(n)) for n in names]
-    err = np.rad2deg(run.commands[ok] - reference[ok])
-    note = f"{int(ok.sum())} frames"
-    out = [Measurement.judge(n, float(np.sqrt(np.mean(err[:, j] ** 2))), "deg",
-                             limits.get(n), note) for j, n in enumerate(names)]
-    share = float(np.mean(run.clamped)) if run.frames else float("nan")
+    note = f"{scoring.teleop_kept} frames"
+    if scoring.teleop_kept < scoring.teleop_frames:
+        note += f" (the first of {scoring.teleop_frames} with ground truth)"
+    rmse = [float(np.sqrt(np.mean(err[:, j] ** 2))) if err.shape[0] else float("nan")
+            for j in range(len(names))]
+    out = [Measurement.judge(n, rmse[j], "deg", limits.get(n), note)
+           for j, n in enumerate(names)]
+    share = run.clamped_commands / run.frames if run.frames else float("nan")
     out.append(Measurement.judge("teleop.clamped_share", share, "ratio",
                                  limits.get("teleop.clamped_share"),
                                  "commands with a joint at its limit"))
@@ -410,15 +552,16 @@ def teleop_measurements(result: SessionResult,
 
 
 def session_accuracy(result: SessionResult, limits: Limits | None = None) -> list[Measurement]:
-    """Accuracy of the streamed estimates against the reference (skipped without one)."""
+    """Accuracy of the streamed estimates against the reference, every frame (skipped without
+    one)."""
     est = result.model.estimator
-    if result.truth is None:
+    if result.scoring is None:
         names = [f"accuracy.rmse.{a}" for a in est.target.angles]
         if _is_shoulder(est):
             names.append("accuracy.direction_rmse")
         return [Measurement.skipped(n, "deg", "no reference recording", (limits or {}).get(n))
                 for n in names]
-    return accuracy_measurements(result.run.estimates, result.truth, est.target.angles, limits)
+    return result.scoring.accuracy.measurements(limits)
 
 
 def robot_measurements(result: SessionResult,

@@ -5,6 +5,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from exohil.harness.frame_source import Frame, FrameSource, LinkStats
 from exohil.harness.pipeline import NOT_STAMPED, STAGES, Pipeline, Sample
@@ -149,3 +150,81 @@ def test_a_run_longer_than_one_log_block_keeps_every_frame_in_order():
     assert run.stamps.shape == (n, len(STAGES)) and np.all(np.isnan(run.commands))
     seen = np.concatenate([s.recent_device_time_s for s in statuses])
     assert np.array_equal(seen, run.device_time_s[: seen.size])  # statuses tile the run
+
+
+class CountingSource(FakeSource):
+    """Frames made on demand (seq 0, 1, ...), so a long run holds no list of them."""
+
+    def __init__(self, n):
+        super().__init__([])
+        self.n, self.next = n, 0
+
+    def get(self, timeout=None):
+        if self.next >= self.n:
+            return None
+        k, self.next = self.next, self.next + 1
+        return Frame(seq=k, device_time_s=k / 250, values_mm=np.full(4, float(k)),
+                     host_ns=time.perf_counter_ns())
+
+
+def test_a_long_run_holds_its_memory_steady_and_still_counts_every_frame(monkeypatch):
+    from exohil.harness import pipeline
+
+    sizes = []
+
+    class SmallLog(pipeline._Log):
+        BLOCK, FOLD = 64, 16  # the real sizes, scaled down
+
+        def add(self, *args):
+            super().add(*args)
+            if self.n % self.BLOCK == 0:
+                sizes.append(self.nbytes)
+
+    monkeypatch.setattr(pipeline, "_Log", SmallLog)
+    n = 64 * 60
+    folded = []
+    writes = {k: time.perf_counter_ns() - 1000 for k in range(n)}
+    run = Pipeline(CountingSource(n), SumEstimator(), [ListSink(stage="commanded")],
+                   device_clock=writes.get, keep_first=128, keep_last=100,
+                   observers=[lambda rows: folded.append(rows.seq.copy())]).run(max_frames=n)
+    # the window is 2 blocks at the start and 2 + the one being filled at the end: once it is
+    # full, the kept rows and the totals take the same bytes frame after frame
+    full = 2 + 3
+    assert len(sizes) == 60 and sizes[full] > sizes[0]
+    assert sizes[full - 1:] == [sizes[full - 1]] * (60 - full + 1)
+    # the rows: the first 128 frames and the last 192 (>= 100), in order
+    assert run.frames == n and run.retained == 128 + 192 and run.head == 128
+    assert not run.complete
+    assert np.array_equal(run.seq, np.r_[0:128, n - 192:n])
+    assert np.array_equal(run.estimates[:, 1], run.seq + 1)
+    # every frame was folded exactly once, in order, into the totals and the observers
+    assert np.array_equal(np.concatenate(folded), np.arange(n))
+    assert all(len(chunk) <= 16 for chunk in folded)
+    assert run.compute_ms.count == n and run.commanded == 0 and run.clamped_commands == 0
+    assert run.stamped == {"device_write": n, "host_receive": n, "decoded": 0, "estimated": n,
+                           "commanded": n, "done": n}
+    assert run.interval_histogram("device_write", "commanded").count == n
+    assert run.interval_histogram("host_receive", "decoded").count == 0
+    assert (run.first_seq, run.last_seq) == (0, n - 1)
+    assert run.last_device_time_s == (n - 1) / 250
+
+
+def test_latency_totals_agree_with_the_rows_of_a_run_that_fits():
+    n = 600
+    writes = {k: time.perf_counter_ns() - 1000 * (k % 7 + 1) for k in range(n)}
+    run = Pipeline(FakeSource(frames(n)), SumEstimator(), [ListSink(stage="commanded")],
+                   device_clock=writes.get).run(max_frames=n)
+    assert run.complete and run.head == run.retained == n
+    width = 10 ** (1 / 200)  # one histogram bin
+    for i, start in enumerate(STAGES):
+        for end in STAGES[i + 1:]:
+            exact = np.maximum(run.interval_ms(start, end), 0.0)
+            hist = run.interval_histogram(start, end)
+            assert hist.count == exact.size
+            if exact.size:
+                assert hist.max == exact.max()
+                for q in (0.5, 0.99):
+                    value = float(np.quantile(exact, q, method="inverted_cdf"))
+                    assert value <= hist.quantile(q) <= max(value, 1e-3) * width * (1 + 1e-9)
+    with pytest.raises(ValueError, match="does not come before"):
+        run.interval_histogram("done", "host_receive")
