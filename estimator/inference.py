@@ -179,7 +179,7 @@ class _NumpyRecurrentRunner:
     Per group, one buffer holds [c | g̃ | f | i | o] (H each): the recurrent ``dot`` writes the
     gate pre-activations [g̃, f, i, o] in place, one tanh and one sigmoid activate them, and
     [f, i]·[c, g̃] is a single multiply — 8 NumPy calls per LSTM step. The input projection
-    x·W_ih + b (with the input normalisation folded in) is computed once per frame and kept in
+    (x − x_mean)·W_ih + b (input scaling folded in) is computed once per frame and kept in
     the ring with the frame.
     """
 
@@ -189,7 +189,8 @@ class _NumpyRecurrentRunner:
         self.expit = expit
         state = est.weights()
         # ENNet: G = 1 LSTM reading all S sensors; LNNet: G = S, sensor s drives LSTM s only.
-        # Input normalisation folded in; gates reordered [i, f, g, o] → [g, f, i, o].
+        # Input scaling folded in (the mean is subtracted per frame in float64); gates
+        # reordered [i, f, g, o] → [g, f, i, o].
         lstm = lstm_weights(est.kind, state).folded(est.norm).gates("gfio")
         hidden = lstm.hidden
         self.groups, self.hidden = lstm.w_hh.shape[0], hidden
@@ -214,6 +215,8 @@ class _NumpyRecurrentRunner:
         self.h3, self.g3 = self.h[:, None, :], self.gates[:, None, :]
         self.xp = np.zeros((self.groups, 4 * h), dtype=f32)
         self.x32 = np.zeros(est.config.n_sensors, dtype=f32)
+        self.x64 = np.zeros(est.config.n_sensors)
+        self.x_mean = np.asarray(est.norm.x_mean, dtype=np.float64)
         self.head = _FoldedHead(est, state)
         # h·W_hh into the gate slots: one batched matmul over the groups (LNNet), or a plain
         # vector-matrix dot for the single LSTM (ENNet), which is the cheaper call.
@@ -226,7 +229,8 @@ class _NumpyRecurrentRunner:
         self.ring.reset()
 
     def _project(self, x: np.ndarray) -> None:
-        self.x32[:] = x
+        np.subtract(x, self.x_mean, out=self.x64)  # centred in float64 (see Normalisation.fold_x)
+        self.x32[:] = self.x64
         if self.grouped:
             np.multiply(self.x32[:, None], self.w_ih_sensorwise, out=self.xp)
         else:

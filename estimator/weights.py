@@ -49,8 +49,8 @@ class LSTMWeights:
         return LSTMWeights(*(reorder_gates(a, order) for a in (self.w_ih, self.w_hh, self.bias)))
 
     def folded(self, norm: Normalisation) -> LSTMWeights:
-        """The same LSTMs reading raw sensors: the input normalisation folded into ``w_ih`` and
-        ``bias`` (:meth:`~exohil.estimator.trained.Normalisation.fold_x`)."""
+        """The same LSTMs reading centred sensors x − x_mean: the input scaling folded into
+        ``w_ih`` (:meth:`~exohil.estimator.trained.Normalisation.fold_x`)."""
         w_ih, bias = norm.fold_x(self.w_ih, self.bias)
         return LSTMWeights(w_ih, self.w_hh, bias)
 
