@@ -155,12 +155,12 @@ def soak_measurements(monitor: Monitor, run_s: float) -> list[Measurement]:
     else:
         samples = [v for _, v in monitor.rss]
         out += [
-            Measurement.judge("soak.rss_start", ref[1], "count",
-                              note=f"MiB, resident at {ref[0]:.0f} s"),
-            Measurement.judge("soak.rss_end", end[1], "count",
-                              note=f"MiB, resident at {end[0]:.0f} s"),
-            Measurement.judge("soak.rss_max", max(samples), "count",
-                              note=f"MiB, largest of {len(samples)} samples"),
+            Measurement.judge("soak.rss_start", ref[1], "MiB",
+                              note=f"resident at {ref[0]:.0f} s"),
+            Measurement.judge("soak.rss_end", end[1], "MiB",
+                              note=f"resident at {end[0]:.0f} s"),
+            Measurement.judge("soak.rss_max", max(samples), "MiB",
+                              note=f"largest of {len(samples)} samples"),
             Measurement.judge("soak.rss_growth", 100.0 * (end[1] - ref[1]) / ref[1], "%",
                               LIMITS["soak.rss_growth"],
                               f"{end[1] - ref[1]:+.1f} MiB from {ref[0]:.0f} s to "
