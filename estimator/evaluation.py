@@ -2,8 +2,15 @@
 
 The JSON layout (``exohil evaluate --json``)::
 
-    {"rmse": {"<angle>": deg, ...}, "mae": {...}, "max": {...}, "frames": N,
+    {"accuracy": {"accuracy.rmse.<angle>": deg, "accuracy.direction_rmse": deg, ...},
+     "rmse": {"<angle>": deg, ...}, "mae": {...}, "max": {...}, "frames": N,
      "per_segment": {"<movement>": {"rmse": {...}, "mae": {...}, "max": {...}, "frames": n}}}
+
+``accuracy`` is exohil's one accuracy definition (:func:`accuracy_measurements`: for a shoulder
+model, RMSE per angle where the true elevation is at least 20° and the arm-direction RMSE over
+every frame), the figures to compare models by. ``rmse``/``mae``/``max`` are over every scored
+frame (all frames, or those ``min_angle`` keeps), θ included where the arm hangs and θ is
+undefined.
 
 Every frame of every block is scored (windows are edge-padded at block starts, see
 :mod:`exohil.estimator.windows`). Frames outside any labelled segment count towards the overall
@@ -58,7 +65,11 @@ def evaluate_predictions(
         if not keep.any():
             raise ValueError(f"no frame satisfies {min_angle}")
         err, labels = err[keep], labels[keep]
-    result = error_stats(err, angles)
+    predicted = np.concatenate(predictions)
+    truth_all = np.concatenate([b.y for b in blocks])
+    result = {"accuracy": {m.name: m.value for m in
+                           accuracy_measurements(predicted, truth_all, angles)},
+              **error_stats(err, angles)}
     result["per_segment"] = {
         str(name): error_stats(err[labels == name], angles)
         for name in sorted({str(v) for v in labels if v})

@@ -27,27 +27,41 @@ def comparison_markdown(
     results: list[ModelResult], angles: tuple[str, ...], *, title: str, command: str,
     split: str, data: str,
 ) -> str:
-    """The Table-I-style RMSE table, a detail table (MAE, max, training) and provenance."""
-    head = "| Method | " + " | ".join(f"{a} RMSE (°)" for a in angles) + " |"
+    """The Table-I-style RMSE table in exohil's accuracy definition (RMSE per angle where the
+    elevation is at least 20°, plus the arm-direction RMSE over all frames, for a shoulder
+    model), a detail table (all-frames RMSE, MAE, max, training) and provenance."""
+    shoulder = any("accuracy.direction_rmse" in r.test.get("accuracy", {}) for r in results)
+    where = " where φ ≥ 20°" if shoulder else ""
+    head = ("| Method | " + " | ".join(f"{a} RMSE{where} (°)" for a in angles)
+            + (" | arm direction RMSE, all frames (°) |" if shoulder else " |"))
     lines = [f"### {title}", "", f"Data: {data}", "", f"Split: {split}", "", head,
-             "|---|" + "---:|" * len(angles)]
+             "|---|" + "---:|" * (len(angles) + shoulder)]
     for r in results:
-        cells = " | ".join(f"{r.test['rmse'][a]:.2f}" for a in angles)
-        lines.append(f"| {METHOD_NAMES.get(r.kind, r.kind)} | {cells} |")
-    lines += ["", "| Method | " + " | ".join(f"{a} MAE / max (°)" for a in angles)
+        acc = r.test.get("accuracy", {})
+        cells = [_deg(acc.get(f"accuracy.rmse.{a}")) for a in angles]
+        if shoulder:
+            cells.append(_deg(acc.get("accuracy.direction_rmse")))
+        lines.append(f"| {METHOD_NAMES.get(r.kind, r.kind)} | {' | '.join(cells)} |")
+    lines += ["", "| Method | " + " | ".join(f"{a} RMSE / MAE / max, all frames (°)"
+                                            for a in angles)
               + " | window | epochs (best) | stopped by | train s |",
               "|---|" + "---:|" * (len(angles) + 4)]
     for r in results:
         info = r.estimator.info
-        cells = " | ".join(f"{r.test['mae'][a]:.2f} / {r.test['max'][a]:.1f}" for a in angles)
+        detail = " | ".join(f"{r.test['rmse'][a]:.2f} / {r.test['mae'][a]:.2f} / "
+                            f"{r.test['max'][a]:.1f}" for a in angles)
         window = "—" if r.kind in ("ann", "classical") else (
             f"{r.estimator.config.window}×{r.estimator.config.dilation}")
         epochs = f"{info.get('epochs', '—')} ({info.get('best_epoch', '—')})"
-        lines.append(f"| {r.kind} | {cells} | {window} | {epochs} | "
+        lines.append(f"| {r.kind} | {detail} | {window} | {epochs} | "
                      f"{info.get('stopped_by', 'closed form')} | {info.get('train_seconds')} |")
     lines += ["", f"Test frames: {results[0].test['frames'] if results else 0}. Made by:", "",
               "```", command, "```"]
     return "\n".join(lines) + "\n"
+
+
+def _deg(value: float | None) -> str:
+    return "—" if value is None else f"{value:.2f}"
 
 
 def write_section(path: Path, name: str, text: str) -> None:

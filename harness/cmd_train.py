@@ -95,6 +95,20 @@ def _load(paths, joint=None, angles=None, expected=None):
         raise click.ClickException(str(exc)) from None
 
 
+def _accuracy_line(accuracy: dict) -> str:
+    """The one accuracy definition (estimator.evaluation.accuracy_measurements) as one line."""
+    from exohil.estimator.evaluation import OBSERVABLE_ELEVATION_DEG
+
+    rmse = {k.removeprefix("accuracy.rmse."): v for k, v in accuracy.items()
+            if k.startswith("accuracy.rmse.") and v is not None}
+    text = "accuracy: RMSE " + ", ".join(f"{a} {v:.2f}°" for a, v in rmse.items())
+    direction = accuracy.get("accuracy.direction_rmse")
+    if direction is not None:
+        text += (f" where elevation ≥ {OBSERVABLE_ELEVATION_DEG:g}°; arm direction "
+                 f"{direction:.2f}° over all frames")
+    return text
+
+
 def _workflow():
     from exohil.estimator import workflow
 
@@ -156,9 +170,8 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     save_checkpoint(out, est)
     metrics = est.info.get("metrics", {})
     part = "test" if "test" in metrics else "validation"
-    rmse = metrics.get(part, {}).get("rmse", {})
-    shown = ", ".join(f"{a} {v:.2f}°" for a, v in rmse.items())
-    click.echo(f"wrote {out} ({kind}); {part} RMSE: {shown}")
+    shown = _accuracy_line(metrics[part]["accuracy"]) if part in metrics else "not measured"
+    click.echo(f"wrote {out} ({kind}); {part} {shown}")
 
 
 @click.command("evaluate")
@@ -173,8 +186,10 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
               help="Score only frames whose true ANGLE ≥ DEG (repeatable), e.g. "
               "shoulder_elv=20 where the plane of elevation is observable.")
 def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle):
-    """Score CHECKPOINT on RECORDING files: per-angle RMSE, MAE and max |error| (degrees),
-    overall and per movement segment. Example:
+    """Score CHECKPOINT on RECORDING files: first exohil's accuracy (RMSE per angle where the
+    elevation is at least 20°, and the arm-direction RMSE over all frames), then per-angle
+    RMSE, MAE and max |error| (degrees) over all frames, overall and per movement segment.
+    Example:
 
     \b
         exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
@@ -208,10 +223,14 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     result["checkpoint"] = str(checkpoint)
     result["model"] = est.kind
     result["recordings"] = data.sources
+    click.echo(_accuracy_line(result["accuracy"]))
+    scope = "frames kept by --min" if limits else "all frames"
     for stat in ("rmse", "mae", "max"):
-        click.echo(f"{stat:>4}: " + ", ".join(f"{a} {v:.2f}°" for a, v in result[stat].items()))
+        click.echo(f"{stat:>4} ({scope}): "
+                   + ", ".join(f"{a} {v:.2f}°" for a, v in result[stat].items()))
     for name, seg in result["per_segment"].items():
-        click.echo(f"  {name}: RMSE " + ", ".join(f"{a} {v:.2f}°" for a, v in seg["rmse"].items()))
+        click.echo(f"  {name}: RMSE ({scope}) "
+                   + ", ".join(f"{a} {v:.2f}°" for a, v in seg["rmse"].items()))
     if json_out:
         write_text(json_out, json.dumps(result, indent=2) + "\n")
 

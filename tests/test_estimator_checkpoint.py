@@ -222,3 +222,24 @@ def test_weights_are_copies():
     est = load_checkpoint(ROOT / "fixtures" / "models" / "ann.npz")
     est.weights()["head.0.bias"][:] = 0.0
     assert est.weights()["head.0.bias"].any()
+
+
+def test_evaluate_reports_the_one_accuracy_definition_beside_all_frames():
+    from exohil.estimator.evaluation import OBSERVABLE_ELEVATION_DEG, evaluate
+    from exohil.estimator.report import comparison_markdown
+    from exohil.estimator.workflow import ModelResult
+
+    _, split, est = _trained("ann")
+    result = evaluate(est, split.test)
+    observable = evaluate(est, split.test, {"shoulder_elv": OBSERVABLE_ELEVATION_DEG})
+    for angle in est.target.angles:  # the headline RMSE: only where θ is observable
+        assert result["accuracy"][f"accuracy.rmse.{angle}"] == pytest.approx(
+            observable["rmse"][angle], rel=1e-12)
+    assert result["accuracy"]["accuracy.direction_rmse"] > 0
+    assert result["accuracy"]["accuracy.frames_scored"] == result["frames"]
+    table = comparison_markdown([ModelResult("ann", est, result)], est.target.angles,
+                                title="t", command="c", split="s", data="d")
+    header = table.splitlines()[6]
+    assert "elv_angle RMSE where φ ≥ 20° (°)" in header and "arm direction" in header
+    row = table.splitlines()[8]
+    assert f"{result['accuracy']['accuracy.rmse.elv_angle']:.2f}" in row
