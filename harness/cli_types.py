@@ -287,13 +287,13 @@ class Robot(click.ParamType):
         if text in ROBOT_NAMES:
             return text
         if text.startswith("udp:"):
-            host, _, port = text.removeprefix("udp:").rpartition(":")
-            host = host.removeprefix("[").removesuffix("]")
-            if (host.strip() and not any(_is_control(c) or c.isspace() for c in host)
-                    and port.isascii() and port.isdigit() and 1 <= int(port) <= 65535):
-                return text
-            self.fail(f"bad robot address {text!r}: expected udp:HOST:PORT with a port "
-                      "1..65535, e.g. udp:127.0.0.1:9000", param, ctx)
+            from exohil.harness.robot_udp import parse_udp_address
+
+            try:
+                parse_udp_address(text)
+            except ValueError as err:
+                self.fail(str(err), param, ctx)
+            return text
         self.fail(f"unknown robot {text!r}; available: {', '.join(ROBOT_NAMES)}, "
                   "udp:HOST:PORT", param, ctx)
 

@@ -52,6 +52,20 @@ COMMAND_SCHEMA = {
 }
 
 
+
+def parse_udp_address(name: str) -> tuple[str, int]:
+    """``udp:HOST:PORT`` (an IPv6 host in brackets) → (host, port); ValueError saying what is
+    expected."""
+    host, _, port = name.removeprefix("udp:").rpartition(":")
+    host = host.removeprefix("[").removesuffix("]")
+    if (not name.startswith("udp:") or not host.strip() or not host.isprintable()
+            or any(c.isspace() for c in host) or not (port.isascii() and port.isdigit())
+            or not 1 <= int(port) <= 65535):
+        raise ValueError(f"bad robot address {name!r}: expected udp:HOST:PORT with a port "
+                         "1..65535, e.g. udp:127.0.0.1:9000")
+    return host, int(port)
+
+
 class UdpJointTarget:
     """Sends each NAO command to ``host:port`` as one UDP datagram of JSON.
 

@@ -152,15 +152,14 @@ def _build_robot(name: str) -> Any:
         nao.start()
         return nao
     if name.startswith("udp:"):
-        from exohil.harness.robot_udp import UdpJointTarget
+        from exohil.harness.robot_udp import UdpJointTarget, parse_udp_address
 
-        host, _, port = name.removeprefix("udp:").rpartition(":")
-        host = host.removeprefix("[").removesuffix("]")
-        if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
-            raise BenchError(f"bad robot address {name!r}: expected udp:HOST:PORT with a port "
-                             "1..65535, e.g. udp:127.0.0.1:9000")
         try:
-            return UdpJointTarget(host, int(port))
+            host, port = parse_udp_address(name)
+        except ValueError as err:
+            raise BenchError(str(err)) from None
+        try:
+            return UdpJointTarget(host, port)
         except ValueError as err:
             raise BenchError(f"robot {name!r}: {err}") from None
     raise BenchError(f"unknown robot {name!r}; available: simulated, mujoco, udp:HOST:PORT")
