@@ -533,16 +533,13 @@ def teleop_measurements(result: SessionResult,
         why = "no reference" if scoring is None else "no teleoperation (not a shoulder model)"
         return [Measurement.skipped(n, "deg", why, limits.get(n)) for n in names]
     err = scoring.teleop_errors_deg()
-    if err.shape[0] == 0:
-        return [Measurement.skipped(n, "deg", "no frame with both a command and the truth",
-                                    limits.get(n)) for n in names]
     note = f"{scoring.teleop_kept} frames"
     if scoring.teleop_kept < scoring.teleop_frames:
         note += f" (the first of {scoring.teleop_frames} with ground truth)"
-    rmse = [float(np.sqrt(np.mean(err[:, j] ** 2))) if err.shape[0] else float("nan")
-            for j in range(len(names))]
-    out = [Measurement.judge(n, rmse[j], "deg", limits.get(n), note)
-           for j, n in enumerate(names)]
+    out = [Measurement.judge(n, float(np.sqrt(np.mean(err[:, j] ** 2))), "deg", limits.get(n),
+                             note) if err.shape[0] else
+           Measurement.skipped(n, "deg", "no frame with both a command and the truth",
+                               limits.get(n)) for j, n in enumerate(names)]
     share = run.clamped_commands / run.frames if run.frames else float("nan")
     out.append(Measurement.judge("teleop.clamped_share", share, "ratio",
                                  limits.get("teleop.clamped_share"),
