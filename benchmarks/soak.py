@@ -30,6 +30,7 @@ import time
 from collections import deque
 from pathlib import Path
 
+from benchmarks.bench_pipeline import HOST_LOSS_LIMITS
 from benchmarks.report import (
     document,
     load_average,
@@ -53,10 +54,7 @@ from exohil.harness.session import (
 
 #: issue 13's goals
 LIMITS = {
-    "link.lost_on_host": Limit(high=0, unit="count", inclusive=True),
-    "link.overflow": Limit(high=0, unit="count", inclusive=True),
-    "link.bad_frames_delivered": Limit(high=0, unit="count", inclusive=True),
-    "link.dropped_unexplained": Limit(high=0, unit="count", inclusive=True),
+    **HOST_LOSS_LIMITS,
     "soak.rss_growth": Limit(high=5.0, unit="%", inclusive=True),
     "soak.latency_p99_ratio": Limit(high=1.2, unit="x", inclusive=True),
 }
