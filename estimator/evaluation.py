@@ -55,21 +55,21 @@ def evaluate_predictions(
     """
     if not blocks:
         raise ValueError("nothing to evaluate: no labelled frames")
-    err = np.concatenate([p - b.y for p, b in zip(predictions, blocks, strict=True)])
+    if [p.shape for p in predictions] != [b.y.shape for b in blocks]:
+        raise ValueError("one prediction per block, shaped like its targets, is needed")
+    predicted = np.concatenate(predictions)
+    truth = np.concatenate([b.y for b in blocks])
+    err = predicted - truth
     labels = np.concatenate([b.segment for b in blocks])
+    accuracy = {m.name: m.value for m in accuracy_measurements(predicted, truth, angles)}
     if min_angle:
-        truth = np.concatenate([b.y for b in blocks])
         keep = np.ones(err.shape[0], dtype=bool)
         for name, low in min_angle.items():
             keep &= truth[:, angles.index(name)] >= low
         if not keep.any():
             raise ValueError(f"no frame satisfies {min_angle}")
         err, labels = err[keep], labels[keep]
-    predicted = np.concatenate(predictions)
-    truth_all = np.concatenate([b.y for b in blocks])
-    result = {"accuracy": {m.name: m.value for m in
-                           accuracy_measurements(predicted, truth_all, angles)},
-              **error_stats(err, angles)}
+    result = {"accuracy": accuracy, **error_stats(err, angles)}
     result["per_segment"] = {
         str(name): error_stats(err[labels == name], angles)
         for name in sorted({str(v) for v in labels if v})
