@@ -37,19 +37,20 @@ MAX_OFFSET_FRAMES = 1_000_000
 
 
 class AngleLimit(click.ParamType):
-    """``ANGLE=DEG``: an angle name and a finite number of degrees within ±360; the text is
-    returned unchanged (whether the model has that angle is checked once it is loaded)."""
+    """``ANGLE=DEG``: an angle name and a finite number of degrees within ±360, returned as
+    (name, degrees) (whether the model has that angle is checked once it is loaded)."""
 
     name = "angle=deg"
 
     def convert(self, value, param, ctx):
+        if isinstance(value, tuple):  # already converted
+            return value
         text = str(value)
         name, sep, number = text.partition("=")
         if not sep or not name.strip():
             self.fail(f"{text!r} is not ANGLE=DEG", param, ctx)
         Name().convert(name, param, ctx)
-        Finite(-360.0, 360.0).convert(number, param, ctx)
-        return text
+        return name, Finite(-360.0, 360.0).convert(number, param, ctx)
 
 
 def _angles(text: str | None) -> tuple[str, ...] | None:
@@ -235,19 +236,15 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         write_text(json_out, json.dumps(result, indent=2) + "\n")
 
 
-def _angle_limits(items: tuple[str, ...], angles: tuple[str, ...]) -> dict[str, float]:
-    limits: dict[str, float] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            if not sep or name not in angles:
-                raise ValueError
-            limits[name] = float(value)
-        except ValueError:
+def _angle_limits(items: tuple[tuple[str, float], ...],
+                  angles: tuple[str, ...]) -> dict[str, float]:
+    """--min values ((name, degrees), parsed by AngleLimit) for a model with ``angles``."""
+    for name, degrees in items:
+        if name not in angles:
             raise click.ClickException(
-                f"--min {item!r}: expected ANGLE=DEG with ANGLE one of {', '.join(angles)}"
-            ) from None
-    return limits
+                f"--min '{name}={degrees:g}': expected ANGLE=DEG with ANGLE one of "
+                f"{', '.join(angles)}")
+    return dict(items)
 
 
 @click.command("table")
