@@ -161,29 +161,30 @@ def _existing_ancestor(path: Path) -> Path:
     return Path.cwd()
 
 
-class InputFile(click.Path):
+class _UsablePath(click.Path):
+    """A ``click.Path`` that first refuses what no file system accepts
+    (:func:`_fail_unusable_path`)."""
+
+    def convert(self, value, param, ctx):
+        _fail_unusable_path(self, value, param, ctx)
+        return super().convert(value, param, ctx)
+
+
+class InputFile(_UsablePath):
     """A file the command reads: it must exist and be a file."""
 
     def __init__(self) -> None:
         super().__init__(exists=True, dir_okay=False, path_type=Path)
 
-    def convert(self, value, param, ctx):
-        _fail_unusable_path(self, value, param, ctx)
-        return super().convert(value, param, ctx)
 
-
-class InputDir(click.Path):
+class InputDir(_UsablePath):
     """A folder the command reads: it must exist and be a folder."""
 
     def __init__(self) -> None:
         super().__init__(exists=True, file_okay=False, path_type=Path)
 
-    def convert(self, value, param, ctx):
-        _fail_unusable_path(self, value, param, ctx)
-        return super().convert(value, param, ctx)
 
-
-class OutputFile(click.Path):
+class OutputFile(_UsablePath):
     """A file the command will write: its folder must exist, checked when the command line is
     parsed, so a long run (training, streaming) cannot fail only at the end."""
 
@@ -191,7 +192,6 @@ class OutputFile(click.Path):
         super().__init__(dir_okay=False, path_type=Path)
 
     def convert(self, value, param, ctx):
-        _fail_unusable_path(self, value, param, ctx)
         path = super().convert(value, param, ctx)
         if Path(path).name in ("", ".", ".."):
             self.fail(f"{os.fspath(path)!r} is not a file name", param, ctx)
@@ -204,7 +204,7 @@ class OutputFile(click.Path):
         return path
 
 
-class OutputDir(click.Path):
+class OutputDir(_UsablePath):
     """A folder the command will create (with its parents) or fill: it must not be a file,
     nor lie inside one, and it (or the nearest folder above it that exists) must take new
     files."""
@@ -213,7 +213,6 @@ class OutputDir(click.Path):
         super().__init__(file_okay=False, path_type=Path)
 
     def convert(self, value, param, ctx):
-        _fail_unusable_path(self, value, param, ctx)
         path = super().convert(value, param, ctx)
         ancestor = _existing_ancestor(Path(path).absolute())
         if not ancestor.is_dir():
