@@ -7,7 +7,7 @@ if __name__ != "exohil.kinematics":  # e.g. `import kinematics` from the reposit
     raise ImportError(f"import exohil.kinematics, not {__name__}: the folder is a subpackage of "
                       "exohil, and a second copy of its modules would not share their classes")
 
-from exohil.kinematics.arm import humerus_direction
+from exohil.kinematics.arm import humerus_angles, humerus_direction
 from exohil.kinematics.robot import NAO_JOINTS, NAO_LIMITS, NaoArm, humerus_to_nao, quat_to_zyx
 from exohil.kinematics.rotations import (
     matrix_to_quat,
@@ -32,6 +32,7 @@ __all__ = [
     "NAO_JOINTS",
     "NAO_LIMITS",
     "NaoArm",
+    "humerus_angles",
     "humerus_direction",
     "humerus_to_nao",
     "isb_to_ms",

@@ -18,3 +18,16 @@ def humerus_direction(theta, phi) -> np.ndarray:
     theta, phi = np.broadcast_arrays(np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
     s = np.sin(phi)
     return np.stack([s * np.sin(theta), -np.cos(phi), s * np.cos(theta)], axis=-1)
+
+
+def humerus_angles(direction) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`humerus_direction`: ``(θ, φ)`` in radians from vectors ``(..., 3)``
+    in the thorax frame (any non-zero length; they are not normalised first).
+
+    φ ∈ [0, π] is the angle from straight down; θ = atan2(x, z) ∈ (−π, π]. With the arm
+    hanging or straight up (x = z = 0) θ is undefined and 0 is returned.
+    """
+    d = np.asarray(direction, dtype=float)
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    horizontal = np.hypot(x, z)
+    return np.arctan2(x, z), np.arctan2(horizontal, -y)
