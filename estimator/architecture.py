@@ -11,6 +11,10 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 MODEL_KINDS = ("ennet", "lnnet", "ann", "cnn")
+#: What a network outputs: the target angles themselves, or the humerus direction (a 3-vector
+#: in the thorax frame, converted back to θ/φ after the network) for a shoulder θ/φ target,
+#: which has no singularity where the arm hangs (docs/estimator.md, "Target").
+OUTPUTS = ("angles", "direction")
 DENSE_STACK = (512, 256, 128, 64, 32)
 #: The CNN's temporal kernel (frames); 'same' padding.
 CONV_KERNEL = 3
@@ -26,6 +30,10 @@ class ModelConfig:
         window: frames per window (n); dilation: frame step inside the window.
         hidden: LSTM hidden size (ENNet; per sensor for LNNet); CNN channels.
         dense: widths of the ReLU layers after the temporal encoder.
+        output: one of OUTPUTS; "direction" makes the network's output 3 wide.
+        stateful: ENNet only: the LSTM state is carried from frame to frame over the whole
+            stream (one LSTM step per frame; ``window`` and ``dilation`` are 1) instead of
+            re-run over a window from a zero state.
     """
 
     kind: str
@@ -35,6 +43,13 @@ class ModelConfig:
     dilation: int = 1
     hidden: int = 64
     dense: tuple[int, ...] = field(default=DENSE_STACK)
+    output: str = "angles"
+    stateful: bool = False
+
+    @property
+    def n_outputs(self) -> int:
+        """Width of the network's output layer."""
+        return 3 if self.output == "direction" else self.n_angles
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -53,6 +68,14 @@ def state_shapes(cfg: ModelConfig) -> dict[str, tuple[int, ...]]:
     with its shape. Raises ValueError for an unknown kind or a size that is not positive."""
     if cfg.kind not in MODEL_KINDS:
         raise ValueError(f"unknown model kind {cfg.kind!r}; choose from {MODEL_KINDS}")
+    if cfg.output not in OUTPUTS:
+        raise ValueError(f"unknown model output {cfg.output!r}; choose from {OUTPUTS}")
+    if cfg.output == "direction" and cfg.n_angles != 2:
+        raise ValueError(f"a direction output estimates 2 angles, not {cfg.n_angles}")
+    if not isinstance(cfg.stateful, bool):
+        raise ValueError(f"model config stateful = {cfg.stateful!r} is not true or false")
+    if cfg.stateful and (cfg.kind != "ennet" or cfg.window != 1 or cfg.dilation != 1):
+        raise ValueError("stateful is true only for an ENNet of window 1, dilation 1")
     sizes = {"n_sensors": cfg.n_sensors, "n_angles": cfg.n_angles, "window": cfg.window,
              "dilation": cfg.dilation, "hidden": cfg.hidden}
     sizes.update({f"dense[{k}]": w for k, w in enumerate(cfg.dense)})
@@ -76,7 +99,7 @@ def state_shapes(cfg: ModelConfig) -> dict[str, tuple[int, ...]]:
     else:  # ann: the newest frame
         features = s
     # dense head: Sequential(Linear, ReLU, …, Linear), so the Linear layers are 0, 2, 4, …
-    for k, width in enumerate((*cfg.dense, cfg.n_angles)):
+    for k, width in enumerate((*cfg.dense, cfg.n_outputs)):
         shapes[f"head.{2 * k}.weight"] = (width, features)
         shapes[f"head.{2 * k}.bias"] = (width,)
         features = width

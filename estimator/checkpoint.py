@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from exohil.estimator.architecture import ModelConfig, check_state, state_shapes
+from exohil.estimator.architecture import OUTPUTS, ModelConfig, check_state, state_shapes
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import TargetSpec
-from exohil.estimator.trained import Normalisation, TrainedEstimator
+from exohil.estimator.trained import DIRECTION_ANGLES, Normalisation, TrainedEstimator
 from exohil.formats import strict_json
 from exohil.formats.atomic import replacing
 from exohil.formats.errors import InputError
@@ -122,7 +122,11 @@ def _from_meta(meta: dict) -> TrainedEstimator:
     target = TargetSpec(meta["target"]["joint"], tuple(meta["target"]["angles"]))
     if norm.x_mean.shape != (len(sensors),) or len(sensors) != cfg.n_sensors:
         raise ValueError("sensor count inconsistent")
-    if norm.y_mean.shape != (len(target.angles),) or len(target.angles) != cfg.n_angles:
+    if cfg.output not in OUTPUTS:
+        raise ValueError(f"unknown output {cfg.output!r}")
+    if cfg.output == "direction" and sorted(target.angles) != sorted(DIRECTION_ANGLES):
+        raise ValueError(f"a direction output needs the angles {list(DIRECTION_ANGLES)}")
+    if norm.y_mean.shape != (cfg.n_outputs,) or len(target.angles) != cfg.n_angles:
         raise ValueError("angle count inconsistent")
     return TrainedEstimator(
         config=cfg,
@@ -164,9 +168,9 @@ def _attach_classical(path: Path, est: TrainedEstimator, arrays: dict[str, np.nd
         raise CheckpointError(f"{path}: classical weights missing ({exc})") from None
     s, k, m = est.config.n_sensors, model.thresholds.shape[0], model.alphas.shape[0]
     n_features = 1 + s + s * (s + 1) // 2 + s * k + s * m
-    if model.weights.shape != (n_features, est.config.n_angles):
+    if model.weights.shape != (n_features, est.config.n_outputs):
         raise CheckpointError(f"{path}: classical weights have shape {model.weights.shape}, "
-                              f"expected {(n_features, est.config.n_angles)}")
+                              f"expected {(n_features, est.config.n_outputs)}")
     est.classical = model
 
 

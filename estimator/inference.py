@@ -7,38 +7,42 @@ The engine reproduces :meth:`TrainedEstimator.predict_block` frame by frame:
 - the window: a ring buffer written twice (positions k and k + span), so the newest ``span``
   frames are always one contiguous view; the first frame fills the whole ring, which is the
   edge padding used in training and evaluation;
-- the LSTM is re-run over the window at every frame (10 steps by default). Carrying the LSTM
-  state from frame to frame would NOT be equivalent: the training model restarts its LSTM at
-  the oldest frame of every window.
+- a windowed model's LSTM is re-run over the window at every frame (10 steps by default).
+  Carrying the LSTM state from frame to frame would NOT be equivalent: the training model
+  restarts its LSTM at the oldest frame of every window. A stateful ENNet
+  (``config.stateful``) is trained that way: its state is carried, one LSTM step per frame;
+- a ``direction`` output (the humerus direction) is turned into θ/φ after the network.
 
 Backends (the default is :func:`default_backend`: ``onnxruntime`` when it is installed — the
 fastest back to back, level with numpy at the live 250 Hz pace, docs/estimator.md — else
 ``numpy``):
 - ``onnxruntime``: a hand-built ONNX graph (:mod:`exohil.estimator.onnx_graph`) in ONNX Runtime,
-  one thread, input/output bound once with ``io_binding``. ENNet, LNNet, ANN and CNN. Needs the
-  optional ``onnxruntime`` and ``onnx`` packages.
+  one thread, input/output bound once with ``io_binding``. Windowed ENNet, LNNet, ANN and CNN
+  (not the stateful ENNet). Needs the optional ``onnxruntime`` and ``onnx`` packages.
 - ``numpy`` (fallback): hand-written float32 LSTM/MLP with preallocated buffers — no
   array allocation per frame in steady state; input normalisation, biases and output
   de-normalisation are folded into the weights (layers from :mod:`exohil.estimator.weights`,
   folding by :class:`~exohil.estimator.trained.Normalisation`). The input projection
   x·W_ih + b of each frame is computed once, when the frame arrives, and kept in the ring with
   the frame. ENNet, LNNet (S independent LSTMs, batched), ANN and classical run here; CNN does
-  not (use ``torch``). Neither this nor ``onnxruntime`` imports torch.
+  not (use ``torch``). A stateful ENNet runs one LSTM step per frame from the held state.
+  Neither this nor ``onnxruntime`` imports torch.
 - ``torch``: the checkpoint's module (built from its weights then, importing torch) in eager
   mode under ``inference_mode``, one thread.
-- ``torchscript``: the same module traced with ``torch.jit.trace``.
+- ``torchscript``: the same module traced with ``torch.jit.trace`` (windowed models).
 
 ``push`` returns a view of an internal buffer that the next call overwrites; copy it to keep it.
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from functools import partial
 
 import numpy as np
 
-from exohil.estimator.trained import TrainedEstimator
+from exohil.estimator.trained import DIRECTION_ANGLES, TrainedEstimator
 from exohil.estimator.weights import dense_layers, lstm_weights
 
 BACKENDS = ("numpy", "torch", "torchscript", "onnxruntime")
@@ -57,11 +61,19 @@ class StreamingEstimator:
             raise ValueError("the numpy backend has no CNN; use backend='torch'")
         if backend != "numpy" and est.kind == "classical":
             raise ValueError("the classical model runs on the numpy backend only")
+        if backend in ("onnxruntime", "torchscript") and est.config.stateful:
+            raise ValueError(f"the {backend} backend runs windowed models only; a stateful "
+                             "ENNet runs on numpy or torch")
         if backend == "onnxruntime" and not onnxruntime_available():
             raise ValueError("backend 'onnxruntime' needs the onnxruntime and onnx packages")
         self.est = est
         self.backend = backend
         self._offset_frames = est.offset_frames
+        self._direction = est.config.output == "direction"
+        if self._direction:
+            th, ph = (est.target.angles.index(a) for a in DIRECTION_ANGLES)
+            self._theta_phi = (th, ph)
+            self._angles = np.zeros(2)
         self._x = np.zeros(est.config.n_sensors)
         self._base_sum = np.zeros(est.config.n_sensors)
         self._base = np.zeros(est.config.n_sensors)
@@ -86,7 +98,15 @@ class StreamingEstimator:
                 np.divide(self._base_sum, self._count + 1, out=self._base)
             x -= self._base
         self._count += 1
-        return self._runner.step(x, first=self._count == 1)
+        out = self._runner.step(x, first=self._count == 1)
+        if not self._direction:
+            return out
+        # the humerus direction → θ, φ in degrees (kinematics.humerus_angles, in scalars)
+        dx, dy, dz = float(out[0]), float(out[1]), float(out[2])
+        th, ph = self._theta_phi
+        self._angles[th] = math.degrees(math.atan2(dx, dz))
+        self._angles[ph] = math.degrees(math.atan2(math.hypot(dx, dz), -dy))
+        return self._angles
 
 
 class _Normaliser:
@@ -96,7 +116,7 @@ class _Normaliser:
     def __init__(self, est: TrainedEstimator) -> None:
         self.norm = est.norm
         self.z = np.zeros(est.config.n_sensors)
-        self.out = np.zeros(est.config.n_angles)
+        self.out = np.zeros(est.config.n_outputs)
 
     def inputs(self, x: np.ndarray) -> np.ndarray:
         return self.norm.x(x, out=self.z)
@@ -200,14 +220,16 @@ class _NumpyRecurrentRunner:
         self.w_ih_sensorwise = np.ascontiguousarray(self.w_ih[:, 0, :])
         self.w_hh = np.ascontiguousarray(lstm.w_hh, dtype=f32)  # (G, H, 4H)
         self.bias = np.ascontiguousarray(lstm.bias, dtype=f32)  # (G, 4H)
+        self.stateful = est.config.stateful
         self.ring = _Ring(est.config.window, est.config.dilation, (self.groups, 4 * hidden))
         h = hidden
         self.buf = np.zeros((self.groups, 5 * h), dtype=f32)
         self.gates = self.buf[:, h:]
         self.gg, self.fio = self.buf[:, h : 2 * h], self.buf[:, 2 * h :]
         self.c, self.cg, self.fi = self.buf[:, :h], self.buf[:, : 2 * h], self.buf[:, 2 * h : 4 * h]
-        self.i, self.o = self.buf[:, 3 * h : 4 * h], self.buf[:, 4 * h :]
+        self.o = self.buf[:, 4 * h :]
         self.prod = np.zeros((self.groups, 2 * h), dtype=f32)
+        self.prod_f, self.prod_i = self.prod[:, :h], self.prod[:, h:]
         self.tmp = np.zeros((self.groups, h), dtype=f32)
         # hidden states of all groups, flat, followed by the constant 1 the head's bias needs
         self.h_aug = np.ones(self.groups * h + 1, dtype=f32)
@@ -239,30 +261,30 @@ class _NumpyRecurrentRunner:
 
     def step(self, x: np.ndarray, first: bool) -> np.ndarray:
         self._project(x)
-        window = self.ring.push(self.xp, first)
-        hd, tanh, expit, multiply = self.hidden, np.tanh, self.expit, np.multiply
-        gates, gg, fio, c, cg, fi, i, o = (self.gates, self.gg, self.fio, self.c, self.cg,
-                                           self.fi, self.i, self.o)
-        h, prod, tmp = self.h, self.prod, self.tmp
-        prod_f, prod_i = prod[:, :hd], prod[:, hd:]
-        # step 0: h = c = 0, so the gates are the input projection and c = i·g̃
-        gates[:] = window[0]
-        tanh(gg, out=gg)
-        expit(fio, out=fio)
-        multiply(i, gg, out=c)
-        tanh(c, out=tmp)
-        multiply(o, tmp, out=h)
-        recurrent = self._recurrent
-        for xp in window[1:]:
-            recurrent()  # gates = h·W_hh
-            gates += xp
-            tanh(gg, out=gg)
-            expit(fio, out=fio)
-            multiply(fi, cg, out=prod)  # [f·c, i·g̃]
-            np.add(prod_f, prod_i, out=c)
-            tanh(c, out=tmp)
-            multiply(o, tmp, out=h)
+        if self.stateful:  # one step on from the state of the previous frame
+            if first:
+                self._zero_state()
+            self._advance(self.xp)
+        else:  # the whole window from a zero state
+            self._zero_state()
+            for xp in self.ring.push(self.xp, first):
+                self._advance(xp)
         return self.head(self.h_aug)
+
+    def _zero_state(self) -> None:
+        self.c[:] = 0.0
+        self.h[:] = 0.0
+
+    def _advance(self, xp: np.ndarray) -> None:
+        """One LSTM step from the held (h, c) with input projection ``xp``."""
+        self._recurrent()  # gates = h·W_hh
+        self.gates += xp
+        np.tanh(self.gg, out=self.gg)
+        self.expit(self.fio, out=self.fio)
+        np.multiply(self.fi, self.cg, out=self.prod)  # [f·c, i·g̃]
+        np.add(self.prod_f, self.prod_i, out=self.c)
+        np.tanh(self.c, out=self.tmp)
+        np.multiply(self.o, self.tmp, out=self.h)
 
 
 class _NumpyANNRunner:
@@ -323,6 +345,8 @@ class _TorchRunner:
                 warnings.simplefilter("ignore", DeprecationWarning)
                 net = torch.jit.trace(net, torch.zeros(1, cfg.window, cfg.n_sensors))
         self.net = net
+        self.stateful = cfg.stateful
+        self.state = None
         self.xbuf = torch.zeros(1, cfg.window, cfg.n_sensors)
         self.xview = self.xbuf.numpy()
 
@@ -330,6 +354,11 @@ class _TorchRunner:
         self.ring.reset()
 
     def step(self, x: np.ndarray, first: bool) -> np.ndarray:
+        if self.stateful:
+            self.xview[0, 0] = self.norm.inputs(x)
+            with self.torch.inference_mode():
+                y, self.state = self.net.sequence(self.xbuf, None if first else self.state)
+            return self.norm.outputs(y.numpy()[0, 0])
         win = self.ring.push(self.norm.inputs(x), first)
         self.xview[0, -win.shape[0] :] = win
         with self.torch.inference_mode():
@@ -373,8 +402,8 @@ class _OrtRunner:
             self.win_view = self.inp[0].T
         else:
             self.win_view = self.inp.reshape(-1, cfg.n_sensors)
-        self.y = np.zeros((1, cfg.n_angles), dtype=np.float32)
-        self.out = np.zeros(cfg.n_angles)
+        self.y = np.zeros((1, cfg.n_outputs), dtype=np.float32)
+        self.out = np.zeros(cfg.n_outputs)
         self.binding = self.session.io_binding()
         self._ort_values = (ort.OrtValue.ortvalue_from_numpy(self.inp),
                             ort.OrtValue.ortvalue_from_numpy(self.y))
@@ -392,12 +421,12 @@ class _OrtRunner:
 
 
 def default_backend(est: TrainedEstimator) -> str:
-    """``onnxruntime`` when installed and ``est`` is a network, else ``numpy`` (``torch`` for
-    a CNN, which the numpy engine does not run).
+    """``onnxruntime`` when installed and ``est`` is a windowed network, else ``numpy``
+    (``torch`` for a CNN, which the numpy engine does not run).
 
     ONNX Runtime measured 1.7× faster than numpy back to back and level with it at the live
     250 Hz pace (docs/estimator.md), so it is never the slower choice."""
-    if est.kind != "classical" and onnxruntime_available():
+    if est.kind != "classical" and not est.config.stateful and onnxruntime_available():
         return "onnxruntime"
     return "torch" if est.kind == "cnn" else "numpy"  # the numpy engine has no CNN
 

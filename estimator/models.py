@@ -6,7 +6,9 @@ the checkpoint (:mod:`exohil.estimator.checkpoint`). The configuration and the p
 of each kind are in :mod:`exohil.estimator.architecture`, which needs no torch.
 
 - ENNet (early fusion, Varghese et al.): one LSTM over all S sensors per time step, its last
-  hidden state → dense 512-256-128-64-32 (ReLU) → linear A outputs.
+  hidden state → dense 512-256-128-64-32 (ReLU) → linear A outputs. Stateful ENNet
+  (``cfg.stateful``): the same network, its LSTM state carried over the whole stream, so every
+  frame's hidden state goes through the head (:meth:`ENNet.sequence`).
 - LNNet (late fusion): one LSTM per sensor (input size 1), last hidden states concatenated →
   the same dense stack (the S LSTMs run batched, see :class:`GroupedLSTM`).
 - ANN: memoryless MLP on the newest frame only (the paper's baseline) → the same dense stack.
@@ -41,11 +43,18 @@ class ENNet(nn.Module):
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__()
         self.lstm = nn.LSTM(cfg.n_sensors, cfg.hidden, batch_first=True)
-        self.head = dense_head(cfg.hidden, cfg.dense, cfg.n_angles)
+        self.head = dense_head(cfg.hidden, cfg.dense, cfg.n_outputs)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         _, (h, _) = self.lstm(x)
         return self.head(h[-1])
+
+    def sequence(self, x: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None,
+                 ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
+        """Stateful use: outputs of every frame (B, T, A) of streams x (B, T, S) that go on
+        from ``state`` (None: the streams start here), and the state after their last frame."""
+        hs, state = self.lstm(x, state)
+        return self.head(hs), state
 
 
 class GroupedLSTM(nn.Module):
@@ -86,7 +95,7 @@ class LNNet(nn.Module):
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__()
         self.lstm = GroupedLSTM(cfg.n_sensors, cfg.hidden)
-        self.head = dense_head(cfg.hidden * cfg.n_sensors, cfg.dense, cfg.n_angles)
+        self.head = dense_head(cfg.hidden * cfg.n_sensors, cfg.dense, cfg.n_outputs)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(self.lstm(x))
@@ -97,7 +106,7 @@ class ANN(nn.Module):
 
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__()
-        self.head = dense_head(cfg.n_sensors, cfg.dense, cfg.n_angles)
+        self.head = dense_head(cfg.n_sensors, cfg.dense, cfg.n_outputs)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(x[:, -1, :])
@@ -112,7 +121,7 @@ class CNN(nn.Module):
             nn.Conv1d(cfg.n_sensors, cfg.hidden, CONV_KERNEL, padding=CONV_KERNEL // 2), nn.ReLU(),
             nn.Conv1d(cfg.hidden, cfg.hidden, CONV_KERNEL, padding=CONV_KERNEL // 2), nn.ReLU(),
         )
-        self.head = dense_head(cfg.hidden * cfg.window, cfg.dense, cfg.n_angles)
+        self.head = dense_head(cfg.hidden * cfg.window, cfg.dense, cfg.n_outputs)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         z = self.conv(x.transpose(1, 2))

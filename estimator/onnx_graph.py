@@ -77,6 +77,8 @@ def build_onnx_model(est: TrainedEstimator):
 
     if est.kind == "classical" or not est.has_network:
         raise ValueError("the classical model has no ONNX graph; use backend='numpy'")
+    if est.config.stateful:
+        raise ValueError("a stateful ENNet has no ONNX graph; use backend='numpy'")
     shape = input_shape(est)
     state = est.weights()
     g = _Graph()
@@ -91,7 +93,7 @@ def build_onnx_model(est: TrainedEstimator):
         g.nodes, f"exohil_{est.kind}",
         [helper.make_tensor_value_info(INPUT_NAME, TensorProto.FLOAT, list(shape))],
         [helper.make_tensor_value_info(OUTPUT_NAME, TensorProto.FLOAT,
-                                       [1, est.config.n_angles])],
+                                       [1, est.config.n_outputs])],
         initializer=g.inits)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
                               producer_name="exohil", ir_version=IR_VERSION)

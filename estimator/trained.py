@@ -4,8 +4,12 @@ Pipeline for one block of sensor frames (recording units, e.g. mm):
 1. optional per-recording offset removal (causal initial rest value, done when the blocks are
    made — :func:`exohil.estimator.dataset.recording_blocks` with ``offset_frames``);
 2. per-sensor normalisation z = (x − x_mean) / x_std (training statistics);
-3. the model on edge-padded causal windows (or the classical operators on the block);
-4. de-normalisation of the outputs: angle = ŷ · y_std + y_mean, degrees.
+3. the model on edge-padded causal windows, or (stateful ENNet) on the whole block from a zero
+   state, or the classical operators on the block;
+4. de-normalisation of the outputs: ŷ · y_std + y_mean;
+5. for a ``direction`` output (a shoulder θ/φ target, see
+   :data:`~exohil.estimator.architecture.OUTPUTS`), the humerus direction → θ/φ
+   (:meth:`TrainedEstimator.decode`); angles in degrees.
 """
 
 from __future__ import annotations
@@ -18,6 +22,10 @@ from exohil.estimator.architecture import ModelConfig
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import Block, TargetSpec
 from exohil.estimator.windows import block_windows
+from exohil.kinematics import humerus_angles, humerus_direction
+
+#: The shoulder angles a direction output stands for: plane of elevation θ and elevation φ.
+DIRECTION_ANGLES = ("elv_angle", "shoulder_elv")
 
 #: Frames per forward pass when predicting a long block.
 PREDICT_BATCH = 4096
@@ -33,10 +41,13 @@ class Normalisation:
     y_std: np.ndarray
 
     @classmethod
-    def fit(cls, blocks: list[Block]) -> Normalisation:
-        x = np.concatenate([b.x for b in blocks])
-        y = np.concatenate([b.y for b in blocks])
-        return cls(x.mean(0), _safe_std(x), y.mean(0), _safe_std(y))
+    def fit(cls, x: np.ndarray, y: np.ndarray, scale_y: bool = True) -> Normalisation:
+        """Statistics of training sensors ``x`` (N, S) and network targets ``y`` (N, K);
+        ``scale_y`` False leaves the targets as they are (mean 0, std 1: a unit direction
+        vector, whose squared error is then the squared chord between directions)."""
+        if scale_y:
+            return cls(x.mean(0), _safe_std(x), y.mean(0), _safe_std(y))
+        return cls(x.mean(0), _safe_std(x), np.zeros(y.shape[1]), np.ones(y.shape[1]))
 
     def x(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Normalised sensors z = (x − x_mean) / x_std (into ``out`` when given: no allocation,
@@ -135,6 +146,25 @@ class TrainedEstimator:
     def kind(self) -> str:
         return self.config.kind
 
+    def encode(self, angles: np.ndarray) -> np.ndarray:
+        """Network targets (N, K) from target angles (N, A), degrees: the angles themselves,
+        or for a direction output the unit humerus direction (thorax frame)."""
+        if self.config.output != "direction":
+            return angles
+        th, ph = (self.target.angles.index(a) for a in DIRECTION_ANGLES)
+        return humerus_direction(np.deg2rad(angles[:, th]), np.deg2rad(angles[:, ph]))
+
+    def decode(self, outputs: np.ndarray) -> np.ndarray:
+        """Angles (N, A), degrees, from de-normalised network outputs (N, K): the inverse of
+        :meth:`encode` (θ is 0 where the direction is vertical, its singular pose)."""
+        if self.config.output != "direction":
+            return outputs
+        angles = np.empty((outputs.shape[0], 2))
+        theta, phi = humerus_angles(outputs)
+        th, ph = (self.target.angles.index(a) for a in DIRECTION_ANGLES)
+        angles[:, th], angles[:, ph] = np.rad2deg(theta), np.rad2deg(phi)
+        return angles
+
     @property
     def network(self) -> object | None:
         """The torch module, built from the NumPy weights at the first read (imports torch);
@@ -163,21 +193,33 @@ class TrainedEstimator:
 
     def predict_block(self, block: Block) -> np.ndarray:
         """(N, A) angle estimates in degrees for every frame of one block (the network runs in
-        torch)."""
+        torch; a stateful ENNet starts from a zero state at the block's first frame)."""
         z = self.norm.x(block.x)
         if self.classical is not None:
-            return self.norm.y_inverse(self.classical.predict(z))
+            return self.decode(self.norm.y_inverse(self.classical.predict(z)))
+        return self.decode(self.norm.y_inverse(self.network_outputs(z.astype(np.float32))))
+
+    def network_outputs(self, z: np.ndarray) -> np.ndarray:
+        """Normalised network outputs (N, K) for one block's normalised sensors z (N, S),
+        float32, in torch (inference mode, the module in eval mode)."""
         import torch
 
         net = self.network
         assert isinstance(net, torch.nn.Module)
         net.eval()
-        wins = block_windows(z.astype(np.float32), self.config.window, self.config.dilation)
-        out = np.empty((len(block), self.config.n_angles), dtype=np.float64)
+        out = np.empty((z.shape[0], self.config.n_outputs), dtype=np.float64)
         with torch.inference_mode():
-            for s in range(0, len(block), PREDICT_BATCH):
+            if self.config.stateful:
+                state = None
+                for s in range(0, z.shape[0], PREDICT_BATCH):
+                    y, state = net.sequence(torch.from_numpy(z[None, s : s + PREDICT_BATCH]),
+                                            state)
+                    out[s : s + PREDICT_BATCH] = y[0]
+                return out
+            wins = block_windows(z, self.config.window, self.config.dilation)
+            for s in range(0, z.shape[0], PREDICT_BATCH):
                 out[s : s + PREDICT_BATCH] = net(torch.from_numpy(wins[s : s + PREDICT_BATCH]))
-        return self.norm.y_inverse(out)
+        return out
 
     def predict(self, blocks: list[Block]) -> list[np.ndarray]:
         """Estimates (degrees) for each block."""

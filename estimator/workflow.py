@@ -11,7 +11,7 @@ Splits (documented in docs/estimator.md):
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from exohil.estimator.dataset import (
@@ -22,6 +22,7 @@ from exohil.estimator.dataset import (
     recording_blocks,
     resolve_target,
 )
+from exohil.estimator.defaults import DEFAULT_HIDDEN, DEFAULT_WINDOW, MODEL_NAMES
 from exohil.estimator.evaluation import evaluate
 from exohil.estimator.splits import Split, cut_at_segments, time_block_split, trial_split
 from exohil.estimator.trained import TrainedEstimator
@@ -29,8 +30,20 @@ from exohil.estimator.training import TrainConfig, train
 from exohil.formats.digest import sha256_file
 from exohil.formats.recording import Recording
 
-#: Default temporal-encoder width per model kind (LSTM hidden size; CNN channels).
-DEFAULT_HIDDEN = {"ennet": 64, "lnnet": 32, "cnn": 32, "ann": 64, "classical": 0}
+
+def model_config(name: str, base: TrainConfig, hidden: int | None = None) -> TrainConfig:
+    """The training configuration of model ``name`` (one of
+    :data:`~exohil.estimator.defaults.MODEL_NAMES`): ``base`` with the model's kind and
+    its defaults (:mod:`exohil.estimator.defaults`) wherever ``base`` or ``hidden`` leave a
+    setting open (None)."""
+    if name not in MODEL_NAMES:
+        raise ValueError(f"unknown model {name!r}; choose from {MODEL_NAMES}")
+    window, dilation = DEFAULT_WINDOW.get(name, (1, 1))
+    stateful = name == "ennet-stateful"
+    return replace(base, kind=name.removesuffix("-stateful"), stateful=stateful,
+                   hidden=hidden or DEFAULT_HIDDEN[name],
+                   window=1 if stateful else base.window or window,
+                   dilation=1 if stateful else base.dilation or dilation)
 
 
 @dataclass
@@ -107,7 +120,7 @@ def compare_models(
     """Train every model kind on the same split and score each on its test part."""
     results: list[ModelResult] = []
     for kind in kinds:
-        cfg = TrainConfig(**{**base.__dict__, "kind": kind, "hidden": DEFAULT_HIDDEN[kind]})
+        cfg = model_config(kind, base)
         est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
                     sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress)
         test = evaluate(est, split.test)

@@ -23,7 +23,12 @@ from exohil.harness.cli_types import (
     refuse_overwriting_inputs,
 )
 
-MODEL_CHOICES = ("ennet", "lnnet", "ann", "cnn", "classical")
+from exohil.estimator.architecture import OUTPUTS
+from exohil.estimator.defaults import DEFAULT_WINDOW, MODEL_NAMES
+
+#: ``--model`` names: the kinds, and ``ennet-stateful`` (ENNet carrying its LSTM state)
+MODEL_CHOICES = MODEL_NAMES
+OUTPUT_CHOICES = ("auto", *OUTPUTS)
 
 _recordings = click.argument("recordings", nargs=-1, required=True, type=InputFile())
 
@@ -61,16 +66,21 @@ def _common_training_options(fn):
     options = [
         click.option("--seed", type=Seed(), default=0, show_default=True,
                      help="Seed of initialisation and shuffling."),
-        click.option("--time-budget", type=Finite(1.0, MAX_DURATION_S), default=600.0,
+        click.option("--time-budget", type=Finite(1.0, MAX_DURATION_S), default=300.0,
                      show_default=True, help="Wall-clock limit per model, seconds."),
         click.option("--max-epochs", type=Count(1, MAX_EPOCHS), default=10_000,
                      show_default=True, help="Epoch limit (use for bit-reproducible runs)."),
         click.option("--patience", type=Count(1, MAX_EPOCHS), default=25, show_default=True,
                      help="Early stopping: epochs without validation improvement."),
-        click.option("--window", type=Count(1, MAX_WINDOW), default=10, show_default=True,
-                     help="Frames per window (n)."),
-        click.option("--dilation", type=Count(1, MAX_DILATION), default=1, show_default=True,
-                     help="Frame step inside the window (window spans (n-1)·dilation+1 frames)."),
+        click.option("--window", type=Count(1, MAX_WINDOW), help="Frames per window (n); "
+                     "default per model, docs/estimator.md (ennet and lnnet "
+                     f"{DEFAULT_WINDOW['ennet'][0]}, cnn {DEFAULT_WINDOW['cnn'][0]})."),
+        click.option("--dilation", type=Count(1, MAX_DILATION), help="Frame step inside the "
+                     "window (it spans (n-1)·dilation+1 frames); default per model (ennet and "
+                     f"lnnet {DEFAULT_WINDOW['ennet'][1]}, cnn {DEFAULT_WINDOW['cnn'][1]})."),
+        click.option("--output", type=click.Choice(OUTPUT_CHOICES), default="auto",
+                     show_default=True, help="What the network learns: the humerus direction "
+                     "for a shoulder θ/φ target (auto), or the target angles themselves."),
         click.option("--joint", type=Name(), help="Mocap joint to estimate (default: "
                      "shoulder, or the recording's only joint)."),
         click.option("--angles", type=NameList(), help="Comma-separated angle fields "
@@ -116,11 +126,11 @@ def _workflow():
     return workflow
 
 
-def _base_config(seed, time_budget, max_epochs, patience, window, dilation):
+def _base_config(seed, time_budget, max_epochs, patience, window, dilation, output):
     from exohil.estimator.training import TrainConfig
 
     return TrainConfig(window=window, dilation=dilation, seed=seed, time_budget_s=time_budget,
-                       max_epochs=max_epochs, patience=patience)
+                       max_epochs=max_epochs, patience=patience, output=output)
 
 
 def _command_line() -> str:
@@ -140,7 +150,8 @@ def _command_line() -> str:
               "and store its metrics in the checkpoint (0 = train on everything).")
 @_common_training_options
 def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budget, max_epochs,
-                  patience, window, dilation, joint, angles, offset_frames, val_fraction):
+                  patience, window, dilation, output, joint, angles, offset_frames,
+                  val_fraction):
     """Train an estimator on RECORDING files (MCAP, format v1) and write a checkpoint.
 
     Adam (lr 1e-3, β 0.9/0.999), batch 500, MSE, early stopping on validation = the last
@@ -161,8 +172,10 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
                           val_fraction=val_fraction)
     if not split.train:
         raise click.ClickException("no labelled sensor frames to train on")
-    cfg = _base_config(seed, time_budget, max_epochs, patience, window, dilation)
-    cfg.kind, cfg.hidden = kind, hidden or wf.DEFAULT_HIDDEN[kind]
+    if kind == "ennet-stateful" and (window or dilation):
+        raise click.UsageError("a stateful ENNet has no window: drop --window/--dilation")
+    base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, output)
+    cfg = wf.model_config(kind, base, hidden)
     est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
                 sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress_printer())
     if split.test:
@@ -256,7 +269,7 @@ def _angle_limits(items: tuple[tuple[str, float], ...],
 @click.option("--test-fraction", type=Finite(0.05, 0.9), default=0.3,
               show_default=True, help="Within-recording split: test = last fraction.")
 @click.option("--models", type=NameList(MODEL_CHOICES),
-              default=",".join(("ann", "classical", "cnn", "lnnet", "ennet")),
+              default=",".join(("ann", "classical", "cnn", "lnnet", "ennet", "ennet-stateful")),
               show_default=True, help="Comma-separated model kinds, in table order.")
 @click.option("--out", type=OutputFile(),
               help="Markdown file to put the table into (e.g. docs/results.md).")
@@ -271,7 +284,7 @@ def _angle_limits(items: tuple[tuple[str, float], ...],
 @_common_training_options
 def table_command(train_paths, test_paths, test_fraction, models, out, section, title,
                   json_out, save_dir, seed, time_budget, max_epochs, patience, window,
-                  dilation, joint, angles, offset_frames, val_fraction):
+                  dilation, output, joint, angles, offset_frames, val_fraction):
     """Train every model on the same split and print the RMSE table (paper's Table I layout).
 
     Within recordings (default): each movement piece → first 70% train (its last 15% =
@@ -295,7 +308,7 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
                           test_fraction=test_fraction, val_fraction=val_fraction)
     if not split.train or not split.test:
         raise click.ClickException("the split has no training or no test frames")
-    base = _base_config(seed, time_budget, max_epochs, patience, window, dilation)
+    base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, output)
     results = wf.compare_models(split, data, kinds, base, offset_frames, progress_printer())
     names = ", ".join(p.name for p in train_paths)
     described = f"train {names}" + (
