@@ -1,19 +1,21 @@
 """Per-frame latency of the streaming estimator backends (``python -m benchmarks.bench_inference``).
 
-Builds ENNet (hidden 64, window 10, dense 512-256-128-64-32, 4 sensors → 2 angles; random
-weights: latency does not depend on their values) — or loads ``--checkpoint`` — then times
+Loads ``--checkpoint`` (default: the reference ENNet, ``fixtures/models/ennet.npz``; ``random``:
+an ENNet of hidden 64, window 10, dense 512-256-128-64-32 with random weights) and times
 ``StreamingEstimator.push`` for each backend over many frames and reports p50/p99/max in µs
 (``push.<backend>``, judged against the goal p99 ≤ 100 µs of docs/estimator.md) through
 :mod:`benchmarks.report`, after the library versions and load average. Warm-up frames are
 excluded. A last "fixed work" row times constant NumPy work of about the same duration: its p99
 shows how much of the tail is the machine rather than the engine. ``--pace-hz 250`` spaces the
 calls like the live 250 Hz stream instead of calling back to back (caches go cold between
-frames).
+frames). ``push.default_over_fixed_work.p99`` is the default backend's p99 over the baseline's
+(issue 11: at most 1.5 when paced at 250 Hz).
 """
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -26,11 +28,16 @@ from exohil.formats.measurement import (
     distribution,
 )
 
+#: the reference ENNet the demo and the conformance suite run
+REFERENCE_ENNET = Path(__file__).resolve().parent.parent / "fixtures" / "models" / "ennet.npz"
+
 if TYPE_CHECKING:
     from exohil.estimator.trained import TrainedEstimator
 
 #: docs/estimator.md, "Benchmark": goal p99 ≤ 100 µs per pushed frame, for every backend
 PUSH_LIMITS = {"p99": Limit(high=100.0, unit="us", inclusive=True)}
+#: issue 11: the default engine's p99 at most 1.5 × the fixed-work baseline's p99 of the same run
+BASELINE_RATIO_LIMIT = Limit(high=1.5, unit="ratio", inclusive=True)
 
 
 class Pushable(Protocol):
@@ -111,17 +118,20 @@ def time_push(engine: Pushable, frames: np.ndarray, warmup: int = 200,
 
 def main() -> None:
     from exohil.estimator.checkpoint import load_checkpoint
-    from exohil.estimator.inference import BACKENDS, StreamingEstimator
+    from exohil.estimator.inference import BACKENDS, StreamingEstimator, default_backend
 
     ap = parser(__doc__)
     ap.add_argument("--frames", type=positive_int, default=20_000,
                     help="timed frames per backend")
-    ap.add_argument("--checkpoint", help="time this checkpoint instead of a random ENNet")
+    ap.add_argument("--checkpoint", default=str(REFERENCE_ENNET),
+                    help="checkpoint to time (default: the reference ENNet, "
+                         "fixtures/models/ennet.npz); 'random' times a random-weight ENNet "
+                         "of hidden 64, window 10 and the paper's dense stack")
     ap.add_argument("--pace-hz", type=float, default=0.0,
                     help="one push every 1/HZ s like a live stream (e.g. 250); default: back "
                          "to back")
     args = ap.parse_args()
-    est = load_checkpoint(args.checkpoint) if args.checkpoint else random_estimator()
+    est = random_estimator() if args.checkpoint == "random" else load_checkpoint(args.checkpoint)
     rng = np.random.default_rng(0)
     frames = est.norm.x_mean + est.norm.x_std * rng.standard_normal((args.frames + 200,
                                                                       est.config.n_sensors))
@@ -129,10 +139,13 @@ def main() -> None:
     pacing = f"paced at {pace_hz:g} Hz" if pace_hz > 0 else "back to back"
     print(f"libraries: {library_versions()}")
     print(f"load average before: {load_average()}")
-    print(f"model: {est.kind} hidden {est.config.hidden} window {est.config.window} "
-          f"sensors {est.config.n_sensors} angles {est.config.n_angles}; {args.frames} frames; "
-          f"{pacing}")
+    cfg = est.config
+    memory = "carried state" if cfg.stateful else f"window {cfg.window}×{cfg.dilation}"
+    print(f"model: {args.checkpoint}: {est.kind} hidden {cfg.hidden} {memory} dense "
+          f"{'-'.join(map(str, cfg.dense))} sensors {cfg.n_sensors} outputs {cfg.n_outputs}; "
+          f"{args.frames} frames; {pacing}")
     measurements: list[Measurement] = []
+    p99 = {}
     for backend in BACKENDS:
         name = f"push.{backend}"
         try:
@@ -142,10 +155,16 @@ def main() -> None:
                                                  PUSH_LIMITS.get(stat))
                              for stat in DISTRIBUTION_STATS]
             continue
-        measurements += distribution(name, time_push(engine, frames, pace_hz=pace_hz), "us",
-                                     PUSH_LIMITS, note=pacing)
-    measurements += distribution("fixed_work", time_push(FixedWork(), frames, pace_hz=pace_hz),
-                                 "us", note=f"{pacing}; noise baseline")
+        times = time_push(engine, frames, pace_hz=pace_hz)
+        p99[backend] = float(np.percentile(times, 99))
+        measurements += distribution(name, times, "us", PUSH_LIMITS, note=pacing)
+    baseline = time_push(FixedWork(), frames, pace_hz=pace_hz)
+    measurements += distribution("fixed_work", baseline, "us", note=f"{pacing}; noise baseline")
+    default = default_backend(est)
+    if default in p99:
+        measurements.append(Measurement.judge(
+            "push.default_over_fixed_work.p99", p99[default] / np.percentile(baseline, 99),
+            "ratio", BASELINE_RATIO_LIMIT, f"default backend {default}; {pacing}"))
     print(f"load average after: {load_average()}")
     report("bench_inference", measurements, args.json)
 

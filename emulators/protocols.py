@@ -156,10 +156,15 @@ def _azimuth_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> None
             path.hold(rng.uniform(0.2, 0.8))
 
 
+#: Elevations (deg) of the fixed-elevation sweeps of the plane of elevation: where the plane is
+#: observable (at φ near 0 moving θ moves nothing, so a sweep there would not be data).
+SWEEP_ELEVATIONS_DEG = (30.0, 50.0, 70.0, 90.0, 120.0)
+
+
 def _elevation_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> None:
-    for phi in (20.0, 40.0, 60.0, 75.0, 90.0):
+    for phi in SWEEP_ELEVATIONS_DEG:
         speed = rng.uniform(35.0, 80.0)
-        path.move(0.0, 0.0, 0.5)
+        path.move(0.0, 0.0, 1.0)  # the plane turns while the arm hangs
         path.move_at(0.0, phi, 45.0)
         for _ in range(2):
             path.move_at(-40.0, phi, speed)

@@ -10,5 +10,20 @@ MODEL_NAMES = ("ennet", "ennet-stateful", "lnnet", "ann", "cnn", "classical")
 #: Temporal-encoder width per model name (LSTM hidden size; per sensor for LNNet; CNN channels).
 DEFAULT_HIDDEN = {"ennet": 64, "ennet-stateful": 64, "lnnet": 32, "cnn": 32, "ann": 64,
                   "classical": 0}
-#: (frames per window, dilation) per windowed model name.
-DEFAULT_WINDOW = {"ennet": (10, 12), "lnnet": (10, 12), "cnn": (10, 1)}
+#: Widths of the dense ReLU layers after the temporal encoder, every network (the paper's is
+#: 512-256-128-64-32, ``architecture.DENSE_STACK``).
+DEFAULT_DENSE = (128, 64, 32)
+#: (frames per window, seconds the window spans) per windowed model name; the dilation follows
+#: from the sensor rate (:func:`default_window`), so a default means the same time at 250 Hz
+#: (the suit) and at 100 Hz (the graphene knee sleeve).
+DEFAULT_WINDOW = {"ennet": (10, 0.44), "lnnet": (10, 0.44), "cnn": (10, 0.036)}
+
+
+def default_window(name: str, rate_hz: float) -> tuple[int, int]:
+    """(frames per window, dilation) of model ``name`` at ``rate_hz`` frames per second:
+    the dilation that spans :data:`DEFAULT_WINDOW`'s seconds best, at least 1. Models
+    without a window get (1, 1)."""
+    if name not in DEFAULT_WINDOW:
+        return 1, 1
+    frames, span_s = DEFAULT_WINDOW[name]
+    return frames, max(1, round(span_s * rate_hz / (frames - 1)))

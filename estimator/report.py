@@ -19,7 +19,8 @@ METHOD_NAMES = {
     "cnn": "CNN (1-D temporal conv, after Ogata 2019)",
     "classical": "Classical (PI play operators + creep + quadratic, ridge)",
     "lnnet": "LNNet (late fusion LSTM)",
-    "ennet": "ENNet (early fusion LSTM)",
+    "ennet": "ENNet (early fusion LSTM over a window, as in the paper)",
+    "ennet-stateful": "ENNet, stateful (LSTM state carried frame to frame)",
 }
 
 
@@ -50,8 +51,9 @@ def comparison_markdown(
         info = r.estimator.info
         detail = " | ".join(f"{r.test['rmse'][a]:.2f} / {r.test['mae'][a]:.2f} / "
                             f"{r.test['max'][a]:.1f}" for a in angles)
-        window = "—" if r.kind in ("ann", "classical") else (
-            f"{r.estimator.config.window}×{r.estimator.config.dilation}")
+        cfg = r.estimator.config
+        window = ("—" if r.kind in ("ann", "classical") else "carried state"
+                  if cfg.stateful else f"{cfg.window}×{cfg.dilation}")
         epochs = f"{info.get('epochs', '—')} ({info.get('best_epoch', '—')})"
         lines.append(f"| {r.kind} | {detail} | {window} | {epochs} | "
                      f"{info.get('stopped_by', 'closed form')} | {info.get('train_seconds')} |")

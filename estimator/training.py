@@ -30,6 +30,7 @@ import numpy as np
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import Block, DatasetError, TargetSpec
 from exohil.estimator.evaluation import evaluate
+from exohil.estimator.defaults import DEFAULT_DENSE
 from exohil.estimator.models import MODEL_KINDS, ModelConfig, build_model
 from exohil.estimator.splits import Split
 from exohil.estimator.trained import DIRECTION_ANGLES, Normalisation, TrainedEstimator
@@ -42,10 +43,12 @@ GRADIENT_CLIP = 1.0
 #: streams per minibatch, their length, frames per backpropagated chunk, frames not scored at
 #: the start of a stream that starts inside a block, and the share that start at a block start.
 STREAMS_PER_BATCH = 64
-STREAM_FRAMES = 2_500
+STREAM_FRAMES = 1_250
 TBPTT_FRAMES = 50
 BURN_IN_FRAMES = 250
 FROM_START_SHARE = 0.1
+#: Stream batches per epoch at least (an epoch of long streams is few updates otherwise).
+MIN_STREAM_GROUPS = 4
 #: Least training data `train` accepts, seconds of frames at the sensor rate.
 MIN_TRAIN_SECONDS = 1.0
 
@@ -59,6 +62,7 @@ class TrainConfig:
     dilation: int | None = 1
     hidden: int = 64
     stateful: bool = False
+    dense: tuple[int, ...] = DEFAULT_DENSE
     output: str = "auto"  # "auto": a direction for a shoulder θ/φ target, else the angles
     batch_size: int = 500
     lr: float = 1e-3
@@ -103,7 +107,8 @@ def train(
     model_cfg = ModelConfig(cfg.kind, len(sensor_names), len(target.angles),
                             1 if stateful else cfg.window or 1,
                             1 if stateful else cfg.dilation or 1,
-                            cfg.hidden, output=output, stateful=stateful)
+                            cfg.hidden, dense=tuple(cfg.dense), output=output,
+                            stateful=stateful)
     est = TrainedEstimator(model_cfg, tuple(sensor_names), target,
                            Normalisation(np.zeros(0), np.ones(0), np.zeros(0), np.ones(0)),
                            offset_frames, sensor_rate_hz)
@@ -258,7 +263,8 @@ def _stream_batches(est: TrainedEstimator, tr: _Data, cfg: TrainConfig,
     state carried (detached) from chunk to chunk: each update sees as many arm poses as
     streams. A stream that starts inside a block starts from a zero state the true history
     would not give, so its first :data:`BURN_IN_FRAMES` frames are not scored. An epoch scores
-    about as many frames as the training part holds. Yields (loss, scored frames).
+    about as many frames as the training part holds, in at least :data:`MIN_STREAM_GROUPS`
+    batches of streams. Yields (loss, scored frames).
     """
     import torch
 
@@ -268,7 +274,7 @@ def _stream_batches(est: TrainedEstimator, tr: _Data, cfg: TrainConfig,
     lengths = stops - starts
     scored_per_group = STREAMS_PER_BATCH * max(1, min(STREAM_FRAMES, int(lengths.max()))
                                                - BURN_IN_FRAMES)
-    groups = max(1, int(np.ceil(len(tr) / scored_per_group)))
+    groups = max(MIN_STREAM_GROUPS, int(np.ceil(len(tr) / scored_per_group)))
 
     def group() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         block = rng.choice(len(starts), STREAMS_PER_BATCH, p=lengths / lengths.sum())

@@ -22,7 +22,7 @@ from exohil.estimator.dataset import (
     recording_blocks,
     resolve_target,
 )
-from exohil.estimator.defaults import DEFAULT_HIDDEN, DEFAULT_WINDOW, MODEL_NAMES
+from exohil.estimator.defaults import DEFAULT_HIDDEN, MODEL_NAMES, default_window
 from exohil.estimator.evaluation import evaluate
 from exohil.estimator.splits import Split, cut_at_segments, time_block_split, trial_split
 from exohil.estimator.trained import TrainedEstimator
@@ -31,14 +31,15 @@ from exohil.formats.digest import sha256_file
 from exohil.formats.recording import Recording
 
 
-def model_config(name: str, base: TrainConfig, hidden: int | None = None) -> TrainConfig:
+def model_config(name: str, base: TrainConfig, rate_hz: float,
+                 hidden: int | None = None) -> TrainConfig:
     """The training configuration of model ``name`` (one of
-    :data:`~exohil.estimator.defaults.MODEL_NAMES`): ``base`` with the model's kind and
-    its defaults (:mod:`exohil.estimator.defaults`) wherever ``base`` or ``hidden`` leave a
-    setting open (None)."""
+    :data:`~exohil.estimator.defaults.MODEL_NAMES`) for data at ``rate_hz``: ``base`` with
+    the model's kind and its defaults (:mod:`exohil.estimator.defaults`) wherever ``base``
+    or ``hidden`` leave a setting open (None)."""
     if name not in MODEL_NAMES:
         raise ValueError(f"unknown model {name!r}; choose from {MODEL_NAMES}")
-    window, dilation = DEFAULT_WINDOW.get(name, (1, 1))
+    window, dilation = default_window(name, rate_hz)
     stateful = name == "ennet-stateful"
     return replace(base, kind=name.removesuffix("-stateful"), stateful=stateful,
                    hidden=hidden or DEFAULT_HIDDEN[name],
@@ -120,7 +121,7 @@ def compare_models(
     """Train every model kind on the same split and score each on its test part."""
     results: list[ModelResult] = []
     for kind in kinds:
-        cfg = model_config(kind, base)
+        cfg = model_config(kind, base, data.rate_hz)
         est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
                     sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress)
         test = evaluate(est, split.test)

@@ -139,6 +139,27 @@ class NameList(Name):
         return text
 
 
+class Widths(click.ParamType):
+    """Comma-separated layer widths, e.g. ``512,256,128``: 1 to ``max_layers`` whole numbers,
+    each in [1, ``max_width``]; returned as a tuple of ints."""
+
+    name = "widths"
+
+    def __init__(self, max_width: int, max_layers: int) -> None:
+        self.max_width, self.max_layers = max_width, max_layers
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):  # already converted
+            return value
+        text = str(value)
+        parts = [part.strip() for part in text.split(",")]
+        if not 1 <= len(parts) <= self.max_layers:
+            self.fail(f"{text!r}: give 1 to {self.max_layers} comma-separated widths", param,
+                      ctx)
+        count = Count(1, self.max_width)
+        return tuple(count.convert(part, param, ctx) for part in parts)
+
+
 def _fail_unusable_path(kind: click.ParamType, value, param, ctx) -> None:
     """Refuse what no file system accepts: an empty path, a NUL byte, an over-long name."""
     text = os.fspath(value)

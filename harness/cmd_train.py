@@ -20,11 +20,12 @@ from exohil.harness.cli_types import (
     OutputDir,
     OutputFile,
     Seed,
+    Widths,
     refuse_overwriting_inputs,
 )
 
-from exohil.estimator.architecture import OUTPUTS
-from exohil.estimator.defaults import DEFAULT_WINDOW, MODEL_NAMES
+from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
+from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
 
 #: ``--model`` names: the kinds, and ``ennet-stateful`` (ENNet carrying its LSTM state)
 MODEL_CHOICES = MODEL_NAMES
@@ -39,6 +40,7 @@ MAX_EPOCHS = 1_000_000
 MAX_WINDOW = 1000
 MAX_DILATION = 100
 MAX_OFFSET_FRAMES = 1_000_000
+MAX_LAYERS = 16
 
 
 class AngleLimit(click.ParamType):
@@ -73,11 +75,16 @@ def _common_training_options(fn):
         click.option("--patience", type=Count(1, MAX_EPOCHS), default=25, show_default=True,
                      help="Early stopping: epochs without validation improvement."),
         click.option("--window", type=Count(1, MAX_WINDOW), help="Frames per window (n); "
-                     "default per model, docs/estimator.md (ennet and lnnet "
-                     f"{DEFAULT_WINDOW['ennet'][0]}, cnn {DEFAULT_WINDOW['cnn'][0]})."),
+                     f"default ennet and lnnet {DEFAULT_WINDOW['ennet'][0]}, cnn "
+                     f"{DEFAULT_WINDOW['cnn'][0]} (docs/estimator.md, Defaults)."),
         click.option("--dilation", type=Count(1, MAX_DILATION), help="Frame step inside the "
-                     "window (it spans (n-1)·dilation+1 frames); default per model (ennet and "
-                     f"lnnet {DEFAULT_WINDOW['ennet'][1]}, cnn {DEFAULT_WINDOW['cnn'][1]})."),
+                     "window (it spans (n-1)·dilation+1 frames); default: the step that spans "
+                     f"{DEFAULT_WINDOW['ennet'][1]:g} s for ennet and lnnet, "
+                     f"{DEFAULT_WINDOW['cnn'][1]:g} s for cnn, at the recording's rate."),
+        click.option("--dense", type=Widths(MAX_HIDDEN, MAX_LAYERS), help="Widths of the dense "
+                     "ReLU layers after the temporal encoder; default "
+                     f"{','.join(map(str, DEFAULT_DENSE))} (docs/estimator.md, Defaults; the "
+                     f"paper's is {','.join(map(str, DENSE_STACK))})."),
         click.option("--output", type=click.Choice(OUTPUT_CHOICES), default="auto",
                      show_default=True, help="What the network learns: the humerus direction "
                      "for a shoulder θ/φ target (auto), or the target angles themselves."),
@@ -126,11 +133,12 @@ def _workflow():
     return workflow
 
 
-def _base_config(seed, time_budget, max_epochs, patience, window, dilation, output):
+def _base_config(seed, time_budget, max_epochs, patience, window, dilation, dense, output):
     from exohil.estimator.training import TrainConfig
 
     return TrainConfig(window=window, dilation=dilation, seed=seed, time_budget_s=time_budget,
-                       max_epochs=max_epochs, patience=patience, output=output)
+                       max_epochs=max_epochs, patience=patience, output=output,
+                       dense=dense or DEFAULT_DENSE)
 
 
 def _command_line() -> str:
@@ -150,7 +158,7 @@ def _command_line() -> str:
               "and store its metrics in the checkpoint (0 = train on everything).")
 @_common_training_options
 def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budget, max_epochs,
-                  patience, window, dilation, output, joint, angles, offset_frames,
+                  patience, window, dilation, dense, output, joint, angles, offset_frames,
                   val_fraction):
     """Train an estimator on RECORDING files (MCAP, format v1) and write a checkpoint.
 
@@ -174,8 +182,9 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
         raise click.ClickException("no labelled sensor frames to train on")
     if kind == "ennet-stateful" and (window or dilation):
         raise click.UsageError("a stateful ENNet has no window: drop --window/--dilation")
-    base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, output)
-    cfg = wf.model_config(kind, base, hidden)
+    base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, dense,
+                        output)
+    cfg = wf.model_config(kind, base, data.rate_hz, hidden)
     est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
                 sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress_printer())
     if split.test:
@@ -284,7 +293,7 @@ def _angle_limits(items: tuple[tuple[str, float], ...],
 @_common_training_options
 def table_command(train_paths, test_paths, test_fraction, models, out, section, title,
                   json_out, save_dir, seed, time_budget, max_epochs, patience, window,
-                  dilation, output, joint, angles, offset_frames, val_fraction):
+                  dilation, dense, output, joint, angles, offset_frames, val_fraction):
     """Train every model on the same split and print the RMSE table (paper's Table I layout).
 
     Within recordings (default): each movement piece → first 70% train (its last 15% =
@@ -308,7 +317,8 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
                           test_fraction=test_fraction, val_fraction=val_fraction)
     if not split.train or not split.test:
         raise click.ClickException("the split has no training or no test frames")
-    base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, output)
+    base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, dense,
+                        output)
     results = wf.compare_models(split, data, kinds, base, offset_frames, progress_printer())
     names = ", ".join(p.name for p in train_paths)
     described = f"train {names}" + (

@@ -198,6 +198,9 @@ def fixed_bad_values(param: click.Parameter, tmp: Path) -> list[str]:
         return ["", "a", "-1", "3-1", "1,1", "1-", "0-100000", str(2**64), "1;2", "nan"]
     if isinstance(kind, Delimiter):
         return ["", ";;", "\n", "\r", '"', "\x00", "\x1b"]
+    if isinstance(kind, ct.Widths):
+        return ["", ",", "0", "-1", "1,,2", "64,", "1.5", "nan", "abc", str(kind.max_width + 1),
+                ",".join(["8"] * (kind.max_layers + 1)), *HUGE_INTEGERS]
     pytest.fail(f"{param.name}: no bad values for type {type(kind).__name__}; add them here")
 
 
@@ -265,6 +268,9 @@ def random_bad_values(param: click.Parameter, tmp: Path) -> st.SearchStrategy[st
         return st.text(min_size=2, max_size=5)
     if isinstance(kind, KeywordExpression):
         return st.sampled_from(["(", ")", "and", "or", "not", "a b", "a or", "(a"])
+    if isinstance(kind, ct.Widths):
+        width = st.one_of(st.integers(max_value=0), st.integers(min_value=kind.max_width + 1))
+        return st.lists(width, min_size=1, max_size=3).map(lambda ws: ",".join(map(str, ws)))
     pytest.fail(f"{param.name}: no bad values for type {type(kind).__name__}; add them here")
 
 

@@ -155,6 +155,14 @@ def _meta(text: str):
         '"kind": "ann"', '"kind": "rnn"')))(a), "unknown model kind 'rnn'"),
     (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
         '"hidden": 8', '"hidden": 0')))(a), "hidden = 0 is not a positive"),
+    (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
+        '"output": "direction"', '"output": "quaternion"')))(a), "unknown output"),
+    (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
+        '"stateful": false', '"stateful": true')))(a), "stateful is true only for an ENNet"),
+    (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
+        '"stateful": false', '"stateful": 1')))(a), "is not true or false"),
+    (lambda a: _set("meta", lambda m: _meta(m.tobytes().decode().replace(
+        '"shoulder_elv"]', '"shoulder_rot"]')))(a), "a direction output needs the angles"),
 ])
 def test_damaged_checkpoints_are_refused_not_evaluated(tmp_path, change, problem):
     path = _damaged(tmp_path, change)
