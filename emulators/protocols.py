@@ -156,9 +156,12 @@ def _azimuth_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> None
             path.hold(rng.uniform(0.2, 0.8))
 
 
-#: Elevations (deg) of the fixed-elevation sweeps of the plane of elevation: where the plane is
-#: observable (at φ near 0 moving θ moves nothing, so a sweep there would not be data).
-SWEEP_ELEVATIONS_DEG = (30.0, 50.0, 70.0, 90.0, 120.0)
+#: Elevations (deg) of the fixed-elevation sweeps of the plane of elevation, in the order
+#: swept: where the plane is observable (at φ near 0 moving θ moves nothing, so a sweep there
+#: would not be data). The extremes come first, so that the end of the movement, which a
+#: within-recording split holds out for testing, stays inside the range its start covered
+#: (no other movement reaches 120°).
+SWEEP_ELEVATIONS_DEG = (30.0, 120.0, 50.0, 90.0, 70.0)
 
 
 def _elevation_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> None:

@@ -31,6 +31,18 @@ from exohil.kinematics import humerus_direction
 #: Shoulder elevation (deg) from which the plane of elevation counts as observable: below it
 #: θ is ill-defined (undefined at φ = 0), see docs/conventions.md.
 OBSERVABLE_ELEVATION_DEG = 20.0
+#: Angles that wrap around (deg): an estimate of −179° for a true 179° is 2° off, not 358°.
+CIRCULAR_ANGLES = ("elv_angle",)
+
+
+def angle_errors(estimates: np.ndarray, truth: np.ndarray, angles: Sequence[str]) -> np.ndarray:
+    """Estimate − truth (N, A), degrees, with the circular angles' errors wrapped into
+    [−180°, 180°)."""
+    err = estimates - truth
+    for j, name in enumerate(angles):
+        if name in CIRCULAR_ANGLES:
+            err[:, j] = (err[:, j] + 180.0) % 360.0 - 180.0
+    return err
 
 
 def error_stats(err: np.ndarray, angles: tuple[str, ...]) -> dict:
@@ -59,7 +71,7 @@ def evaluate_predictions(
         raise ValueError("one prediction per block, shaped like its targets, is needed")
     predicted = np.concatenate(predictions)
     truth = np.concatenate([b.y for b in blocks])
-    err = predicted - truth
+    err = angle_errors(predicted, truth, angles)
     labels = np.concatenate([b.segment for b in blocks])
     accuracy = {m.name: m.value for m in accuracy_measurements(predicted, truth, angles)}
     if min_angle:
@@ -118,8 +130,8 @@ class AccuracyTally:
         if self.shoulder:
             keep = true[:, self.angles.index("shoulder_elv")] >= OBSERVABLE_ELEVATION_DEG
         self.kept += int(keep.sum())
-        for j in range(len(self.angles)):
-            self.squares[j] += float(np.sum((est[keep, j] - true[keep, j]) ** 2))
+        err = angle_errors(est[keep], true[keep], self.angles)
+        self.squares += np.sum(err**2, axis=0)
         if self.shoulder and true.shape[0]:
             th, ph = self.angles.index("elv_angle"), self.angles.index("shoulder_elv")
             err = arm_direction_error_deg(est[:, th], est[:, ph], true[:, th], true[:, ph])

@@ -119,3 +119,13 @@ def test_a_stateful_ennet_takes_no_window(tmp_path, recording):
     assert result.exit_code == 2
     assert "a stateful ENNet has no window" in result.output
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_plane_of_elevation_errors_wrap_around():
+    from exohil.estimator.evaluation import accuracy_measurements, angle_errors
+
+    angles = ("elv_angle", "shoulder_elv")
+    est, truth = np.array([[-179.0, 50.0], [90.0, 50.0]]), np.array([[179.0, 50.0], [-90.0, 30.0]])
+    np.testing.assert_allclose(angle_errors(est, truth, angles), [[2.0, 0.0], [-180.0, 20.0]])
+    rmse = {m.name: m.value for m in accuracy_measurements(est, truth, angles)}
+    assert rmse["accuracy.rmse.elv_angle"] == pytest.approx(np.sqrt((4 + 180**2) / 2))
