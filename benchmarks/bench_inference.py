@@ -130,6 +130,8 @@ def main() -> None:
     ap.add_argument("--pace-hz", type=float, default=0.0,
                     help="one push every 1/HZ s like a live stream (e.g. 250); default: back "
                          "to back")
+    ap.add_argument("--backend", dest="backends", action="append", choices=BACKENDS,
+                    help="time only this backend (repeatable; default: every backend)")
     args = ap.parse_args()
     est = random_estimator() if args.checkpoint == "random" else load_checkpoint(args.checkpoint)
     rng = np.random.default_rng(0)
@@ -146,7 +148,7 @@ def main() -> None:
           f"{args.frames} frames; {pacing}")
     measurements: list[Measurement] = []
     p99 = {}
-    for backend in BACKENDS:
+    for backend in args.backends or BACKENDS:
         name = f"push.{backend}"
         try:
             engine = StreamingEstimator(est, backend)
