@@ -162,9 +162,11 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
                   val_fraction):
     """Train an estimator on RECORDING files (MCAP, format v1) and write a checkpoint.
 
-    Adam (lr 1e-3, β 0.9/0.999), batch 500, MSE, early stopping on validation = the last
-    --val-fraction of each movement segment of each recording (contiguous time blocks; no window
-    crosses a boundary). Progress goes to stderr. Example:
+    Adam (lr 1e-3, β 0.9/0.999), batch 500, MSE on the humerus direction for a shoulder θ/φ
+    target (on the angles otherwise), early stopping on the same MSE over validation = the
+    last --val-fraction of each movement segment of each recording (contiguous time blocks; no
+    window crosses a boundary). Each model's defaults (window, head) are in docs/estimator.md
+    and are stored in the checkpoint. Progress goes to stderr. Example:
 
     \b
         exohil train --model ennet fixtures/paper_protocol.mcap --out ennet.npz
@@ -173,6 +175,8 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     from exohil.estimator.evaluation import evaluate
     from exohil.estimator.training import progress_printer, train
 
+    if kind == "ennet-stateful" and (window or dilation):
+        raise click.UsageError("a stateful ENNet has no window: drop --window/--dilation")
     refuse_overwriting_inputs([("--out", out)], recordings)
     wf = _workflow()
     data = _load(recordings, joint, angles)
@@ -180,8 +184,6 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
                           val_fraction=val_fraction)
     if not split.train:
         raise click.ClickException("no labelled sensor frames to train on")
-    if kind == "ennet-stateful" and (window or dilation):
-        raise click.UsageError("a stateful ENNet has no window: drop --window/--dilation")
     base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, dense,
                         output)
     cfg = wf.model_config(kind, base, data.rate_hz, hidden)

@@ -71,17 +71,20 @@ def test_push_matches_batch_prediction(recording, backend, kind, dilation):
         engine.reset()
 
 
-def assert_same_estimates(est, streamed, reference):
-    """Angles equal to 1e-5°; for a direction output, the arm direction to 1e-3° (float32
-    outputs of a barely trained network are short vectors, and θ is ill-conditioned near
-    the vertical, so the angles themselves are compared where the elevation is 20°..160°)."""
+def assert_same_estimates(est, streamed, reference, atol=1e-5, direction_atol=1e-3,
+                          raised_atol=1e-2):
+    """Angles equal to ``atol`` degrees. For a direction output: the arm direction to
+    ``direction_atol`` and the angles to ``raised_atol`` where the elevation is 20°..160°
+    (the conversion to angles amplifies float32 rounding, most for θ near the vertical,
+    where θ is undefined; barely trained test networks also output short vectors)."""
     if est.config.output != "direction":
-        np.testing.assert_allclose(streamed, reference, rtol=0, atol=1e-5)  # degrees
+        np.testing.assert_allclose(streamed, reference, rtol=0, atol=atol)  # degrees
         return
     assert np.max(arm_direction_error_deg(streamed[:, 0], streamed[:, 1], reference[:, 0],
-                                          reference[:, 1])) < 1e-3
-    away = (reference[:, 1] > 20) & (reference[:, 1] < 160)
-    np.testing.assert_allclose(streamed[away], reference[away], rtol=0, atol=1e-2)
+                                          reference[:, 1])) < direction_atol
+    raised = (reference[:, 1] > 20) & (reference[:, 1] < 160)
+    assert raised.any()
+    np.testing.assert_allclose(streamed[raised], reference[raised], rtol=0, atol=raised_atol)
 
 
 def test_push_reuses_its_output_buffer(recording):
@@ -127,13 +130,15 @@ def test_demo_backend_choices_match_the_engine():
     assert set(option.type.choices) == {"auto", *BACKENDS}
 
 
-#: Largest |numpy engine − torch| (degrees) over the first frames of the held-out fixture
-#: recording, per committed model. Both run float32, so they differ by rounding alone
-#: (measured 1.5e-4° for the ENNet, 8.8e-6° on average, and 2.9e-5° for the ANN; torch's own
-#: batched and per-frame runs differ by 3.7e-5°). The ENNet's engine subtracts the sensor mean
+#: Largest numpy engine − torch difference (degrees) over the first 24 s of the held-out
+#: fixture recording, per committed model: of the arm direction, and of θ and φ where the
+#: elevation is 20°..160° (both models output the humerus direction; near the vertical θ is
+#: undefined and its float32 rounding is amplified without bound). Both run float32, so they
+#: differ by rounding alone (measured for the direction-output models: ENNet 3.4e-5° of arm
+#: direction, 3.9e-5° of θ; ANN 1.6e-5°, 2.3e-5°). The ENNet's engine subtracts the sensor mean
 #: in float64 and folds only the scale into the LSTM's input weights: folding the mean too made
-#: the raw sensors (≈ 550 mm, std ≈ 30) cancel in float32, 2.6e-3° off, which this bound
-#: catches.
+#: the raw sensors (≈ 550 mm, std ≈ 30) cancel in float32, 2.6e-3° off (the angle-output
+#: ENNet of before), which this bound catches.
 FIXTURE_TOLERANCE = {"ennet": 5e-4, "ann": 1e-4}
 
 
@@ -147,7 +152,8 @@ def test_numpy_engine_matches_torch_on_the_committed_models(name):
     root = Path(__file__).resolve().parents[1]
     rec = read_recording(root / "fixtures" / "paper_protocol_heldout.mcap")
     est = load_checkpoint(root / "fixtures" / "models" / f"{name}.npz")
-    raw = rec.sensors.values[:1500]
+    raw = rec.sensors.values[:6000]
     engines = {b: StreamingEstimator(est, b) for b in ("numpy", "torch")}
     out = {b: np.array([e.push(v).copy() for v in raw]) for b, e in engines.items()}
-    np.testing.assert_allclose(out["numpy"], out["torch"], rtol=0, atol=FIXTURE_TOLERANCE[name])
+    tolerance = FIXTURE_TOLERANCE[name]
+    assert_same_estimates(est, out["numpy"], out["torch"], tolerance, tolerance, tolerance)
