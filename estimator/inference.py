@@ -17,8 +17,9 @@ Backends (the default is :func:`default_backend`: ``onnxruntime`` when it is ins
 fastest back to back, level with numpy at the live 250 Hz pace, docs/estimator.md — else
 ``numpy``):
 - ``onnxruntime``: a hand-built ONNX graph (:mod:`exohil.estimator.onnx_graph`) in ONNX Runtime,
-  one thread, input/output bound once with ``io_binding``. Windowed ENNet, LNNet, ANN and CNN
-  (not the stateful ENNet). Needs the optional ``onnxruntime`` and ``onnx`` packages.
+  one thread, input/output bound once with ``io_binding``. ENNet (windowed and stateful: the
+  state goes in and out of the graph), LNNet, ANN and CNN. Needs the optional ``onnxruntime``
+  and ``onnx`` packages.
 - ``numpy`` (fallback): hand-written float32 LSTM/MLP with preallocated buffers — no
   array allocation per frame in steady state; input normalisation, biases and output
   de-normalisation are folded into the weights (layers from :mod:`exohil.estimator.weights`,
@@ -61,9 +62,9 @@ class StreamingEstimator:
             raise ValueError("the numpy backend has no CNN; use backend='torch'")
         if backend != "numpy" and est.kind == "classical":
             raise ValueError("the classical model runs on the numpy backend only")
-        if backend in ("onnxruntime", "torchscript") and est.config.stateful:
-            raise ValueError(f"the {backend} backend runs windowed models only; a stateful "
-                             "ENNet runs on numpy or torch")
+        if backend == "torchscript" and est.config.stateful:
+            raise ValueError("the torchscript backend runs windowed models only; a stateful "
+                             "ENNet runs on numpy, torch or onnxruntime")
         if backend == "onnxruntime" and not onnxruntime_available():
             raise ValueError("backend 'onnxruntime' needs the onnxruntime and onnx packages")
         self.est = est
@@ -382,6 +383,8 @@ class _OrtRunner:
         from exohil.estimator.onnx_graph import (
             INPUT_NAME,
             OUTPUT_NAME,
+            STATE_INPUTS,
+            STATE_OUTPUTS,
             build_onnx_model,
             input_shape,
         )
@@ -404,29 +407,52 @@ class _OrtRunner:
             self.win_view = self.inp.reshape(-1, cfg.n_sensors)
         self.y = np.zeros((1, cfg.n_outputs), dtype=np.float32)
         self.out = np.zeros(cfg.n_outputs)
-        self.binding = self.session.io_binding()
-        self._ort_values = (ort.OrtValue.ortvalue_from_numpy(self.inp),
-                            ort.OrtValue.ortvalue_from_numpy(self.y))
-        self.binding.bind_ortvalue_input(INPUT_NAME, self._ort_values[0])
-        self.binding.bind_ortvalue_output(OUTPUT_NAME, self._ort_values[1])
+        # A stateful ENNet's state lives in two (h, c) pairs bound crosswise to two bindings:
+        # each frame reads the state the previous frame wrote, with no copy.
+        stateful = cfg.stateful
+        self.states = [np.zeros((2, 1, 1, cfg.hidden), dtype=np.float32)
+                       for _ in range(2 if stateful else 0)]
+        self.bindings = []
+        self._ort_values = [ort.OrtValue.ortvalue_from_numpy(a) for a in (self.inp, self.y)]
+        for k in range(2 if stateful else 1):
+            binding = self.session.io_binding()
+            binding.bind_ortvalue_input(INPUT_NAME, self._ort_values[0])
+            binding.bind_ortvalue_output(OUTPUT_NAME, self._ort_values[1])
+            if stateful:
+                read, write = self.states[k], self.states[1 - k]
+                for j in range(2):
+                    values = (ort.OrtValue.ortvalue_from_numpy(read[j]),
+                              ort.OrtValue.ortvalue_from_numpy(write[j]))
+                    self._ort_values += values
+                    binding.bind_ortvalue_input(STATE_INPUTS[j], values[0])
+                    binding.bind_ortvalue_output(STATE_OUTPUTS[j], values[1])
+            self.bindings.append(binding)
+        self.turn = 0
 
     def reset(self) -> None:
         self.ring.reset()
 
     def step(self, x: np.ndarray, first: bool) -> np.ndarray:
         self.win_view[:] = self.ring.push(self.norm.inputs(x), first)
-        self.session.run_with_iobinding(self.binding)
+        if self.states:
+            if first:
+                self.turn = 0
+                self.states[0][:] = 0.0
+            self.session.run_with_iobinding(self.bindings[self.turn])
+            self.turn = 1 - self.turn
+        else:
+            self.session.run_with_iobinding(self.bindings[0])
         self.out[:] = self.y[0]
         return self.out
 
 
 def default_backend(est: TrainedEstimator) -> str:
-    """``onnxruntime`` when installed and ``est`` is a windowed network, else ``numpy``
-    (``torch`` for a CNN, which the numpy engine does not run).
+    """``onnxruntime`` when installed and ``est`` is a network, else ``numpy`` (``torch``
+    for a CNN, which the numpy engine does not run).
 
     ONNX Runtime measured 1.7× faster than numpy back to back and level with it at the live
     250 Hz pace (docs/estimator.md), so it is never the slower choice."""
-    if est.kind != "classical" and not est.config.stateful and onnxruntime_available():
+    if est.kind != "classical" and onnxruntime_available():
         return "onnxruntime"
     return "torch" if est.kind == "cnn" else "numpy"  # the numpy engine has no CNN
 

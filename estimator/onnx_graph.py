@@ -9,7 +9,12 @@ Graph input ``window``, per kind (batch of one, frames oldest first):
 - ``ennet`` / ``lnnet``: (n, 1, S), ONNX LSTM layout (sequence, batch, input);
 - ``cnn``: (1, S, n), channels first (the torch model's ``x.transpose(1, 2)``);
 - ``ann``: (1, S), the newest frame only.
-Graph output ``angles``: (1, A) float32, degrees.
+Graph output ``angles``: (1, K) float32: the angles in degrees, or the de-normalised humerus
+direction (K = 3) for a direction output.
+
+A stateful ENNet (window of one frame) also takes the LSTM state in, ``h_in`` and ``c_in``
+(1, 1, H), and gives the state after the frame out, ``h_out`` and ``c_out``: the runner feeds
+each frame's state out to the next frame.
 
 The weights come as layers from :mod:`exohil.estimator.weights` (shared with the NumPy engine).
 Gate order: PyTorch stores LSTM gates [i, f, g, o]; ONNX wants [i, o, f, c] (c = the cell
@@ -34,6 +39,9 @@ OPSET = 17
 IR_VERSION = 8
 INPUT_NAME = "window"
 OUTPUT_NAME = "angles"
+#: The LSTM state of a stateful ENNet: graph inputs (before the frame) and outputs (after).
+STATE_INPUTS = ("h_in", "c_in")
+STATE_OUTPUTS = ("h_out", "c_out")
 
 
 def input_shape(est: TrainedEstimator) -> tuple[int, ...]:
@@ -77,8 +85,6 @@ def build_onnx_model(est: TrainedEstimator):
 
     if est.kind == "classical" or not est.has_network:
         raise ValueError("the classical model has no ONNX graph; use backend='numpy'")
-    if est.config.stateful:
-        raise ValueError("a stateful ENNet has no ONNX graph; use backend='numpy'")
     shape = input_shape(est)
     state = est.weights()
     g = _Graph()
@@ -89,12 +95,17 @@ def build_onnx_model(est: TrainedEstimator):
     else:
         features = INPUT_NAME
     _head_nodes(est, state, features, g)
-    graph = helper.make_graph(
-        g.nodes, f"exohil_{est.kind}",
-        [helper.make_tensor_value_info(INPUT_NAME, TensorProto.FLOAT, list(shape))],
-        [helper.make_tensor_value_info(OUTPUT_NAME, TensorProto.FLOAT,
-                                       [1, est.config.n_outputs])],
-        initializer=g.inits)
+    inputs = [helper.make_tensor_value_info(INPUT_NAME, TensorProto.FLOAT, list(shape))]
+    outputs = [helper.make_tensor_value_info(OUTPUT_NAME, TensorProto.FLOAT,
+                                             [1, est.config.n_outputs])]
+    if est.config.stateful:
+        state = [1, 1, est.config.hidden]
+        inputs += [helper.make_tensor_value_info(n, TensorProto.FLOAT, state)
+                   for n in STATE_INPUTS]
+        outputs += [helper.make_tensor_value_info(n, TensorProto.FLOAT, state)
+                    for n in STATE_OUTPUTS]
+    graph = helper.make_graph(g.nodes, f"exohil_{est.kind}", inputs, outputs,
+                              initializer=g.inits)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
                               producer_name="exohil", ir_version=IR_VERSION)
     onnx.checker.check_model(model)
@@ -108,9 +119,14 @@ def _lstm_nodes(est: TrainedEstimator, state: dict, g: _Graph) -> str:
     units = r.shape[0]
     inputs = [INPUT_NAME, g.const("lstm_W", w.T[None]), g.const("lstm_R", r.T[None]),
               g.const("lstm_B", bias[None])]
-    # outputs: Y (all steps) unused; Y_h (1 direction, 1 batch, U) → (1, U)
-    g.node("LSTM", inputs, ["", "lstm_h"], hidden_size=units)
-    return g.node("Squeeze", ["lstm_h", g.const("axis0", np.array([0]), np.int64)],
+    # outputs: Y (all steps) unused; Y_h (1 direction, 1 batch, U) → (1, U); a stateful ENNet
+    # starts from the state given (no sequence_lens) and gives Y_c out too
+    outputs = ["", "lstm_h"]
+    if est.config.stateful:
+        inputs += ["", *STATE_INPUTS]
+        outputs = ["", *STATE_OUTPUTS]
+    g.node("LSTM", inputs, outputs, hidden_size=units)
+    return g.node("Squeeze", [outputs[1], g.const("axis0", np.array([0]), np.int64)],
                   ["features"])
 
 

@@ -16,7 +16,7 @@ WINDOWED = {"ennet", "lnnet", "ann", "cnn", "ann-angles"}
 SUPPORTED = {"numpy": {"ennet", "lnnet", "ann", "classical", "ennet-stateful", "ann-angles"},
              "torch": WINDOWED | {"ennet-stateful"},
              "torchscript": WINDOWED,
-             "onnxruntime": WINDOWED}
+             "onnxruntime": WINDOWED | {"ennet-stateful"}}
 
 
 @pytest.fixture(scope="module")
