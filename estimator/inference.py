@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from functools import partial
 
 import numpy as np
@@ -347,6 +348,8 @@ class _TorchRunner:
                 net = torch.jit.trace(net, torch.zeros(1, cfg.window, cfg.n_sensors))
         self.net = net
         self.stateful = cfg.stateful
+        # a stateful ENNet steps through ENNet.sequence, carrying (h, c)
+        self.sequence: Callable = getattr(net, "sequence", net)
         self.state = None
         self.xbuf = torch.zeros(1, cfg.window, cfg.n_sensors)
         self.xview = self.xbuf.numpy()
@@ -358,7 +361,7 @@ class _TorchRunner:
         if self.stateful:
             self.xview[0, 0] = self.norm.inputs(x)
             with self.torch.inference_mode():
-                y, self.state = self.net.sequence(self.xbuf, None if first else self.state)
+                y, self.state = self.sequence(self.xbuf, None if first else self.state)
             return self.norm.outputs(y.numpy()[0, 0])
         win = self.ring.push(self.norm.inputs(x), first)
         self.xview[0, -win.shape[0] :] = win

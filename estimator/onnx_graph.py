@@ -99,10 +99,10 @@ def build_onnx_model(est: TrainedEstimator):
     outputs = [helper.make_tensor_value_info(OUTPUT_NAME, TensorProto.FLOAT,
                                              [1, est.config.n_outputs])]
     if est.config.stateful:
-        state = [1, 1, est.config.hidden]
-        inputs += [helper.make_tensor_value_info(n, TensorProto.FLOAT, state)
+        state_shape = [1, 1, est.config.hidden]
+        inputs += [helper.make_tensor_value_info(n, TensorProto.FLOAT, state_shape)
                    for n in STATE_INPUTS]
-        outputs += [helper.make_tensor_value_info(n, TensorProto.FLOAT, state)
+        outputs += [helper.make_tensor_value_info(n, TensorProto.FLOAT, state_shape)
                     for n in STATE_OUTPUTS]
     graph = helper.make_graph(g.nodes, f"exohil_{est.kind}", inputs, outputs,
                               initializer=g.inits)

@@ -210,6 +210,9 @@ class TrainedEstimator:
         out = np.empty((z.shape[0], self.config.n_outputs), dtype=np.float64)
         with torch.inference_mode():
             if self.config.stateful:
+                from exohil.estimator.models import ENNet
+
+                assert isinstance(net, ENNet)
                 state = None
                 for s in range(0, z.shape[0], PREDICT_BATCH):
                     y, state = net.sequence(torch.from_numpy(z[None, s : s + PREDICT_BATCH]),

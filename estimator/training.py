@@ -29,8 +29,8 @@ import numpy as np
 
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import Block, DatasetError, TargetSpec
-from exohil.estimator.evaluation import evaluate
 from exohil.estimator.defaults import DEFAULT_DENSE
+from exohil.estimator.evaluation import evaluate
 from exohil.estimator.models import MODEL_KINDS, ModelConfig, build_model
 from exohil.estimator.splits import Split
 from exohil.estimator.trained import DIRECTION_ANGLES, Normalisation, TrainedEstimator
@@ -155,7 +155,6 @@ class _Data:
     (N, K), and each frame's block start (windows and streams never cross a block)."""
 
     def __init__(self, est: TrainedEstimator, blocks: list[Block]) -> None:
-        self.blocks = blocks
         table = FrameTable.from_blocks(blocks, dtype=np.float64)
         self.table = FrameTable(est.norm.x(table.x).astype(np.float32),
                                 est.norm.y(est.encode(table.y)).astype(np.float32),
@@ -188,7 +187,7 @@ def _fit_network(
 
     def val_mse() -> float:
         total = 0.0
-        for (a, b), block in zip(va.bounds, va.blocks, strict=True):
+        for a, b in va.bounds:
             total += float(np.sum((est.network_outputs(va.table.x[a:b]) - va.table.y[a:b]) ** 2))
         net.train()
         return total / (len(va) * va.table.y.shape[1])

@@ -9,6 +9,8 @@ import sys
 
 import click
 
+from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
+from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
 from exohil.formats.atomic import write_text
 from exohil.harness.cli_types import (
     MAX_DURATION_S,
@@ -23,9 +25,6 @@ from exohil.harness.cli_types import (
     Widths,
     refuse_overwriting_inputs,
 )
-
-from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
-from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
 
 #: ``--model`` names: the kinds, and ``ennet-stateful`` (ENNet carrying its LSTM state)
 MODEL_CHOICES = MODEL_NAMES

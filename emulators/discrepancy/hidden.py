@@ -101,7 +101,7 @@ def _bouc_wen(x: np.ndarray, amplitude: np.ndarray, travel: np.ndarray) -> np.nd
 
 
 def apply_hidden_effect(kind: str, family: str, magnitude: float, signal: Signal,
-           rng: np.random.Generator) -> Signal:
+                        rng: np.random.Generator) -> Signal:
     """One hidden effect. ``magnitude`` ∈ {1, 2}: small and large. Small is chosen so the
     effect's residual after calibrating the static map is about twice the 0.15 mm noise:
     a held-out gap can only halve when the effect stands that far above the noise floor."""
@@ -195,7 +195,8 @@ def make_recording(case: Case) -> Recording:
     lengths = geometry.path_lengths(ang[:, 0], ang[:, 1], ang[:, 2]) * gains + offsets
     rng = np.random.default_rng([case.seed, KINDS.index(case.kind), case.magnitude,
                                  int(case.family == "alt")])
-    signal = apply_hidden_effect(case.kind, case.family, case.magnitude, Signal.from_values(t, lengths), rng)
+    signal = apply_hidden_effect(case.kind, case.family, case.magnitude,
+                                 Signal.from_values(t, lengths), rng)
     signal = Noise(sigma_mm=NOISE_MM).apply(signal, rng)
     t_mocap = trajectory.frame_times(MOCAP_RATE_HZ)
     mocap = AngleStream(t=t_mocap, names=ANGLE_NAMES, angles=trajectory.sample(t_mocap))
