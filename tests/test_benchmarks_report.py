@@ -11,7 +11,8 @@ import pytest
 from exohil.formats.measurement import Limit, Measurement, distribution
 
 ROOT = Path(__file__).resolve().parents[1]
-BENCHMARKS = ("bench_sim", "bench_recording_io", "bench_inference", "bench_emulator")
+BENCHMARKS = ("bench_sim", "bench_recording_io", "bench_inference", "bench_emulator",
+              "bench_unseen_suits")
 
 
 def run_module(*args: str) -> subprocess.CompletedProcess[str]:
@@ -60,9 +61,28 @@ def test_every_benchmark_documents_json_in_its_help(module):
 @pytest.mark.parametrize("args", [("benchmarks.bench_sim", "--repeats", "0"),
                                   ("benchmarks.bench_emulator", "--seconds", "0"),
                                   ("benchmarks.bench_inference", "--frames", "-5"),
+                                  ("benchmarks.bench_unseen_suits", "--suits", "0"),
                                   ("benchmarks.bench_recording_io", "--json",
                                    "/no/such/folder/out.json")])
 def test_bad_arguments_are_refused_before_anything_runs(args):
     result = run_module(*args)
     assert result.returncode == 2
     assert result.stdout == "" and "error: argument" in result.stderr
+
+
+def test_unseen_suit_sessions_share_the_suit_and_differ_in_movement(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks.bench_unseen_suits import parse_model, session
+
+    train, test = session(11, "train", 4.0), session(11, "test", 4.0)
+    assert train.sensor_names == test.sensor_names  # the same suit
+    assert session(12, "train", 4.0).sensor_names != train.sensor_names  # another geometry
+    angles = [r.mocap["shoulder"].angles for r in (train, test)]
+    assert angles[0].shape == angles[1].shape and not (angles[0] == angles[1]).all()
+    assert (session(11, "train", 4.0).sensors.values == train.sensors.values).all()  # seeded
+    assert parse_model("ann") == ("ann", ["--model", "ann"])
+    refused = run_module("benchmarks.bench_unseen_suits", "--baseline", "lnnet")
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert "--baseline 'lnnet' is not among the models" in refused.stderr
+    assert parse_model("w=--model ennet --window 5") == ("w", ["--model", "ennet", "--window",
+                                                               "5"])
