@@ -42,37 +42,26 @@ ACCEPTANCE_SUITS = (11, 12, 13, 14, 15)
 def session(suit: int, part: str, duration_s: float):
     """One session of suit ``suit`` (a Recording): ``part`` is "train" or "test"."""
     from exohil.emulators.discrepancy.hidden import (
-        MOCAP_RATE_HZ,
         NOISE_MM,
-        SENSOR_RATE_HZ,
         apply_hidden_effect,
         random_geometry,
         random_trajectory,
+        suit_lengths,
+        suit_recording,
     )
-    from exohil.emulators.effects import Noise, Signal
-    from exohil.emulators.protocols import ANGLE_NAMES
-    from exohil.formats.recording import AngleStream, Recording, SensorStream
+    from exohil.emulators.effects import Noise
 
     geometry, gains, offsets = random_geometry(10_000 + suit)
     trajectory = random_trajectory(20_000 + 2 * suit + (part == "test"), duration_s)
-    t = trajectory.frame_times(SENSOR_RATE_HZ)
-    ang = np.deg2rad(trajectory.sample(t))
-    signal = Signal.from_values(t, geometry.path_lengths(ang[:, 0], ang[:, 1], ang[:, 2])
-                                * gains + offsets)
+    signal = suit_lengths(trajectory, geometry, gains, offsets)
     for k, kind in enumerate(("hysteresis", "creep", "lag")):
         # the suit's effect parameters: the same draws for both sessions
         signal = apply_hidden_effect(kind, "alt", 2, signal, np.random.default_rng([suit, k]))
     signal = Noise(sigma_mm=NOISE_MM).apply(signal, np.random.default_rng([suit, part == "test",
                                                                            99]))
-    t_mocap = trajectory.frame_times(MOCAP_RATE_HZ)
-    return Recording(
-        sensor_names=geometry.sensor_names,
-        sensors=SensorStream(seq=np.arange(t.shape[0]), t=signal.t, values=signal.values),
-        mocap={"shoulder": AngleStream(t=t_mocap, names=ANGLE_NAMES,
-                                       angles=trajectory.sample(t_mocap))},
-        sensor_units="mm", sensor_rate_hz=SENSOR_RATE_HZ, mocap_rate_hz=MOCAP_RATE_HZ,
-        metadata={"generator": "benchmarks.bench_unseen_suits", "suit": str(suit),
-                  "session": part})
+    return suit_recording(trajectory, geometry, signal,
+                          {"generator": "benchmarks.bench_unseen_suits", "suit": str(suit),
+                           "session": part})
 
 
 def parse_model(text: str) -> tuple[str, list[str]]:

@@ -186,26 +186,42 @@ class Case:
         return f"{self.kind}/{self.family}/m{self.magnitude}/s{self.seed}"
 
 
-def make_recording(case: Case) -> Recording:
-    """The recording of ``case`` (sensors at 250 Hz, mocap at 120 Hz, exact angles)."""
-    trajectory = random_trajectory(case.seed, case.duration_s)
-    geometry, gains, offsets = random_geometry(case.seed)
+def suit_lengths(trajectory: Trajectory, geometry: SuitGeometry, gains: np.ndarray,
+                 offsets: np.ndarray) -> Signal:
+    """The suit's ideal sensor signal (mm) at 250 Hz along ``trajectory``: path lengths times
+    ``gains`` plus ``offsets``, per sensor."""
     t = trajectory.frame_times(SENSOR_RATE_HZ)
     ang = np.deg2rad(trajectory.sample(t))
     lengths = geometry.path_lengths(ang[:, 0], ang[:, 1], ang[:, 2]) * gains + offsets
-    rng = np.random.default_rng([case.seed, KINDS.index(case.kind), case.magnitude,
-                                 int(case.family == "alt")])
-    signal = apply_hidden_effect(case.kind, case.family, case.magnitude,
-                                 Signal.from_values(t, lengths), rng)
-    signal = Noise(sigma_mm=NOISE_MM).apply(signal, rng)
+    return Signal.from_values(t, lengths)
+
+
+def suit_recording(trajectory: Trajectory, geometry: SuitGeometry, signal: Signal,
+                   metadata: dict[str, str]) -> Recording:
+    """A recording of ``signal`` (every frame received) with ``trajectory``'s exact angles as
+    the shoulder mocap at 120 Hz."""
     t_mocap = trajectory.frame_times(MOCAP_RATE_HZ)
     mocap = AngleStream(t=t_mocap, names=ANGLE_NAMES, angles=trajectory.sample(t_mocap))
     return Recording(
         sensor_names=geometry.sensor_names,
-        sensors=SensorStream(seq=np.arange(t.shape[0]), t=signal.t, values=signal.values),
+        sensors=SensorStream(seq=np.arange(signal.t.shape[0]), t=signal.t,
+                             values=signal.values),
         mocap={"shoulder": mocap}, sensor_units="mm", sensor_rate_hz=SENSOR_RATE_HZ,
-        mocap_rate_hz=MOCAP_RATE_HZ,
-        metadata={"generator": "exohil.emulators.discrepancy.hidden", "case": case.label})
+        mocap_rate_hz=MOCAP_RATE_HZ, metadata=metadata)
+
+
+def make_recording(case: Case) -> Recording:
+    """The recording of ``case`` (sensors at 250 Hz, mocap at 120 Hz, exact angles)."""
+    trajectory = random_trajectory(case.seed, case.duration_s)
+    geometry, gains, offsets = random_geometry(case.seed)
+    rng = np.random.default_rng([case.seed, KINDS.index(case.kind), case.magnitude,
+                                 int(case.family == "alt")])
+    signal = apply_hidden_effect(case.kind, case.family, case.magnitude,
+                                 suit_lengths(trajectory, geometry, gains, offsets), rng)
+    signal = Noise(sigma_mm=NOISE_MM).apply(signal, rng)
+    return suit_recording(trajectory, geometry, signal,
+                          {"generator": "exohil.emulators.discrepancy.hidden",
+                           "case": case.label})
 
 
 def cases(seeds: range, magnitudes: tuple[int, ...] = (1, 2), duration_s: float = 60.0,
