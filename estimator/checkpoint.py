@@ -23,7 +23,12 @@ import numpy as np
 from exohil.estimator.architecture import OUTPUTS, ModelConfig, check_state, state_shapes
 from exohil.estimator.classical import ClassicalModel
 from exohil.estimator.dataset import TargetSpec
-from exohil.estimator.trained import DIRECTION_ANGLES, Normalisation, TrainedEstimator
+from exohil.estimator.trained import (
+    DIRECTION_ANGLES,
+    Normalisation,
+    TrainedEstimator,
+    is_direction_target,
+)
 from exohil.formats import strict_json
 from exohil.formats.atomic import replacing
 from exohil.formats.errors import InputError
@@ -124,7 +129,7 @@ def _from_meta(meta: dict) -> TrainedEstimator:
         raise ValueError("sensor count inconsistent")
     if cfg.output not in OUTPUTS:
         raise ValueError(f"unknown output {cfg.output!r}")
-    if cfg.output == "direction" and sorted(target.angles) != sorted(DIRECTION_ANGLES):
+    if cfg.output == "direction" and not is_direction_target(target):
         raise ValueError(f"a direction output needs the angles {list(DIRECTION_ANGLES)}")
     if norm.y_mean.shape != (cfg.n_outputs,) or len(target.angles) != cfg.n_angles:
         raise ValueError("angle count inconsistent")

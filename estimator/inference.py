@@ -44,7 +44,7 @@ from functools import partial
 
 import numpy as np
 
-from exohil.estimator.trained import DIRECTION_ANGLES, TrainedEstimator
+from exohil.estimator.trained import TrainedEstimator, direction_columns
 from exohil.estimator.weights import dense_layers, lstm_weights
 
 BACKENDS = ("numpy", "torch", "torchscript", "onnxruntime")
@@ -73,8 +73,7 @@ class StreamingEstimator:
         self._offset_frames = est.offset_frames
         self._direction = est.config.output == "direction"
         if self._direction:
-            th, ph = (est.target.angles.index(a) for a in DIRECTION_ANGLES)
-            self._theta_phi = (th, ph)
+            self._theta_phi = direction_columns(est.target)
             self._angles = np.zeros(2)
         self._x = np.zeros(est.config.n_sensors)
         self._base_sum = np.zeros(est.config.n_sensors)

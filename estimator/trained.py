@@ -27,6 +27,28 @@ from exohil.kinematics import humerus_angles, humerus_direction
 #: The shoulder angles a direction output stands for: plane of elevation θ and elevation φ.
 DIRECTION_ANGLES = ("elv_angle", "shoulder_elv")
 
+
+def is_direction_target(target: TargetSpec) -> bool:
+    """True when ``target`` is exactly the θ/φ pair a direction output stands for (in
+    either order)."""
+    return sorted(target.angles) == sorted(DIRECTION_ANGLES)
+
+
+def direction_columns(target: TargetSpec) -> tuple[int, int]:
+    """Columns of θ and φ in ``target``'s angles."""
+    theta, phi = (target.angles.index(a) for a in DIRECTION_ANGLES)
+    return theta, phi
+
+
+def encode_targets(output: str, target: TargetSpec, angles: np.ndarray) -> np.ndarray:
+    """Network targets (N, K) from target angles (N, A), degrees, for a network of ``output``
+    (see :data:`~exohil.estimator.architecture.OUTPUTS`): the angles themselves, or for a
+    direction output the unit humerus direction (thorax frame)."""
+    if output != "direction":
+        return angles
+    th, ph = direction_columns(target)
+    return humerus_direction(np.deg2rad(angles[:, th]), np.deg2rad(angles[:, ph]))
+
 #: Frames per forward pass when predicting a long block.
 PREDICT_BATCH = 4096
 
@@ -147,12 +169,9 @@ class TrainedEstimator:
         return self.config.kind
 
     def encode(self, angles: np.ndarray) -> np.ndarray:
-        """Network targets (N, K) from target angles (N, A), degrees: the angles themselves,
-        or for a direction output the unit humerus direction (thorax frame)."""
-        if self.config.output != "direction":
-            return angles
-        th, ph = (self.target.angles.index(a) for a in DIRECTION_ANGLES)
-        return humerus_direction(np.deg2rad(angles[:, th]), np.deg2rad(angles[:, ph]))
+        """Network targets (N, K) from target angles (N, A), degrees (:func:`encode_targets`
+        for this network's output)."""
+        return encode_targets(self.config.output, self.target, angles)
 
     def decode(self, outputs: np.ndarray) -> np.ndarray:
         """Angles (N, A), degrees, from de-normalised network outputs (N, K): the inverse of
@@ -161,7 +180,7 @@ class TrainedEstimator:
             return outputs
         angles = np.empty((outputs.shape[0], 2))
         theta, phi = humerus_angles(outputs)
-        th, ph = (self.target.angles.index(a) for a in DIRECTION_ANGLES)
+        th, ph = direction_columns(self.target)
         angles[:, th], angles[:, ph] = np.rad2deg(theta), np.rad2deg(phi)
         return angles
 

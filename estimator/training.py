@@ -33,7 +33,13 @@ from exohil.estimator.defaults import DEFAULT_DENSE
 from exohil.estimator.evaluation import evaluate
 from exohil.estimator.models import MODEL_KINDS, ModelConfig, build_model
 from exohil.estimator.splits import Split
-from exohil.estimator.trained import DIRECTION_ANGLES, Normalisation, TrainedEstimator
+from exohil.estimator.trained import (
+    DIRECTION_ANGLES,
+    Normalisation,
+    TrainedEstimator,
+    encode_targets,
+    is_direction_target,
+)
 from exohil.estimator.windows import FrameTable
 
 ALL_KINDS = (*MODEL_KINDS, "classical")
@@ -101,23 +107,22 @@ def train(
                            "frames)")
     output = cfg.output
     if output == "auto":
-        direction = sorted(target.angles) == sorted(DIRECTION_ANGLES)
-        output = "direction" if direction else "angles"
+        output = "direction" if is_direction_target(target) else "angles"
+    if output == "direction" and not is_direction_target(target):
+        raise DatasetError(f"a direction output needs the target angles {list(DIRECTION_ANGLES)}"
+                           f", not {list(target.angles)}")
     stateful = cfg.stateful and cfg.kind == "ennet"
     model_cfg = ModelConfig(cfg.kind, len(sensor_names), len(target.angles),
                             1 if stateful else cfg.window or 1,
                             1 if stateful else cfg.dilation or 1,
                             cfg.hidden, dense=tuple(cfg.dense), output=output,
                             stateful=stateful)
-    est = TrainedEstimator(model_cfg, tuple(sensor_names), target,
-                           Normalisation(np.zeros(0), np.ones(0), np.zeros(0), np.ones(0)),
-                           offset_frames, sensor_rate_hz)
-    if output == "direction" and sorted(target.angles) != sorted(DIRECTION_ANGLES):
-        raise DatasetError(f"a direction output needs the target angles {list(DIRECTION_ANGLES)}"
-                           f", not {list(target.angles)}")
-    x = np.concatenate([b.x for b in split.train])
-    est.norm = Normalisation.fit(x, est.encode(np.concatenate([b.y for b in split.train])),
-                                 scale_y=output != "direction")
+    norm = Normalisation.fit(
+        np.concatenate([b.x for b in split.train]),
+        encode_targets(output, target, np.concatenate([b.y for b in split.train])),
+        scale_y=output != "direction")
+    est = TrainedEstimator(model_cfg, tuple(sensor_names), target, norm, offset_frames,
+                           sensor_rate_hz)
     start = time.monotonic()
     if cfg.kind == "classical":
         fit_info = _fit_classical(est, split)
@@ -128,7 +133,7 @@ def train(
         "split": split.description,
         "seed": cfg.seed,
         "train_config": {k: getattr(cfg, k) for k in cfg.__dataclass_fields__},
-        "train_frames": int(sum(len(b) for b in split.train)),
+        "train_frames": frames,
         "val_frames": int(sum(len(b) for b in split.val)),
         "train_seconds": round(time.monotonic() - start, 1),
         **fit_info,
@@ -152,15 +157,16 @@ def _fit_classical(est: TrainedEstimator, split: Split) -> dict:
 
 class _Data:
     """One split part as normalised float32 arrays: sensors x (N, S), network targets y
-    (N, K), and each frame's block start (windows and streams never cross a block)."""
+    (N, K), each frame's block start (windows and streams never cross a block), and the
+    (start, stop) frames of every block."""
 
     def __init__(self, est: TrainedEstimator, blocks: list[Block]) -> None:
         table = FrameTable.from_blocks(blocks, dtype=np.float64)
         self.table = FrameTable(est.norm.x(table.x).astype(np.float32),
                                 est.norm.y(est.encode(table.y)).astype(np.float32),
                                 table.block_start)
-        self.bounds = [(int(a), int(a) + len(b)) for a, b in
-                       zip(np.cumsum([0] + [len(b) for b in blocks[:-1]]), blocks, strict=True)]
+        starts = np.unique(table.block_start).tolist()
+        self.bounds = list(zip(starts, [*starts[1:], len(table)], strict=True))
 
     def __len__(self) -> int:
         return len(self.table)

@@ -26,8 +26,6 @@ from exohil.harness.cli_types import (
     refuse_overwriting_inputs,
 )
 
-#: ``--model`` names: the kinds, and ``ennet-stateful`` (ENNet carrying its LSTM state)
-MODEL_CHOICES = MODEL_NAMES
 OUTPUT_CHOICES = ("auto", *OUTPUTS)
 
 _recordings = click.argument("recordings", nargs=-1, required=True, type=InputFile())
@@ -145,7 +143,7 @@ def _command_line() -> str:
 
 
 @click.command("train")
-@click.option("--model", "kind", type=click.Choice(MODEL_CHOICES), default="ennet",
+@click.option("--model", "kind", type=click.Choice(MODEL_NAMES), default="ennet",
               show_default=True, help="Estimator to train.")
 @_recordings
 @click.option("--out", required=True, type=OutputFile(),
@@ -278,7 +276,7 @@ def _angle_limits(items: tuple[tuple[str, float], ...],
               "training movement piece is the test set (--test-fraction).")
 @click.option("--test-fraction", type=Finite(0.05, 0.9), default=0.3,
               show_default=True, help="Within-recording split: test = last fraction.")
-@click.option("--models", type=NameList(MODEL_CHOICES),
+@click.option("--models", type=NameList(MODEL_NAMES),
               default=",".join(("ann", "classical", "cnn", "lnnet", "ennet", "ennet-stateful")),
               show_default=True, help="Comma-separated model kinds, in table order.")
 @click.option("--out", type=OutputFile(),
