@@ -81,7 +81,7 @@ def test_the_demo_reads_a_bench_file(tmp_path):
                      f'[model]\ncheckpoint = "{MODELS_DIR / "ennet.npz"}"\n', encoding="utf-8")
     out = tmp_path / "s.json"
     result = CliRunner().invoke(main, ["demo", "--bench", str(bench), "--seconds", "2",
-                                       "--json", str(out)])
+                                       "--json", str(out), "--out", str(tmp_path / "report")])
     assert result.exit_code == 0, result.output
     assert "corrupt" in out.read_text()
 
