@@ -155,7 +155,7 @@ def _fit_classical(est: TrainedEstimator, split: Split) -> dict:
     return {"ridge": fit["ridge"], "best_val_mse": fit["val_mse"]}
 
 
-class _Data:
+class NormalisedFrames:
     """One split part as normalised float32 arrays: sensors x (N, S), network targets y
     (N, K), each frame's block start (windows and streams never cross a block), and the
     (start, stop) frames of every block."""
@@ -187,8 +187,8 @@ def _fit_network(
     net = build_model(est.config)
     est.network = net
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, betas=(0.9, 0.999))
-    tr = _Data(est, split.train)
-    va = _Data(est, split.val) if split.val else tr
+    tr = NormalisedFrames(est, split.train)
+    va = NormalisedFrames(est, split.val) if split.val else tr
     batches = (_stream_batches if est.config.stateful else _window_batches)(est, tr, cfg, rng)
 
     def val_mse() -> float:
@@ -238,7 +238,7 @@ def _fit_network(
             "stopped_by": stop, "final_train_mse": train_loss}
 
 
-def _window_batches(est: TrainedEstimator, tr: _Data, cfg: TrainConfig,
+def _window_batches(est: TrainedEstimator, tr: NormalisedFrames, cfg: TrainConfig,
                     rng: np.random.Generator):
     """One epoch's minibatches for a windowed model: shuffled frames, each with its window;
     yields (loss, frames)."""
@@ -258,7 +258,7 @@ def _window_batches(est: TrainedEstimator, tr: _Data, cfg: TrainConfig,
     return epoch
 
 
-def _stream_batches(est: TrainedEstimator, tr: _Data, cfg: TrainConfig,
+def _stream_batches(est: TrainedEstimator, tr: NormalisedFrames, cfg: TrainConfig,
                     rng: np.random.Generator):
     """One epoch's minibatches for a stateful ENNet, by truncated backpropagation through time.
 

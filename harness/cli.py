@@ -92,6 +92,7 @@ def main() -> None:
 
 def _register() -> None:
     from exohil.harness import (
+        cmd_calibrate,
         cmd_convert,
         cmd_demo,
         cmd_discrepancy,
@@ -107,7 +108,7 @@ def _register() -> None:
 
     for module in (
         cmd_demo, cmd_convert, cmd_fixtures, cmd_simulate, cmd_emulate, cmd_record, cmd_import,
-        cmd_plot, cmd_train, cmd_run, cmd_discrepancy,
+        cmd_plot, cmd_train, cmd_calibrate, cmd_run, cmd_discrepancy,
     ):
         for command in module.COMMANDS:
             main.add_command(command)

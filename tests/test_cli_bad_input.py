@@ -45,6 +45,8 @@ MODEL = ROOT / "fixtures" / "models" / "ann.npz"
 #: Otherwise valid arguments of every command, per parameter name (``{tmp}`` is a temporary
 #: folder). With them alone each command passes validation and reaches its body.
 BASE: dict[str, dict[str, list[str]]] = {
+    "calibrate": {"checkpoint": [str(MODEL)], "recordings": [str(RECORDING)],
+                  "out": ["--out", "{tmp}/calibrated.npz"]},
     "conform": {"target": ["--target", f"emulator:{RECORDING}"], "model": ["--model", str(MODEL)],
                 "out_dir": ["--out", "{tmp}/conform"]},
     "convert": {"source": ["--from", "ms"], "target": ["--to", "nao"],
@@ -61,6 +63,7 @@ BASE: dict[str, dict[str, list[str]]] = {
     "plot": {"file": [str(RECORDING)], "kind": ["--kind", "timeseries"],
              "out": ["--out", "{tmp}/plot.png"]},
     "record info": {"file": [str(RECORDING)]},
+    "record cut": {"file": [str(RECORDING)], "out": ["--out", "{tmp}/cut.mcap"]},
     "record recover": {"file": [str(RECORDING)], "out": ["--out", "{tmp}/recovered.mcap"]},
     "run": {"url": ["loop://"]},
     "simulate": {"out_path": ["--out", "{tmp}/simulated.mcap"]},

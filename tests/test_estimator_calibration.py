@@ -1,0 +1,189 @@
+"""exohil calibrate: a trained network adapted to another wearer's data, its provenance, its
+refusals, and the calibrated checkpoint in evaluate and the conformance suite."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from estimator_synth import shoulder_recording
+
+from exohil.estimator.calibration import (
+    METHOD,
+    CalibrationConfig,
+    CalibrationError,
+    calibrate,
+)
+from exohil.estimator.checkpoint import load_checkpoint
+from exohil.estimator.dataset import DatasetError, TargetSpec, recording_blocks
+from exohil.estimator.splits import Split
+from exohil.estimator.training import TrainConfig, train
+from exohil.formats.digest import sha256_file
+from exohil.formats.recording import cut_recording
+from exohil.formats.recording_writer import write_recording
+from exohil.harness.cli import main
+from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
+
+TARGET = TargetSpec("shoulder", ("elv_angle", "shoulder_elv"))
+SENSORS = ("F", "SF", "SR", "R")
+FAST = CalibrationConfig(steps=150)
+
+
+def blocks(rec):
+    return recording_blocks(rec, TARGET)
+
+
+def wearer_b(seconds: float, seed: int):
+    """Another wearer: the same suit, its sensors read 6 mm longer (a new donning)."""
+    return shoulder_recording(seconds=seconds, seed=seed, offset_mm=6.0)
+
+
+@pytest.fixture(scope="module")
+def base():
+    train_part = [*blocks(shoulder_recording(seconds=30.0, seed=1)),
+                  *blocks(shoulder_recording(seconds=30.0, seed=3))]
+    val_part = blocks(shoulder_recording(seconds=6.0, seed=2))
+    cfg = TrainConfig(kind="ennet", window=6, dilation=4, hidden=16, dense=(32,),
+                      max_epochs=40, time_budget_s=120.0)
+    return train(Split(train_part, val_part, [], "test"), SENSORS, TARGET, cfg)
+
+
+def rmse(est, part) -> float:
+    err = np.concatenate(est.predict(part)) - np.concatenate([b.y for b in part])
+    return float(np.sqrt(np.mean(err**2)))
+
+
+def test_calibration_brings_the_error_on_another_wearer_down(base):
+    test_part = blocks(wearer_b(20.0, seed=7))
+    before = rmse(base, test_part)
+    assert before > 2 * rmse(base, blocks(shoulder_recording(seconds=20.0, seed=7)))
+    weights = base.weights()
+    est = calibrate(base, blocks(wearer_b(15.0, seed=5)), FAST)
+    assert rmse(est, test_part) < 0.5 * before
+    assert all(np.array_equal(weights[k], v) for k, v in base.weights().items())
+
+
+def test_calibrated_info_names_what_it_came_from(base):
+    source = [{"file": "cal.mcap", "sha256": "ab" * 32}]
+    part = blocks(wearer_b(8.0, seed=5))
+    est = calibrate(base, part, FAST, base_source={"file": "base.npz", "sha256": "cd" * 32},
+                    sources=source)
+    cal = est.info["calibration"]
+    assert cal["method"] == METHOD
+    assert cal["base_checkpoint"] == {"file": "base.npz", "sha256": "cd" * 32}
+    assert cal["recordings"] == source
+    frames = sum(len(b) for b in part)  # frames with ground truth
+    assert 1990 <= frames <= 2000 and cal["frames"] == frames
+    assert cal["seconds"] == round(frames / 250.0, 2)
+    assert cal["config"]["steps"] == 150
+    assert cal["accuracy_after"]["accuracy.direction_rmse"] < \
+        cal["accuracy_before"]["accuracy.direction_rmse"]
+    assert est.info["sources"][-1] == {**source[0], "role": "calibration"}
+    assert est.info["base_info"] == base.info
+
+
+def test_calibration_is_reproducible_for_a_seed(base):
+    part = blocks(wearer_b(6.0, seed=5))
+    a = calibrate(base, part, CalibrationConfig(steps=20, seed=3)).weights()
+    b = calibrate(base, part, CalibrationConfig(steps=20, seed=3)).weights()
+    c = calibrate(base, part, CalibrationConfig(steps=20, seed=4)).weights()
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+    assert not all(np.array_equal(a[k], c[k]) for k in a)
+
+
+def test_too_little_data_and_models_without_a_window_are_refused(base):
+    with pytest.raises(DatasetError, match="too little calibration data"):
+        calibrate(base, blocks(wearer_b(3.0, seed=5)), FAST)
+    part = blocks(shoulder_recording(seconds=8.0, seed=1))
+    split = Split(part, [], [], "test")
+    classical = train(split, SENSORS, TARGET, TrainConfig(kind="classical"))
+    with pytest.raises(CalibrationError, match="no network"):
+        calibrate(classical, part, FAST)
+    stateful = train(split, SENSORS, TARGET, TrainConfig(kind="ennet", stateful=True, hidden=8,
+                                                         dense=(8,), max_epochs=1))
+    with pytest.raises(CalibrationError, match="stateful"):
+        calibrate(stateful, part, FAST)
+
+
+# ------------------------------------------------------------------------------------- CLI
+
+def invoke(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_calibrate_then_evaluate_from_the_command_line(tmp_path, base):
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal, test = tmp_path / "base.npz", tmp_path / "cal.mcap", tmp_path / "test.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(cal, wearer_b(12.0, seed=5))
+    write_recording(test, wearer_b(10.0, seed=8))
+    out = tmp_path / "calibrated.npz"
+    result = invoke("calibrate", ckpt, cal, "--out", out, "--steps", "150")
+    assert result.exit_code == 0, result.output
+    assert "calibrated on 11.99 s from 1 recording(s)" in result.output
+    est = load_checkpoint(out)
+    assert est.info["calibration"]["base_checkpoint"] == {"file": "base.npz",
+                                                          "sha256": sha256_file(ckpt)}
+    assert est.info["calibration"]["recordings"] == [{"file": "cal.mcap",
+                                                      "sha256": sha256_file(cal)}]
+    assert est.info["command"].startswith("exohil ")  # sys.argv: pytest's under CliRunner
+    scores = {}
+    for name in (ckpt, out):
+        result = invoke("evaluate", name, test, "--json", tmp_path / f"{name.stem}.json")
+        assert result.exit_code == 0, result.output
+        scores[name] = json.loads((tmp_path / f"{name.stem}.json").read_text())
+    direction = {k: v["accuracy"]["accuracy.direction_rmse"] for k, v in scores.items()}
+    assert direction[out] < 0.5 * direction[ckpt]
+
+
+@pytest.mark.parametrize("problem", ["out is input", "rate", "sensors"])
+def test_calibrate_bad_input_is_one_line(tmp_path, base, problem):
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal = tmp_path / "base.npz", tmp_path / "cal.mcap"
+    save_checkpoint(ckpt, base)
+    rec = {"out is input": wearer_b(8.0, seed=5),
+           "rate": shoulder_recording(seconds=8.0, rate=100.0),
+           "sensors": shoulder_recording(seconds=8.0, n_sensors=5)}[problem]
+    write_recording(cal, rec)
+    out = ckpt if problem == "out is input" else tmp_path / "out.npz"
+    result = invoke("calibrate", ckpt, cal, "--out", out, "--steps", "5")
+    assert result.exit_code != 0
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error:"), result.output
+    expected = {"out is input": "refusing to overwrite", "rate": "100 Hz, the model's 250 Hz",
+                "sensors": "expects 4 sensors"}[problem]
+    assert expected in lines[0]
+    assert not (tmp_path / "out.npz").exists()
+
+
+def test_conformance_takes_a_calibrated_model_and_refuses_its_calibration_data(tmp_path):
+    """The reference ENNet calibrated on the first 8 s of the held-out fixture: scored on that
+    part, the held-out check fails; scored on the rest, it passes and accuracy is measured."""
+    from exohil.formats.recording_reader import read_recording
+
+    whole = read_recording(FIXTURES_DIR / "paper_protocol_heldout.mcap")
+    cal, rest = tmp_path / "cal.mcap", tmp_path / "rest.mcap"
+    write_recording(cal, cut_recording(whole, 0.0, 8.0))
+    write_recording(rest, cut_recording(whole, 8.0, 40.0))
+    calibrated = tmp_path / "calibrated.npz"
+    result = invoke("calibrate", MODELS_DIR / "ennet.npz", cal, "--out", calibrated,
+                    "--steps", "20")
+    assert result.exit_code == 0, result.output
+    profile = tmp_path / "p.toml"
+    profile.write_text('name = "cal"\ndescription = "held-out and accuracy"\n[settings]\n'
+                       '[checks.compatibility]\n[checks.heldout]\n[checks.accuracy]\n',
+                       encoding="utf-8")
+    verdicts = {}
+    for target in (cal, rest):
+        out = tmp_path / target.stem
+        invoke("conform", "--target", f"emulator:{target}", "--model", calibrated,
+               "--profile", profile, "--out", out)
+        report = json.loads((out / "conformance.json").read_text())
+        verdicts[target] = {c["name"]: c["verdict"] for c in report["checks"]}
+    assert verdicts[cal]["heldout"] == "fail"
+    assert verdicts[rest]["heldout"] == "pass"
+    assert verdicts[rest]["accuracy"] in ("pass", "fail")  # measured, whatever the limits say
