@@ -94,3 +94,32 @@ class Recording:
     mocap_rate_hz: float = 120.0
     segments: list[Segment] = field(default_factory=list)
     metadata: dict[str, str] = field(default_factory=dict)
+
+
+def cut_recording(rec: Recording, start_s: float, stop_s: float) -> Recording:
+    """The part of ``rec`` from ``start_s`` to ``stop_s`` (seconds after its first sensor
+    frame; start included, stop excluded): its sensor frames, the motion capture samples in
+    the same span of the shared clock, and the segments clipped to it (those left empty
+    dropped). Times, sequence numbers and metadata are kept as they were, so the part lines up
+    with the whole. Raises ValueError for a recording without sensor frames or an empty span.
+    """
+    if len(rec.sensors) == 0:
+        raise ValueError("the recording has no sensor frames to cut")
+    if not stop_s > start_s:
+        raise ValueError(f"empty span: start {start_s:g} s, stop {stop_s:g} s")
+    t0 = float(rec.sensors.t[0])
+    lo, hi = t0 + start_s, t0 + stop_s
+    keep = (rec.sensors.t >= lo) & (rec.sensors.t < hi)
+    if not keep.any():
+        duration = float(rec.sensors.t[-1]) - t0
+        raise ValueError(f"no sensor frames from {start_s:g} s to {stop_s:g} s (the recording "
+                         f"spans {duration:.3f} s after its first frame)")
+    mocap = {}
+    for joint, stream in rec.mocap.items():
+        m = (stream.t >= lo) & (stream.t < hi)
+        mocap[joint] = AngleStream(stream.t[m], stream.names, stream.angles[m])
+    segments = [Segment(s.name, max(s.t0, lo), min(s.t1, hi)) for s in rec.segments
+                if min(s.t1, hi) > max(s.t0, lo)]
+    sensors = SensorStream(rec.sensors.seq[keep], rec.sensors.t[keep], rec.sensors.values[keep])
+    return Recording(rec.sensor_names, sensors, mocap, rec.sensor_units, rec.sensor_rate_hz,
+                     rec.mocap_rate_hz, segments, dict(rec.metadata))

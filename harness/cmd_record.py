@@ -1,5 +1,6 @@
 """``exohil record info``: what is inside a recording (format v1 MCAP) file;
-``exohil record recover``: a clean, indexed copy of a recording that was never closed."""
+``exohil record recover``: a clean, indexed copy of a recording that was never closed;
+``exohil record cut``: a time span of a recording as a recording of its own."""
 
 from __future__ import annotations
 
@@ -10,7 +11,13 @@ from typing import Any
 
 import click
 
-from exohil.harness.cli_types import InputFile, OutputFile, refuse_overwriting_inputs
+from exohil.harness.cli_types import (
+    MAX_DURATION_S,
+    Finite,
+    InputFile,
+    OutputFile,
+    refuse_overwriting_inputs,
+)
 
 
 @click.group("record")
@@ -168,6 +175,47 @@ def recover_command(file: Path, out: Path) -> None:
     else:
         click.echo(f"lost: the {scan.lost_bytes} bytes after the last complete record (the file "
                    "was never closed; a durable recording loses at most its last second)")
+
+
+@record_group.command("cut")
+@click.argument("file", type=InputFile())
+@click.option("--start", "start_s", type=Finite(0.0, MAX_DURATION_S), default=0.0,
+              show_default=True, help="Start of the part, seconds after the first sensor frame.")
+@click.option("--stop", "stop_s", type=Finite(0.0, MAX_DURATION_S),
+              help="End of the part (excluded), seconds after the first sensor frame; "
+              "default: the end of the recording.")
+@click.option("--out", "out", type=OutputFile(), required=True,
+              help="The part, a recording of its own (must not be FILE).")
+def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> None:
+    """Write the part of FILE from --start to --stop as recording OUT: its sensor frames, the
+    motion capture of the same span and the segments clipped to it, with times and sequence
+    numbers as they were. OUT's metadata names FILE, its sha256 and the span. Example, the
+    first 12 s of a session for calibration and the rest to test on:
+
+    \b
+        exohil record cut session.mcap --stop 12 --out calib.mcap
+        exohil record cut session.mcap --start 12 --out test.mcap
+    """
+    from exohil.formats.digest import sha256_file
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.recording import cut_recording
+    from exohil.formats.recording_reader import read_recording
+    from exohil.formats.recording_writer import write_recording
+
+    refuse_overwriting_inputs([("--out", out)], [file])
+    try:
+        rec = read_recording(file)
+        part = cut_recording(rec, start_s, math.inf if stop_s is None else stop_s)
+    except (RecordingError, ValueError) as exc:
+        raise click.ClickException(f"{file}: {exc}" if isinstance(exc, ValueError)
+                                   else str(exc)) from None
+    part.metadata.update({"cut.source": file.name, "cut.source_sha256": sha256_file(file),
+                          "cut.start_s": f"{start_s:g}",
+                          "cut.stop_s": "end" if stop_s is None else f"{stop_s:g}"})
+    write_recording(out, part)
+    click.echo(f"wrote {out}: {len(part.sensors)} of {len(rec.sensors)} sensor frames, "
+               f"{part.sensors.t[0] - rec.sensors.t[0]:.3f} → "
+               f"{part.sensors.t[-1] - rec.sensors.t[0]:.3f} s after the first frame")
 
 
 COMMANDS: list[click.Command] = [record_group]

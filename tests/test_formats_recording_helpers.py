@@ -142,3 +142,24 @@ def test_damaged_files_raise_only_recording_error(
         assert str(path) in str(exc)
     else:
         assert len(rec.sensors) <= 200
+
+
+def test_cut_recording_keeps_one_span_of_every_stream() -> None:
+    from exohil.formats.recording import cut_recording
+
+    t = 5.0 + np.arange(1000) / 250.0  # 4 s of sensors starting at 5 s on the clock
+    mt = 5.0 + np.arange(480) / 120.0
+    rec = _recording(t, mt, np.column_stack([mt, -mt]))
+    rec.segments = [Segment("a", 5.0, 6.5), Segment("b", 6.5, 9.0)]
+    rec.metadata = {"source": "test"}
+    part = cut_recording(rec, 1.0, 2.0)
+    assert len(part.sensors) == 250
+    assert part.sensors.t[0] == t[250] and part.sensors.seq[0] == 250
+    assert np.all((part.mocap["shoulder"].t >= 6.0) & (part.mocap["shoulder"].t < 7.0))
+    assert len(part.mocap["shoulder"]) == 120
+    assert [(s.name, s.t0, s.t1) for s in part.segments] == [("a", 6.0, 6.5), ("b", 6.5, 7.0)]
+    assert part.metadata == {"source": "test"}
+    assert len(cut_recording(rec, 3.0, float("inf")).sensors) == 250
+    for start, stop, problem in [(2.0, 2.0, "empty span"), (10.0, 20.0, "no sensor frames")]:
+        with pytest.raises(ValueError, match=problem):
+            cut_recording(rec, start, stop)

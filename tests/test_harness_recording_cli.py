@@ -264,3 +264,25 @@ def test_plot_bad_input_is_one_line(
 def test_every_command_has_help(command: list[str]) -> None:
     result = run(*command, "--help")
     assert result.exit_code == 0 and "Usage:" in result.output and len(result.output) > 200
+
+
+def test_record_cut_splits_a_recording_in_two(tmp_path: Path) -> None:
+    src, head, tail = tmp_path / "s.mcap", tmp_path / "head.mcap", tmp_path / "tail.mcap"
+    t = np.arange(2500) / 250.0
+    mt = np.arange(1200) / 120.0
+    write_recording(src, Recording(("F", "R"), SensorStream(np.arange(2500), t, np.ones((2500, 2))),
+                                   {"shoulder": AngleStream(mt, ("elv_angle",), mt[:, None])},
+                                   segments=[Segment("move", 0.0, 10.0)]))
+    assert run("record", "cut", src, "--stop", "4", "--out", head).exit_code == 0
+    result = run("record", "cut", src, "--start", "4", "--out", tail)
+    assert result.exit_code == 0 and "1500 of 2500 sensor frames" in result.output
+    a, b = read_recording(head), read_recording(tail)
+    assert len(a.sensors) + len(b.sensors) == 2500
+    assert len(a.mocap["shoulder"]) + len(b.mocap["shoulder"]) == 1200
+    assert b.metadata["cut.source"] == "s.mcap" and b.metadata["cut.start_s"] == "4"
+    assert b.metadata["cut.source_sha256"] == hashlib.sha256(src.read_bytes()).hexdigest()
+    assert [(s.t0, s.t1) for s in b.segments] == [(4.0, 10.0)]
+    assert "refusing to overwrite" in assert_one_line_error(
+        run("record", "cut", src, "--stop", "1", "--out", src))
+    assert "no sensor frames from 20 s" in assert_one_line_error(
+        run("record", "cut", src, "--start", "20", "--out", tmp_path / "x.mcap"))
