@@ -3,20 +3,17 @@ recording with ground truth (30–60 s of the calibration protocol, docs/calibra
 
 Method (chosen by measurement, docs/calibration.md "How the method was chosen"): fine-tune
 every weight of the network on the calibration frames, starting from the trained weights,
-with Adam at ``lr`` for a fixed number of minibatch ``steps``:
-
-- each training window gets a random per-sensor offset and gain (``offset_jitter`` and
-  ``gain_jitter``, in units of the sensor's training standard deviation), so that 60 s of
-  data cannot be memorised and the adapted network tolerates the slow offset drift a
-  donning brings over the following minutes;
-- the weights returned are the average of the weights over the last ``average_share`` of
-  the steps (stochastic weight averaging), which is steadier than the last step's.
+with Adam at ``lr`` for a fixed number of minibatch ``steps``, each training window given a
+random per-sensor offset and gain (``offset_jitter`` and ``gain_jitter``, in units of the
+sensor's training standard deviation). The jitter is what makes it work: 60 s of data
+cannot then be memorised, and the adapted network tolerates the slow offset drift a donning
+brings over the following minutes.
 
 The normalisation, window and target of the trained model are kept, so the calibrated model
-runs on every engine like the one it came from. Fine-tuning all weights beat a per-sensor
-gain and offset on the inputs (the network frozen), a full input mixing matrix, and
-fine-tuning only the LSTM, only its input weights or only the dense head, on both
-wearer pairs of the graphene knee data.
+runs on every engine like the one it came from. On both wearer pairs of the graphene knee
+data this beat a per-sensor gain and offset on the inputs (the network frozen), fine-tuning
+the dense head only, and fine-tuning every weight without the jitter
+(``python -m benchmarks.bench_calibration``).
 
 The calibration recordings are training data: they join ``info["sources"]``, so the
 held-out rule (conformance ``heldout.overlap``) refuses to score on them.
@@ -37,7 +34,7 @@ from exohil.estimator.training import NormalisedFrames
 from exohil.formats.errors import InputError
 
 #: The method's name as written into a calibrated checkpoint.
-METHOD = "fine-tune all weights (jittered inputs, averaged weights)"
+METHOD = "fine-tune all weights on jittered inputs"
 #: Least calibration data accepted, seconds of frames at the model's rate.
 MIN_CALIBRATION_SECONDS = 5.0
 
@@ -55,7 +52,6 @@ class CalibrationConfig:
     batch_size: int = 500
     offset_jitter: float = 0.3  # σ of a per-window sensor offset, training standard deviations
     gain_jitter: float = 0.1  # σ of a per-window relative sensor gain
-    average_share: float = 0.5  # weights averaged over this last share of the steps
     seed: int = 0
     threads: int = 1
 
@@ -91,7 +87,7 @@ def calibrate(
         raise DatasetError(f"too little calibration data: {frames} frames ({seconds:.1f} s); "
                            f"need at least {MIN_CALIBRATION_SECONDS:g} s of frames with "
                            "ground truth")
-    if cfg.steps < 1 or cfg.batch_size < 1 or not 0.0 < cfg.average_share <= 1.0:
+    if cfg.steps < 1 or cfg.batch_size < 1 or min(cfg.offset_jitter, cfg.gain_jitter) < 0:
         raise ValueError(f"bad calibration settings {cfg}")
     start = time.monotonic()
     est = TrainedEstimator(base.config, base.sensor_names, base.target, base.norm,
@@ -122,8 +118,7 @@ def calibrate(
 
 def _fine_tune(est: TrainedEstimator, data: NormalisedFrames, cfg: CalibrationConfig,
                progress: Callable[[str], None] | None) -> None:
-    """Adam on the MSE of the normalised network targets, jittered windows, the weights
-    averaged over the last ``average_share`` of the steps (in place)."""
+    """Adam on the MSE of the normalised network targets over jittered windows (in place)."""
     import torch
 
     torch.set_num_threads(cfg.threads)
@@ -131,12 +126,9 @@ def _fine_tune(est: TrainedEstimator, data: NormalisedFrames, cfg: CalibrationCo
     rng = np.random.default_rng(cfg.seed)
     net = est.network
     assert isinstance(net, torch.nn.Module)
-    params = list(net.parameters())
-    opt = torch.optim.Adam(params, lr=cfg.lr)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     table, win, dil = data.table, est.config.window, est.config.dilation
     n_sensors = table.x.shape[1]
-    first_averaged = cfg.steps - max(1, round(cfg.steps * cfg.average_share))
-    average = [torch.zeros_like(p) for p in params]
     start, last = time.monotonic(), -1.0
     net.train()
     for step in range(cfg.steps):
@@ -149,11 +141,6 @@ def _fine_tune(est: TrainedEstimator, data: NormalisedFrames, cfg: CalibrationCo
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        if step >= first_averaged:
-            k = step - first_averaged
-            with torch.no_grad():
-                for a, p in zip(average, params, strict=True):
-                    a.mul_(k / (k + 1)).add_(p.detach(), alpha=1.0 / (k + 1))
         elapsed = time.monotonic() - start
         if progress and (elapsed - last >= 0.5 or step == cfg.steps - 1):
             last = elapsed
@@ -161,7 +148,4 @@ def _fine_tune(est: TrainedEstimator, data: NormalisedFrames, cfg: CalibrationCo
             mse = float(loss.detach())
             progress(f"[calibrate] step {step + 1}/{cfg.steps} train mse {mse:.4f} "
                      f"elapsed {elapsed:4.1f}s{done}")
-    with torch.no_grad():
-        for a, p in zip(average, params, strict=True):
-            p.copy_(a)
     net.eval()

@@ -28,11 +28,11 @@ def calibrate_command(checkpoint, recordings, out, steps, seed):
     plus ground truth; 30–60 s of the calibration protocol in docs/calibration.md) and write
     the adapted model to --out.
 
-    Every weight of the network is fine-tuned on the calibration frames (inputs jittered,
-    weights averaged over the second half of the steps), which takes about 10–20 s on a
-    laptop CPU. The new checkpoint records the base checkpoint's and the recordings' sha256,
-    the method and the seconds used; the recordings count as training data, so score the
-    calibrated model on other recordings of the same wearer. Example:
+    Every weight of the network is fine-tuned on the calibration frames, each window given a
+    random per-sensor offset and gain; it takes 10–20 s on one CPU core. The new checkpoint
+    records the base checkpoint's and the recordings' sha256, the method and the seconds used;
+    the recordings count as training data, so score the calibrated model on other recordings
+    of the same wearer. Example:
 
     \b
         exohil calibrate ennet.npz calib.mcap --out ennet-wearer2.npz
