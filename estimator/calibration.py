@@ -4,10 +4,13 @@ recording with ground truth (30–60 s of the calibration protocol, docs/calibra
 Method (chosen by measurement, docs/calibration.md "How the method was chosen"): fine-tune
 every weight of the network on the calibration frames, starting from the trained weights,
 with Adam at ``lr`` for a fixed number of minibatch ``steps``, each training window given a
-random per-sensor offset and gain (``offset_jitter`` and ``gain_jitter``, in units of the
-sensor's training standard deviation). The jitter is what makes it work: 60 s of data
-cannot then be memorised, and the adapted network tolerates the slow offset drift a donning
-brings over the following minutes.
+random per-sensor offset (σ = ``jitter`` of the sensor's training standard deviation) and
+gain (σ = ``jitter`` / 3). The jitter keeps 60 s of data from being memorised and makes the
+adapted network tolerate the offset drift a sensor shows over the following minutes, at the
+cost of precision where the sensors do not drift. How much jitter suits a suit is chosen from
+the calibration data (``jitter=None``): each of :data:`JITTER_CANDIDATES` fine-tunes on the
+first part of every calibration block and is scored on the rest (the last
+:data:`HOLDOUT_SHARE`); the one with the lowest error there is used on all the data.
 
 The normalisation, window and target of the trained model are kept, so the calibrated model
 runs on every engine like the one it came from. On both wearer pairs of the graphene knee
@@ -28,6 +31,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from exohil.estimator.dataset import Block, DatasetError
+from exohil.estimator.defaults import CALIBRATION_JITTERS
 from exohil.estimator.evaluation import evaluate
 from exohil.estimator.trained import TrainedEstimator
 from exohil.estimator.training import NormalisedFrames
@@ -37,6 +41,14 @@ from exohil.formats.errors import InputError
 METHOD = "fine-tune all weights on jittered inputs"
 #: Least calibration data accepted, seconds of frames at the model's rate.
 MIN_CALIBRATION_SECONDS = 5.0
+#: Input jitter levels tried when none is given (σ of the offset, sensor standard deviations).
+JITTER_CANDIDATES = CALIBRATION_JITTERS
+#: σ of the relative gain jitter per unit of offset jitter.
+GAIN_PER_OFFSET = 1.0 / 3.0
+#: The end of every calibration block on which the jitter candidates are scored.
+HOLDOUT_SHARE = 0.25
+#: Fine-tuning steps of each candidate (the final fit takes ``CalibrationConfig.steps``).
+SELECTION_STEPS = 200
 
 
 class CalibrationError(InputError):
@@ -50,8 +62,7 @@ class CalibrationConfig:
     steps: int = 600
     lr: float = 1e-3
     batch_size: int = 500
-    offset_jitter: float = 0.3  # σ of a per-window sensor offset, training standard deviations
-    gain_jitter: float = 0.1  # σ of a per-window relative sensor gain
+    jitter: float | None = None  # σ of the input offset (std units); None: chosen from data
     seed: int = 0
     threads: int = 1
 
@@ -87,13 +98,16 @@ def calibrate(
         raise DatasetError(f"too little calibration data: {frames} frames ({seconds:.1f} s); "
                            f"need at least {MIN_CALIBRATION_SECONDS:g} s of frames with "
                            "ground truth")
-    if cfg.steps < 1 or cfg.batch_size < 1 or min(cfg.offset_jitter, cfg.gain_jitter) < 0:
+    if cfg.steps < 1 or cfg.batch_size < 1 or (cfg.jitter is not None and cfg.jitter < 0):
         raise ValueError(f"bad calibration settings {cfg}")
     start = time.monotonic()
-    est = TrainedEstimator(base.config, base.sensor_names, base.target, base.norm,
-                           base.offset_frames, base.sensor_rate_hz,
-                           state=base.weights(dtype=np.float32))
-    _fine_tune(est, NormalisedFrames(est, blocks), cfg, progress)
+    selection: dict[str, float] = {}
+    jitter = cfg.jitter
+    if jitter is None:
+        selection = _select_jitter(base, blocks, cfg, progress)
+        jitter = float(min(selection, key=selection.__getitem__))
+    est = _copy(base)
+    _fine_tune(est, NormalisedFrames(est, blocks), cfg.steps, jitter, cfg, progress)
     before, after = evaluate(base, blocks), evaluate(est, blocks)
     base_info = dict(base.info)
     est.info = {
@@ -106,6 +120,9 @@ def calibrate(
             "seconds": round(seconds, 2),
             "frames": frames,
             "config": asdict(cfg),
+            "jitter": jitter,
+            # held-out MSE of each candidate jitter; empty when the jitter was given
+            "jitter_selection": selection,
             "elapsed_s": round(time.monotonic() - start, 1),
             "accuracy_before": before["accuracy"],  # on the calibration frames
             "accuracy_after": after["accuracy"],
@@ -116,9 +133,36 @@ def calibrate(
     return est
 
 
-def _fine_tune(est: TrainedEstimator, data: NormalisedFrames, cfg: CalibrationConfig,
-               progress: Callable[[str], None] | None) -> None:
-    """Adam on the MSE of the normalised network targets over jittered windows (in place)."""
+def _copy(base: TrainedEstimator) -> TrainedEstimator:
+    """A new estimator with ``base``'s settings and a copy of its weights (no info)."""
+    return TrainedEstimator(base.config, base.sensor_names, base.target, base.norm,
+                            base.offset_frames, base.sensor_rate_hz,
+                            state=base.weights(dtype=np.float32))
+
+
+def _select_jitter(base: TrainedEstimator, blocks: list[Block], cfg: CalibrationConfig,
+                   progress: Callable[[str], None] | None) -> dict[str, float]:
+    """Held-out MSE (normalised network targets) of each of :data:`JITTER_CANDIDATES`,
+    fine-tuned :data:`SELECTION_STEPS` steps on the first part of every block and scored on
+    its last :data:`HOLDOUT_SHARE`."""
+    cuts = [len(b) - max(1, round(len(b) * HOLDOUT_SHARE)) for b in blocks]
+    fit = [b.slice(0, c) for b, c in zip(blocks, cuts, strict=True) if c > 0]
+    held = [b.slice(c, len(b)) for b, c in zip(blocks, cuts, strict=True)]
+    scores: dict[str, float] = {}
+    for jitter in JITTER_CANDIDATES:
+        est = _copy(base)
+        _fine_tune(est, NormalisedFrames(est, fit), SELECTION_STEPS, jitter, cfg, progress)
+        data = NormalisedFrames(est, held)
+        err = sum(float(np.sum((est.network_outputs(data.table.x[a:b]) - data.table.y[a:b])
+                               ** 2)) for a, b in data.bounds)
+        scores[f"{jitter:g}"] = err / data.table.y.size
+    return scores
+
+
+def _fine_tune(est: TrainedEstimator, data: NormalisedFrames, steps: int, jitter: float,
+               cfg: CalibrationConfig, progress: Callable[[str], None] | None) -> None:
+    """Adam on the MSE of the normalised network targets over windows given a random offset
+    (σ ``jitter``) and gain (σ ``jitter`` · :data:`GAIN_PER_OFFSET`) per sensor (in place)."""
     import torch
 
     torch.set_num_threads(cfg.threads)
@@ -131,21 +175,21 @@ def _fine_tune(est: TrainedEstimator, data: NormalisedFrames, cfg: CalibrationCo
     n_sensors = table.x.shape[1]
     start, last = time.monotonic(), -1.0
     net.train()
-    for step in range(cfg.steps):
+    for step in range(steps):
         frames = rng.integers(0, len(table), cfg.batch_size)
         xb = torch.from_numpy(table.windows(frames, win, dil))
         shape = (len(frames), 1, n_sensors)
-        xb = (xb * (1.0 + cfg.gain_jitter * torch.randn(shape, generator=gen))
-              + cfg.offset_jitter * torch.randn(shape, generator=gen))
+        xb = (xb * (1.0 + jitter * GAIN_PER_OFFSET * torch.randn(shape, generator=gen))
+              + jitter * torch.randn(shape, generator=gen))
         loss = torch.mean((net(xb) - torch.from_numpy(table.y[frames])) ** 2)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
         elapsed = time.monotonic() - start
-        if progress and (elapsed - last >= 0.5 or step == cfg.steps - 1):
+        if progress and (elapsed - last >= 0.5 or step == steps - 1):
             last = elapsed
-            done = " — stopped: all steps done" if step == cfg.steps - 1 else ""
+            done = " — stopped: all steps done" if step == steps - 1 else ""
             mse = float(loss.detach())
-            progress(f"[calibrate] step {step + 1}/{cfg.steps} train mse {mse:.4f} "
-                     f"elapsed {elapsed:4.1f}s{done}")
+            progress(f"[calibrate] jitter {jitter:g} step {step + 1}/{steps} train mse "
+                     f"{mse:.4f} elapsed {elapsed:4.1f}s{done}")
     net.eval()

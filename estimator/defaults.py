@@ -27,3 +27,7 @@ def default_window(name: str, rate_hz: float) -> tuple[int, int]:
         return 1, 1
     frames, span_s = DEFAULT_WINDOW[name]
     return frames, max(1, round(span_s * rate_hz / (frames - 1)))
+
+#: Calibration (:mod:`exohil.estimator.calibration`): the input jitter levels tried when none
+#: is given, σ of the per-sensor offset in training standard deviations (docs/calibration.md).
+CALIBRATION_JITTERS = (0.03, 0.1, 0.3)

@@ -5,11 +5,21 @@ from __future__ import annotations
 
 import click
 
-from exohil.harness.cli_types import Count, InputFile, OutputFile, Seed, refuse_overwriting_inputs
+from exohil.estimator.defaults import CALIBRATION_JITTERS
+from exohil.harness.cli_types import (
+    Count,
+    Finite,
+    InputFile,
+    OutputFile,
+    Seed,
+    refuse_overwriting_inputs,
+)
 from exohil.harness.cmd_train import _accuracy_line, _command_line, _load
 
 #: Most fine-tuning steps accepted (far beyond any useful value; a typo cannot run for days).
 MAX_STEPS = 1_000_000
+#: Largest --jitter accepted (a σ of 10 training standard deviations drowns any signal).
+MAX_JITTER = 10.0
 #: Relative difference of sensor rates beyond which a model's window would span another time.
 RATE_TOLERANCE = 0.01
 
@@ -21,15 +31,21 @@ RATE_TOLERANCE = 0.01
               help="Calibrated checkpoint to write (.npz); must not be an input.")
 @click.option("--steps", type=Count(1, MAX_STEPS), default=600, show_default=True,
               help="Fine-tuning steps (minibatches of 500 windows).")
+@click.option("--jitter", type=Finite(0.0, MAX_JITTER), help="σ of the random per-sensor "
+              "input offset, in the sensor's training standard deviations (the gain's is a "
+              "third of it); default: the best of "
+              f"{', '.join(map(str, CALIBRATION_JITTERS))} on the last quarter of the calibration "
+              "data (docs/calibration.md).")
 @click.option("--seed", type=Seed(), default=0, show_default=True,
               help="Seed of the minibatches and the input jitter.")
-def calibrate_command(checkpoint, recordings, out, steps, seed):
+def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     """Adapt CHECKPOINT to a new wearer or donning with calibration RECORDING files (sensors
     plus ground truth; 30–60 s of the calibration protocol in docs/calibration.md) and write
     the adapted model to --out.
 
     Every weight of the network is fine-tuned on the calibration frames, each window given a
-    random per-sensor offset and gain; it takes 10–20 s on one CPU core. The new checkpoint
+    random per-sensor offset and gain (--jitter, chosen on held-out calibration frames
+    unless given); it takes 15–25 s on one CPU core. The new checkpoint
     records the base checkpoint's and the recordings' sha256, the method and the seconds used;
     the recordings count as training data, so score the calibrated model on other recordings
     of the same wearer. Example:
@@ -65,7 +81,7 @@ def calibrate_command(checkpoint, recordings, out, steps, seed):
             f"{base.sensor_rate_hz:g} Hz: its window would span another time")
     blocks = [b for b in data.blocks(base.offset_frames) if len(b)]
     try:
-        est = calibrate(base, blocks, CalibrationConfig(steps=steps, seed=seed),
+        est = calibrate(base, blocks, CalibrationConfig(steps=steps, jitter=jitter, seed=seed),
                         base_source={"file": checkpoint.name, "sha256": sha256_file(checkpoint)},
                         sources=data.sources, progress=progress_printer())
     except CalibrationError as exc:
@@ -73,8 +89,10 @@ def calibrate_command(checkpoint, recordings, out, steps, seed):
     est.info["command"] = _command_line()
     save_checkpoint(out, est)
     cal = est.info["calibration"]
+    chosen = " (chosen)" if cal["jitter_selection"] else ""
     click.echo(f"wrote {out} ({est.kind} calibrated on {cal['seconds']:g} s from "
-               f"{len(recordings)} recording(s) in {cal['elapsed_s']:g} s)")
+               f"{len(recordings)} recording(s) in {cal['elapsed_s']:g} s, jitter "
+               f"{cal['jitter']:g}{chosen})")
     click.echo("on the calibration frames (training data, not a test):")
     click.echo("  before " + _accuracy_line(cal["accuracy_before"]))
     click.echo("  after  " + _accuracy_line(cal["accuracy_after"]))
