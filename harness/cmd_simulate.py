@@ -64,7 +64,7 @@ class EffectKind(click.Choice):
 @click.option("--without", "without", multiple=True, metavar="KIND",
               type=EffectKind(),
               help="Drop effects of this kind (hysteresis, creep, saturation, lag, drift, noise, "
-                   "quantization, dropout) from the profile's chain (repeatable).")
+                   "quantization, dropout, gain) from the profile's chain (repeatable).")
 @click.option("--out", "out_path", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
 def simulate_command(protocol: str, profile_path: Path | None, seed: int,
