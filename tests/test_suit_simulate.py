@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from exohil.emulators.effects import EffectChain
+from exohil.emulators.effects import EffectChain, Gain, Quantization, Saturation
 from exohil.emulators.protocols import MOCAP_RATE_HZ, mot_trajectory, paper_protocol
 from exohil.emulators.simulate import geometric_signal, simulate
 from exohil.emulators.suit_profile import (
     DEFAULT_PROFILE_PATH,
+    PROFILES_DIR,
     ProfileError,
     load_default_profile,
     load_profile,
@@ -158,6 +159,58 @@ def test_profile_with_any_number_of_tendons(tmp_path):
     assert profile.sensor_names == ("F",)
     rec = simulate(paper_protocol(1), profile, seed=1)
     assert rec.sensors.values.shape[1] == 1
+
+
+DONNING_B = PROFILES_DIR / "donning-b.toml"
+
+
+@pytest.fixture(scope="module")
+def donning_b():
+    return load_profile(DONNING_B)
+
+
+def test_donning_b_is_the_default_suit_with_a_gain_after_the_stops(donning_b, profile):
+    assert donning_b.name == "donning-b"
+    assert donning_b.sensor_names == profile.sensor_names == ("F", "SF", "SR", "R")
+    kinds = [e.name for e in donning_b.effects.effects]
+    assert [k for k in kinds if k != "gain"] == [e.name for e in profile.effects.effects]
+    assert kinds.index("gain") == kinds.index("saturation") + 1
+    gain = next(e for e in donning_b.effects.effects if isinstance(e, Gain))
+    assert len(gain.gain) == len(gain.offset_mm) == 4
+    assert donning_b.geometry.cap_radius_mm != profile.geometry.cap_radius_mm
+    for ours, theirs in zip(donning_b.geometry.tendons, profile.geometry.tendons, strict=True):
+        for pts in ("thorax_points_mm", "humerus_points_mm"):
+            moved = np.linalg.norm(getattr(ours, pts) - getattr(theirs, pts), axis=1)
+            assert np.all((moved >= 8.0) & (moved <= 15.0)), (ours.name, pts, moved)
+
+
+def test_donning_b_reads_differently_from_default_on_the_same_movement(donning_b, profile,
+                                                                        protocol):
+    ideal_b = geometric_signal(protocol, donning_b).values
+    ideal_default = geometric_signal(protocol, profile).values
+    shape = (ideal_b - ideal_default) - (ideal_b - ideal_default).mean(axis=0)
+    assert np.all(np.sqrt(np.mean(shape**2, axis=0)) > 3.0)  # not just an offset
+    no_drops = profile.effects.without("dropout")
+    ours = simulate(protocol, donning_b, seed=3, effects=donning_b.effects.without("dropout"))
+    theirs = simulate(protocol, profile, seed=3, effects=no_drops)
+    assert np.all(np.mean(np.abs(ours.sensors.values - theirs.sensors.values), axis=0) > 5.0)
+
+
+def test_donning_b_stays_within_its_stops_and_the_adc_range(donning_b, protocol):
+    values = simulate(protocol, donning_b, seed=3).sensors.values
+    chain = {e.name: e for e in donning_b.effects.effects}
+    adc = chain["quantization"]
+    gain, stops = chain["gain"], chain["saturation"]
+    assert isinstance(adc, Quantization) and isinstance(gain, Gain)
+    assert isinstance(stops, Saturation)
+    top = adc.zero_mm + adc.travel_mm * (1 - 2.0**-adc.bits)
+    assert values.min() > adc.zero_mm + 50.0 and values.max() < top - 50.0
+    stop_reading = np.asarray(gain.gain) * np.asarray(stops.lower_mm) + np.asarray(gain.offset_mm)
+    at_stop = np.abs(values - stop_reading) < 1.0
+    assert np.all(at_stop.mean(axis=0) < 0.1)
+    for j in range(values.shape[1]):  # and nowhere else pinned either
+        assert np.mean(values[:, j] <= values[:, j].min() + 0.5) < 0.1
+        assert np.mean(values[:, j] >= values[:, j].max() - 0.5) < 0.1
 
 
 # --- CLI -------------------------------------------------------------------------------
