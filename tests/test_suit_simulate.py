@@ -7,7 +7,13 @@ import pytest
 from click.testing import CliRunner
 
 from exohil.emulators.effects import EffectChain, Gain, Quantization, Saturation
-from exohil.emulators.protocols import MOCAP_RATE_HZ, mot_trajectory, paper_protocol
+from exohil.emulators.protocols import (
+    CALIBRATION_MOVEMENT_S,
+    MOCAP_RATE_HZ,
+    calibration_protocol,
+    mot_trajectory,
+    paper_protocol,
+)
 from exohil.emulators.simulate import geometric_signal, simulate
 from exohil.emulators.suit_profile import (
     DEFAULT_PROFILE_PATH,
@@ -229,8 +235,31 @@ def test_simulate_command_writes_a_readable_recording(tmp_path):
     np.testing.assert_allclose(rec.sensors.values, expected.sensors.values, atol=1e-4)
 
 
+@pytest.mark.parametrize("profile_args", [[], ["--profile", str(DONNING_B)]],
+                         ids=["default", "donning-b"])
+def test_simulate_command_writes_a_calibration_recording(tmp_path, profile_args):
+    out = tmp_path / "calibration.mcap"
+    result = CliRunner().invoke(main, ["simulate", "--protocol", "calibration", "--seed", "3",
+                                       *profile_args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    rec = read_recording(out)
+    mocap = rec.mocap["shoulder"]
+    assert len(mocap) == 60 * 120 and mocap.t[-1] == pytest.approx(60.0 - 1 / 120)
+    assert 0.99 * 60 * 250 < len(rec.sensors) <= 60 * 250  # a few frames dropped
+    assert [s.name for s in rec.segments] == list(CALIBRATION_MOVEMENT_S)
+    assert rec.segments[0].t0 == 0.0 and rec.segments[-1].t1 == pytest.approx(60.0)
+    assert rec.metadata["trajectory"] == "calibration_protocol seed=3 duration_s=60"
+    profile = load_profile(DONNING_B) if profile_args else load_default_profile()
+    assert rec.metadata["suit_profile"] == profile.name
+    expected = simulate(calibration_protocol(3), profile, 3)
+    np.testing.assert_array_equal(rec.sensors.seq, expected.sensors.seq)
+    np.testing.assert_allclose(rec.sensors.values, expected.sensors.values, atol=1e-4)
+    np.testing.assert_allclose(mocap.angles, expected.mocap["shoulder"].angles, atol=1e-4)
+
+
 @pytest.mark.parametrize(("args", "message"), [
-    (["--protocol", "walk"], "use 'paper' or 'mot:FILE"),
+    (["--protocol", "walk"], "use 'paper', 'calibration' or 'mot:FILE"),
+    (["--protocol", "calibration:45"], "use 'paper', 'calibration' or 'mot:FILE"),
     (["--protocol", "mot:/nonexistent.mot"], "no such .mot file"),
     (["--without", "glue"], "unknown effect kind"),
     (["--profile", "/nonexistent.toml"], "does not exist"),
