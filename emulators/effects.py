@@ -10,7 +10,7 @@ removing or reordering other effects never reseeds an effect's random stream.
 Effects (registry key → class): ``hysteresis`` → :class:`Hysteresis`, ``creep`` →
 :class:`Creep`, ``saturation`` → :class:`Saturation`, ``lag`` → :class:`Lag`, ``drift`` →
 :class:`Drift`, ``noise`` → :class:`Noise`, ``quantization`` → :class:`Quantization`,
-``dropout`` → :class:`Dropout`. Serialise with :func:`effect_to_dict` /
+``dropout`` → :class:`Dropout`, ``gain`` → :class:`Gain`. Serialise with :func:`effect_to_dict` /
 :func:`effect_from_dict` (``{"kind": "creep", "tau_build_s": 20.0, ...}``).
 """
 
@@ -388,9 +388,39 @@ class Dropout:
         return Signal(t=signal.t, values=signal.values, keep=signal.keep & kept)
 
 
+@dataclass
+class Gain:
+    """The string pot's transfer and its zero after a donning: out = ``gain`` · in + ``offset_mm``.
+
+    A new wearer or a new donning changes where each pot's string sits when the arm hangs (its
+    zero) and, through the routing and the pot's calibration, how many mm of reading one mm of
+    tendon travel gives. Deterministic (draws nothing from ``rng``).
+
+    Attributes:
+        gain: reading per mm of input (dimensionless, per sensor, > 0 and finite).
+        offset_mm: added to the reading after the gain, mm (per sensor, finite).
+    """
+
+    name: ClassVar[str] = "gain"
+    gain: PerSensor = 1.0
+    offset_mm: PerSensor = 0.0
+
+    def __post_init__(self) -> None:
+        _check(_all(self.gain, lambda v: np.isfinite(v) & (v > 0)),
+               "gain: gain must be > 0 and finite")
+        _check(_all(self.offset_mm, np.isfinite), "gain: offset_mm must be finite")
+
+    def apply(self, signal: Signal, rng: np.random.Generator) -> Signal:
+        s = signal.n_sensors
+        gain = per_sensor(self.gain, s, "gain.gain")
+        offset = per_sensor(self.offset_mm, s, "gain.offset_mm")
+        return signal.with_values(gain * signal.values + offset)
+
+
 EFFECT_TYPES: dict[str, type] = {
     cls.name: cls
-    for cls in (Hysteresis, Creep, Saturation, Lag, Drift, Noise, Quantization, Dropout)
+    for cls in (Hysteresis, Creep, Saturation, Lag, Drift, Noise, Quantization, Dropout,
+                Gain)
 }
 
 

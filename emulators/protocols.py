@@ -1,4 +1,5 @@
-"""Movements that drive the simulated suit: the paper's protocol and real recorded motion.
+"""Movements that drive the simulated suit: the paper's protocol, a calibration recording's
+and real recorded motion.
 
 A :class:`Trajectory` gives the MoBL-ARMS shoulder angles (θ = elv_angle, φ = shoulder_elv,
 ψ = shoulder_rot, degrees) at any time, plus labelled :class:`Segment` spans (seconds on the
@@ -7,19 +8,23 @@ trajectory's clock, which is the motion-capture clock).
 * :func:`paper_protocol` — the movements of Varghese et al. Table III with their exact
   motion-capture frame counts at 120 Hz (29,551 frames ≈ 246.3 s), seeded: point-to-point
   minimum-jerk moves with holds, partial reversals and several amplitudes and speeds.
+* :func:`calibration_protocol` — what a new wearer does for a calibration recording (60 s by
+  default): the same kinds of movement, briefly, within the paper protocol's range.
 * :func:`mot_trajectory` — real shoulder motion from OpenSim ``.mot`` IK results (e.g. the
   shoulder-ik data set), several trials concatenated with smooth bridges.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from exohil.emulators.seeding import keyed_rng
 from exohil.formats.opensim_mot import read_mot
 from exohil.formats.recording import Segment
 from exohil.kinematics import isb_to_ms
@@ -127,22 +132,30 @@ def _move_time(distance_deg: float, speed_deg_s: float) -> float:
     return max(0.4, abs(distance_deg) / speed_deg_s)
 
 
-def _flexion_extension(path: _Path, rng: np.random.Generator, span_s: float) -> None:
-    for rep in range(4):
+def _flexion_extension(path: _Path, rng: np.random.Generator, span_s: float,
+                       flexion_deg: Sequence[float] = (90.0, 60.0, 80.0, 45.0),
+                       extension_deg: Sequence[float] = (60.0, 40.0, 50.0, 30.0)) -> None:
+    """One flexion (θ = 90°) then one extension (θ = −90°) per repetition, to about the
+    given elevations (up to 5 % / 10 % less)."""
+    for flexion, extension in zip(flexion_deg, extension_deg, strict=True):
         speed = rng.uniform(35.0, 90.0)
         path.move(90.0, 0.0, 1.0)  # change plane while the arm hangs
-        path.elevate(90.0, (90.0, 60.0, 80.0, 45.0)[rep] * rng.uniform(0.95, 1.0), rng,
+        path.elevate(90.0, flexion * rng.uniform(0.95, 1.0), rng,
                      hold_s=rng.uniform(0.3, 2.0), speed_deg_s=speed)
         path.move(-90.0, 0.0, 1.0)
-        path.elevate(-90.0, (60.0, 40.0, 50.0, 30.0)[rep] * rng.uniform(0.9, 1.0), rng,
+        path.elevate(-90.0, extension * rng.uniform(0.9, 1.0), rng,
                      hold_s=rng.uniform(0.3, 1.5), speed_deg_s=speed)
 
 
-def _abduction_adduction(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+def _abduction_adduction(path: _Path, rng: np.random.Generator, span_s: float,
+                         elevations_deg: Sequence[float] = (90.0, 70.0, 90.0, 50.0),
+                         holds_s: Sequence[float] = (1.0, 0.5, 4.0, 0.3)) -> None:
+    """Abductions (θ = 0°) to about the given elevations (up to 5 % less), each held at the
+    top for about its hold (±20 %)."""
     path.move(0.0, 0.0, 0.5)
-    for rep in range(4):
-        path.elevate(0.0, (90.0, 70.0, 90.0, 50.0)[rep] * rng.uniform(0.95, 1.0), rng,
-                     hold_s=(1.0, 0.5, 4.0, 0.3)[rep] * rng.uniform(0.8, 1.2),
+    for elevation, hold in zip(elevations_deg, holds_s, strict=True):
+        path.elevate(0.0, elevation * rng.uniform(0.95, 1.0), rng,
+                     hold_s=hold * rng.uniform(0.8, 1.2),
                      speed_deg_s=rng.uniform(30.0, 90.0))
         path.hold(rng.uniform(0.3, 1.0))
 
@@ -164,27 +177,49 @@ def _azimuth_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> None
 SWEEP_ELEVATIONS_DEG = (30.0, 120.0, 50.0, 90.0, 70.0)
 
 
+#: The planes of elevation (deg) a sweep at fixed elevation runs between.
+SWEEP_PLANE_DEG = (-40.0, 90.0)
+
+
+def _sweep_plane(path: _Path, rng: np.random.Generator, phi: float, speed_deg_s: float,
+                 sweeps: int) -> None:
+    """From hanging: raise the arm in the frontal plane (θ = 0) to ``phi``, sweep the plane
+    of elevation ``sweeps`` times over :data:`SWEEP_PLANE_DEG` and back, return and lower."""
+    path.move(0.0, 0.0, 1.0)  # the plane turns while the arm hangs
+    path.move_at(0.0, phi, 45.0)
+    for _ in range(sweeps):
+        path.move_at(SWEEP_PLANE_DEG[0], phi, speed_deg_s)
+        path.hold(rng.uniform(0.2, 1.5))
+        path.move_at(SWEEP_PLANE_DEG[1], phi, speed_deg_s)
+        path.hold(rng.uniform(0.2, 1.5))
+    path.move_at(0.0, phi, speed_deg_s)
+    path.move_at(0.0, 0.0, 45.0)
+    path.hold(rng.uniform(0.3, 1.0))
+
+
 def _elevation_fixed(path: _Path, rng: np.random.Generator, span_s: float) -> None:
     for phi in SWEEP_ELEVATIONS_DEG:
-        speed = rng.uniform(35.0, 80.0)
-        path.move(0.0, 0.0, 1.0)  # the plane turns while the arm hangs
-        path.move_at(0.0, phi, 45.0)
-        for _ in range(2):
-            path.move_at(-40.0, phi, speed)
-            path.hold(rng.uniform(0.2, 1.5))
-            path.move_at(90.0, phi, speed)
-            path.hold(rng.uniform(0.2, 1.5))
-        path.move_at(0.0, phi, speed)
-        path.move_at(0.0, 0.0, 45.0)
-        path.hold(rng.uniform(0.3, 1.0))
+        _sweep_plane(path, rng, phi, rng.uniform(35.0, 80.0), sweeps=2)
 
 
-def _random_movements(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+#: Where random reaching aims: planes of elevation θ and elevations φ, degrees.
+RANDOM_THETA_DEG = (-40.0, 90.0)
+RANDOM_PHI_DEG = (0.0, 90.0)
+
+
+def _random_movements(path: _Path, rng: np.random.Generator, span_s: float,
+                      speed_deg_s: tuple[float, float] = (30.0, 100.0),
+                      hold_s: tuple[float, float] = (0.3, 4.0),
+                      reserve_s: float = 3.0) -> None:
+    """Random targets at random mean speeds in ``speed_deg_s``, about a third of them held
+    for a time in ``hold_s``, until ``span_s`` − ``reserve_s`` is filled; ends lowering the
+    arm."""
     first = len(path.durations)
-    while sum(path.durations[first:]) < span_s - 3.0:
-        path.move_at(rng.uniform(-40.0, 90.0), rng.uniform(0.0, 90.0), rng.uniform(30.0, 100.0))
+    while sum(path.durations[first:]) < span_s - reserve_s:
+        path.move_at(rng.uniform(*RANDOM_THETA_DEG), rng.uniform(*RANDOM_PHI_DEG),
+                     rng.uniform(*speed_deg_s))
         if rng.random() < 0.35:
-            path.hold(rng.uniform(0.3, 4.0))
+            path.hold(rng.uniform(*hold_s))
     path.move_at(path.poses[-1][0], 0.0, 60.0)
 
 
@@ -197,6 +232,30 @@ _PAPER_BUILDERS = {
 }
 
 
+Builder = Callable[[_Path, np.random.Generator, float], None]
+
+
+def _assemble(movements: Sequence[tuple[str, float, Builder]], rng: np.random.Generator,
+              start: tuple[float, float], source: str) -> Trajectory:
+    """Movements one after another, each (label, span in s, builder) time-scaled to fill
+    exactly its span and labelled with it; ψ = 0."""
+    path = _Path(*start)
+    durations: list[float] = []
+    segments = []
+    end = 0.0
+    for label, span, build in movements:
+        first = len(path.durations)
+        build(path, rng, span)
+        steps = np.asarray(path.durations[first:])
+        durations.extend((steps * (span / steps.sum())).tolist())
+        segments.append(Segment(label, end, end + span))
+        end += span
+    knot_t = np.concatenate([[0.0], np.cumsum(durations)])
+    knot_t[-1] = end  # exact end despite rounding in the cumulative sum
+    deg = np.column_stack([np.asarray(path.poses), np.zeros(len(path.poses))])
+    return Trajectory(knot_t, deg, "minimum_jerk", end, segments, source=source)
+
+
 def paper_protocol(seed: int) -> Trajectory:
     """The Table III protocol, seeded; each movement spans exactly its frame count at 120 Hz.
 
@@ -204,23 +263,86 @@ def paper_protocol(seed: int) -> Trajectory:
     only while it hangs) and its steps are time-scaled to fill frames / 120 s; ψ = 0.
     """
     rng = np.random.default_rng(np.random.SeedSequence(int(seed)))
-    path = _Path(90.0, 0.0)
-    durations: list[float] = []
-    segments = []
-    start = 0.0
-    for label, frames in PAPER_MOVEMENT_FRAMES.items():
-        span = frames / MOCAP_RATE_HZ
-        first = len(path.durations)
-        _PAPER_BUILDERS[label](path, rng, span)
-        steps = np.asarray(path.durations[first:])
-        durations.extend((steps * (span / steps.sum())).tolist())
-        segments.append(Segment(label, start, start + span))
-        start += span
-    knot_t = np.concatenate([[0.0], np.cumsum(durations)])
-    knot_t[-1] = start  # exact end despite rounding in the cumulative sum
-    deg = np.column_stack([np.asarray(path.poses), np.zeros(len(path.poses))])
-    return Trajectory(knot_t, deg, "minimum_jerk", start, segments,
-                      source=f"paper_protocol seed={int(seed)}")
+    movements = [(label, frames / MOCAP_RATE_HZ, _PAPER_BUILDERS[label])
+                 for label, frames in PAPER_MOVEMENT_FRAMES.items()]
+    return _assemble(movements, rng, (90.0, 0.0), f"paper_protocol seed={int(seed)}")
+
+
+#: The calibration protocol's movements, in order: label → (span in s of the full version, 60 s
+#: with two repetitions of each movement; span of the short version, 36 s with one). A
+#: recording of ``duration_s`` uses the full version from :data:`CALIBRATION_FULL_FROM_S` on,
+#: the short one below, with every span (and so every speed and hold) scaled to fill it.
+CALIBRATION_MOVEMENT_S: dict[str, tuple[float, float]] = {
+    "stand_start": (3.0, 2.0),
+    "flexion_extension": (16.0, 9.0),
+    "abduction_adduction": (12.0, 7.0),
+    "elevation_fixed_azimuth_varied": (14.0, 9.0),
+    "random_slow": (7.0, 4.0),
+    "random_fast": (5.0, 3.0),
+    "stand_end": (3.0, 2.0),
+}
+#: Shortest and longest calibration recordings, s: beyond these the scaled speeds and holds
+#: leave the range of the paper protocol's.
+CALIBRATION_DURATION_S = (30.0, 120.0)
+#: Recordings at least this long (s) get the full version (two repetitions of each movement).
+CALIBRATION_FULL_FROM_S = 50.0
+#: The elevation (deg) of the calibration protocol's plane sweeps is drawn from this range.
+CALIBRATION_SWEEP_ELEVATION_DEG = (60.0, 90.0)
+
+
+def _stand(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+    path.hold(span_s)
+
+
+def _calibration_builders(reps: int) -> dict[str, Builder]:
+    """The calibration movements with ``reps`` (1 or 2) repetitions each."""
+
+    def sweeps(path: _Path, rng: np.random.Generator, span_s: float) -> None:
+        phi = rng.uniform(*CALIBRATION_SWEEP_ELEVATION_DEG)
+        _sweep_plane(path, rng, phi, rng.uniform(45.0, 80.0), sweeps=reps)
+
+    return {
+        "stand_start": _stand,
+        "flexion_extension": partial(_flexion_extension, flexion_deg=(120.0, 90.0)[:reps],
+                                     extension_deg=(45.0, 30.0)[:reps]),
+        "abduction_adduction": partial(_abduction_adduction,
+                                       elevations_deg=(120.0, 90.0)[:reps],
+                                       holds_s=(0.5, 3.0) if reps == 2 else (2.5,)),
+        "elevation_fixed_azimuth_varied": sweeps,
+        "random_slow": partial(_random_movements, speed_deg_s=(30.0, 50.0), hold_s=(0.5, 2.0),
+                               reserve_s=2.0),
+        "random_fast": partial(_random_movements, speed_deg_s=(70.0, 100.0),
+                               hold_s=(0.2, 0.8), reserve_s=1.5),
+        "stand_end": _stand,
+    }
+
+
+def calibration_protocol(seed: int, duration_s: float = 60.0) -> Trajectory:
+    """What a wearer does for a calibration recording (docs/suit-model.md, "Calibration
+    protocol"): the usual movements, briefly, seeded, ``duration_s`` long (30..120 s).
+
+    Standing with the arm hanging; flexion to ≈ 120° and 90° with extensions to ≈ 45° and
+    30°; abduction to ≈ 120° and to ≈ 90° with a ≈ 3 s hold; two sweeps of the plane of
+    elevation between −40° and 90° at one elevation of 60–90°; random reaching, slow
+    (30–50°/s) then fast (70–100°/s), within −40° ≤ θ ≤ 90°, 0 ≤ φ ≤ 90°; standing again.
+    Below :data:`CALIBRATION_FULL_FROM_S` one repetition of each (flexion ≈ 120°, extension
+    ≈ 45°, abduction ≈ 120° held ≈ 2.5 s, one sweep). Every movement starts and ends with the
+    arm hanging; planes and elevations stay within what :func:`paper_protocol` covers. Spans
+    are :data:`CALIBRATION_MOVEMENT_S` scaled to ``duration_s``, each movement time-scaled to
+    fill its span exactly; ψ = 0.
+    """
+    low, high = CALIBRATION_DURATION_S
+    if not low <= duration_s <= high:  # also refuses NaN
+        raise ValueError(f"calibration protocol duration must be {low:g}..{high:g} s, "
+                         f"got {duration_s!r}")
+    full = duration_s >= CALIBRATION_FULL_FROM_S
+    spans = {label: pair[0 if full else 1] for label, pair in CALIBRATION_MOVEMENT_S.items()}
+    builders = _calibration_builders(2 if full else 1)
+    scale = duration_s / sum(spans.values())
+    movements = [(label, span * scale, builders[label]) for label, span in spans.items()]
+    rng = keyed_rng(int(seed), "calibration_protocol", 0)
+    return _assemble(movements, rng, (0.0, 0.0),
+                     f"calibration_protocol seed={int(seed)} duration_s={duration_s:g}")
 
 
 def mot_trajectory(paths: Sequence[str | Path], bridge_s: float = 1.0) -> Trajectory:

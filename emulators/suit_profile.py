@@ -22,7 +22,9 @@ from exohil.formats.errors import InputError
 
 PROFILE_SCHEMA = "exohil-suit-profile"
 PROFILE_VERSION = 1
-DEFAULT_PROFILE_PATH = Path(__file__).parent / "profiles" / "default.toml"
+#: The packaged suit profiles (``default.toml``, ``donning-b.toml``: another wearer/donning).
+PROFILES_DIR = Path(__file__).parent / "profiles"
+DEFAULT_PROFILE_PATH = PROFILES_DIR / "default.toml"
 
 
 class ProfileError(InputError, ValueError):

@@ -15,10 +15,12 @@ def _mot_files(protocol: str) -> list[Path]:
 
 
 def _trajectory(protocol: str, seed: int):
-    from exohil.emulators.protocols import mot_trajectory, paper_protocol
+    from exohil.emulators.protocols import calibration_protocol, mot_trajectory, paper_protocol
 
     if protocol == "paper":
         return paper_protocol(seed)
+    if protocol == "calibration":
+        return calibration_protocol(seed)
     try:
         return mot_trajectory([Path(p) for p in protocol[4:].split(",")])
     except ValueError as exc:
@@ -26,16 +28,16 @@ def _trajectory(protocol: str, seed: int):
 
 
 class Protocol(click.ParamType):
-    """``paper`` or ``mot:FILE[,FILE...]`` with every .mot file present."""
+    """``paper``, ``calibration`` or ``mot:FILE[,FILE...]`` with every .mot file present."""
 
     name = "protocol"
 
     def convert(self, value, param, ctx):
         text = str(value)
-        if text == "paper":
+        if text in ("paper", "calibration"):
             return text
         if not text.startswith("mot:") or not text[4:]:
-            self.fail(f"{text!r}: use 'paper' or 'mot:FILE[,FILE...]'", param, ctx)
+            self.fail(f"{text!r}: use 'paper', 'calibration' or 'mot:FILE[,FILE...]'", param, ctx)
         for name in text[4:].split(","):
             if not name.strip() or "\x00" in name or not Path(name).is_file():
                 self.fail(f"no such .mot file: {name!r}", param, ctx)
@@ -54,9 +56,12 @@ class EffectKind(click.Choice):
 
 @click.command("simulate")
 @click.option("--protocol", type=Protocol(), default="paper", show_default=True,
-              metavar="paper|mot:FILE[,FILE]",
-              help="Movement: the paper's Table III protocol (seeded), or real motion from "
-                   "OpenSim .mot files (comma-separated, concatenated in order).")
+              metavar="paper|calibration|mot:FILE[,FILE]",
+              help="Movement: the paper's Table III protocol (246 s, seeded); 'calibration', "
+                   "the 60 s calibration recording a new wearer makes (stand, flexion-"
+                   "extension, abduction, plane sweeps, slow and fast reaching, stand; "
+                   "seeded; docs/suit-model.md); or real motion from OpenSim .mot files "
+                   "(comma-separated, concatenated in order).")
 @click.option("--profile", "profile_path", type=InputFile(), default=None,
               help="Suit profile TOML (default: the packaged default profile).")
 @click.option("--seed", type=Seed(), default=0, show_default=True,
@@ -64,7 +69,7 @@ class EffectKind(click.Choice):
 @click.option("--without", "without", multiple=True, metavar="KIND",
               type=EffectKind(),
               help="Drop effects of this kind (hysteresis, creep, saturation, lag, drift, noise, "
-                   "quantization, dropout) from the profile's chain (repeatable).")
+                   "quantization, dropout, gain) from the profile's chain (repeatable).")
 @click.option("--out", "out_path", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
 def simulate_command(protocol: str, profile_path: Path | None, seed: int,
@@ -77,6 +82,8 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
     \b
     Examples:
       exohil simulate --protocol paper --seed 7 --out paper.mcap
+      exohil simulate --protocol calibration --seed 3 \\
+          --profile emulators/profiles/donning-b.toml --out calibration.mcap
       exohil simulate --protocol mot:ABD01.mot,FLX01.mot --without noise --out real.mcap
     """
     from exohil.emulators.simulate import simulate

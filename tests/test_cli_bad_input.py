@@ -195,8 +195,8 @@ def fixed_bad_values(param: click.Parameter, tmp: Path) -> list[str]:
         return ["", " ", "\x00", "nosuch", "default.toml", missing, str(tmp / "no-such.toml"),
                 str(tmp / "bad-profile.toml")]
     if isinstance(kind, Protocol):
-        return ["", "walk", "PAPER", "mot:", "mot:,", f"mot:{missing}", f"mot:{RECORDING},",
-                "mot:\x00"]
+        return ["", "walk", "PAPER", "CALIBRATION", "calibration:60", "mot:", "mot:,",
+                f"mot:{missing}", f"mot:{RECORDING},", "mot:\x00"]
     if isinstance(kind, Columns):
         return ["", "a", "-1", "3-1", "1,1", "1-", "0-100000", str(2**64), "1;2", "nan"]
     if isinstance(kind, Delimiter):
@@ -262,7 +262,8 @@ def random_bad_values(param: click.Parameter, tmp: Path) -> st.SearchStrategy[st
         return st.from_regex(r"[a-z_]{1,20}", fullmatch=True).filter(
             lambda s: s not in ("default", "bench", "ci"))
     if isinstance(kind, Protocol):
-        return text.filter(lambda s: s != "paper" and not s.startswith("mot:"))
+        return text.filter(lambda s: s not in ("paper", "calibration")
+                           and not s.startswith("mot:"))
     if isinstance(kind, Columns):
         return st.one_of(st.integers(min_value=10_000).map(str),
                          st.integers(max_value=-1).map(str), text.filter(

@@ -160,3 +160,13 @@ def test_foreign_recording_is_accepted_as_it_is():
     assert s["invalid_frames"] > 0  # its sequence gaps
     assert s["gap_after"] <= s["gap_before"]
     assert len(s["sensors"]) == 4
+
+
+def test_a_profile_with_a_gain_effect_offers_only_vocabulary_effects():
+    from exohil.emulators.discrepancy import VOCABULARY
+    from exohil.emulators.suit_profile import PROFILES_DIR
+    from exohil.harness.cmd_discrepancy import _in_model
+
+    assert "gain" not in VOCABULARY  # the pots' gain and zero are not a discrepancy term
+    name, in_model = _in_model(PROFILES_DIR / "donning-b.toml")
+    assert name == "donning-b" and in_model == VOCABULARY

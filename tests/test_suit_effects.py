@@ -1,5 +1,7 @@
 """Effect library: each effect's physical property, serialisation, chain seeding."""
 
+import tomllib
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -11,6 +13,7 @@ from exohil.emulators.effects import (
     Drift,
     Dropout,
     EffectChain,
+    Gain,
     Hysteresis,
     Lag,
     Noise,
@@ -193,6 +196,63 @@ def test_dropout_rate_and_burst_length(rate, burst):
     starts = np.flatnonzero(dropped[1:] & ~dropped[:-1]).size
     assert dropped.sum() / starts == pytest.approx(burst, rel=0.1)
     np.testing.assert_array_equal(out.values, np.zeros((400_000, 1)))
+
+
+# --- gain ---------------------------------------------------------------------------------
+
+def test_gain_scales_then_offsets_each_sensor():
+    x = np.column_stack([np.linspace(450.0, 600.0, 50), np.linspace(500.0, 520.0, 50)])
+    out = Gain(gain=[0.9, 1.1], offset_mm=[-3.0, 4.5]).apply(signal_of(x), rng())
+    np.testing.assert_allclose(out.values, x * [0.9, 1.1] + [-3.0, 4.5], rtol=0, atol=1e-12)
+    scalar = Gain(gain=1.05, offset_mm=-2.0).apply(signal_of(x), rng())
+    np.testing.assert_allclose(scalar.values, 1.05 * x - 2.0, rtol=0, atol=1e-12)
+    assert out.keep.all()
+
+
+def test_default_gain_is_the_identity_and_draws_nothing():
+    sig = wave_signal()
+    generator = rng()
+    before = generator.bit_generator.state
+    out = Gain().apply(sig, generator)
+    np.testing.assert_array_equal(out.values, sig.values)
+    assert generator.bit_generator.state == before
+
+
+def test_gain_round_trips_through_a_toml_effect_table():
+    table = tomllib.loads("""
+        [[effect]]
+        kind = "gain"
+        gain = [0.88, 1.12, 0.95, 1.06]
+        offset_mm = [-6.5, 4.0, 9.0, -3.0]
+    """)["effect"][0]
+    effect = effect_from_dict(table)
+    assert isinstance(effect, Gain)
+    assert effect_to_dict(effect) == table
+    assert effect_to_dict(effect_from_dict(effect_to_dict(effect))) == table
+    scalar = {"kind": "gain", "gain": 1.1, "offset_mm": -2.0}
+    assert effect_to_dict(effect_from_dict(scalar)) == scalar
+
+
+@pytest.mark.parametrize(("params", "message"), [
+    ({"gain": 0.0}, "gain must be > 0 and finite"),
+    ({"gain": -1.2}, "gain must be > 0 and finite"),
+    ({"gain": float("nan")}, "gain must be > 0 and finite"),
+    ({"gain": float("inf")}, "gain must be > 0 and finite"),
+    ({"gain": [1.0, 0.0, 1.1, 0.9]}, "gain must be > 0 and finite"),
+    ({"gain": [1.0, float("nan")]}, "gain must be > 0 and finite"),
+    ({"offset_mm": float("nan")}, "offset_mm must be finite"),
+    ({"offset_mm": [0.0, -float("inf")]}, "offset_mm must be finite"),
+    ({"gian": 1.0}, "unknown parameter"),
+])
+def test_bad_gain_parameters_are_rejected(params, message):
+    with pytest.raises(ValueError, match=message):
+        effect_from_dict({"kind": "gain", **params})
+
+
+@pytest.mark.parametrize("params", [{"gain": [1.0, 1.1, 0.9]}, {"offset_mm": [1.0, 2.0, 3.0]}])
+def test_gain_per_sensor_list_of_the_wrong_length_is_rejected(params):
+    with pytest.raises(ValueError, match="list of 2 values"):
+        Gain(**params).apply(wave_signal(), rng())
 
 
 # --- chain, registry ----------------------------------------------------------------------

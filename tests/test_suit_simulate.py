@@ -6,11 +6,18 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from exohil.emulators.effects import EffectChain
-from exohil.emulators.protocols import MOCAP_RATE_HZ, mot_trajectory, paper_protocol
+from exohil.emulators.effects import EffectChain, Gain, Quantization, Saturation
+from exohil.emulators.protocols import (
+    CALIBRATION_MOVEMENT_S,
+    MOCAP_RATE_HZ,
+    calibration_protocol,
+    mot_trajectory,
+    paper_protocol,
+)
 from exohil.emulators.simulate import geometric_signal, simulate
 from exohil.emulators.suit_profile import (
     DEFAULT_PROFILE_PATH,
+    PROFILES_DIR,
     ProfileError,
     load_default_profile,
     load_profile,
@@ -160,6 +167,58 @@ def test_profile_with_any_number_of_tendons(tmp_path):
     assert rec.sensors.values.shape[1] == 1
 
 
+DONNING_B = PROFILES_DIR / "donning-b.toml"
+
+
+@pytest.fixture(scope="module")
+def donning_b():
+    return load_profile(DONNING_B)
+
+
+def test_donning_b_is_the_default_suit_with_a_gain_after_the_stops(donning_b, profile):
+    assert donning_b.name == "donning-b"
+    assert donning_b.sensor_names == profile.sensor_names == ("F", "SF", "SR", "R")
+    kinds = [e.name for e in donning_b.effects.effects]
+    assert [k for k in kinds if k != "gain"] == [e.name for e in profile.effects.effects]
+    assert kinds.index("gain") == kinds.index("saturation") + 1
+    gain = next(e for e in donning_b.effects.effects if isinstance(e, Gain))
+    assert len(gain.gain) == len(gain.offset_mm) == 4
+    assert donning_b.geometry.cap_radius_mm != profile.geometry.cap_radius_mm
+    for ours, theirs in zip(donning_b.geometry.tendons, profile.geometry.tendons, strict=True):
+        for pts in ("thorax_points_mm", "humerus_points_mm"):
+            moved = np.linalg.norm(getattr(ours, pts) - getattr(theirs, pts), axis=1)
+            assert np.all((moved >= 8.0) & (moved <= 15.0)), (ours.name, pts, moved)
+
+
+def test_donning_b_reads_differently_from_default_on_the_same_movement(donning_b, profile,
+                                                                        protocol):
+    ideal_b = geometric_signal(protocol, donning_b).values
+    ideal_default = geometric_signal(protocol, profile).values
+    shape = (ideal_b - ideal_default) - (ideal_b - ideal_default).mean(axis=0)
+    assert np.all(np.sqrt(np.mean(shape**2, axis=0)) > 3.0)  # not just an offset
+    no_drops = profile.effects.without("dropout")
+    ours = simulate(protocol, donning_b, seed=3, effects=donning_b.effects.without("dropout"))
+    theirs = simulate(protocol, profile, seed=3, effects=no_drops)
+    assert np.all(np.mean(np.abs(ours.sensors.values - theirs.sensors.values), axis=0) > 5.0)
+
+
+def test_donning_b_stays_within_its_stops_and_the_adc_range(donning_b, protocol):
+    values = simulate(protocol, donning_b, seed=3).sensors.values
+    chain = {e.name: e for e in donning_b.effects.effects}
+    adc = chain["quantization"]
+    gain, stops = chain["gain"], chain["saturation"]
+    assert isinstance(adc, Quantization) and isinstance(gain, Gain)
+    assert isinstance(stops, Saturation)
+    top = adc.zero_mm + adc.travel_mm * (1 - 2.0**-adc.bits)
+    assert values.min() > adc.zero_mm + 50.0 and values.max() < top - 50.0
+    stop_reading = np.asarray(gain.gain) * np.asarray(stops.lower_mm) + np.asarray(gain.offset_mm)
+    at_stop = np.abs(values - stop_reading) < 1.0
+    assert np.all(at_stop.mean(axis=0) < 0.1)
+    for j in range(values.shape[1]):  # and nowhere else pinned either
+        assert np.mean(values[:, j] <= values[:, j].min() + 0.5) < 0.1
+        assert np.mean(values[:, j] >= values[:, j].max() - 0.5) < 0.1
+
+
 # --- CLI -------------------------------------------------------------------------------
 
 @needs_shoulder_ik
@@ -176,8 +235,31 @@ def test_simulate_command_writes_a_readable_recording(tmp_path):
     np.testing.assert_allclose(rec.sensors.values, expected.sensors.values, atol=1e-4)
 
 
+@pytest.mark.parametrize("profile_args", [[], ["--profile", str(DONNING_B)]],
+                         ids=["default", "donning-b"])
+def test_simulate_command_writes_a_calibration_recording(tmp_path, profile_args):
+    out = tmp_path / "calibration.mcap"
+    result = CliRunner().invoke(main, ["simulate", "--protocol", "calibration", "--seed", "3",
+                                       *profile_args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    rec = read_recording(out)
+    mocap = rec.mocap["shoulder"]
+    assert len(mocap) == 60 * 120 and mocap.t[-1] == pytest.approx(60.0 - 1 / 120)
+    assert 0.99 * 60 * 250 < len(rec.sensors) <= 60 * 250  # a few frames dropped
+    assert [s.name for s in rec.segments] == list(CALIBRATION_MOVEMENT_S)
+    assert rec.segments[0].t0 == 0.0 and rec.segments[-1].t1 == pytest.approx(60.0)
+    assert rec.metadata["trajectory"] == "calibration_protocol seed=3 duration_s=60"
+    profile = load_profile(DONNING_B) if profile_args else load_default_profile()
+    assert rec.metadata["suit_profile"] == profile.name
+    expected = simulate(calibration_protocol(3), profile, 3)
+    np.testing.assert_array_equal(rec.sensors.seq, expected.sensors.seq)
+    np.testing.assert_allclose(rec.sensors.values, expected.sensors.values, atol=1e-4)
+    np.testing.assert_allclose(mocap.angles, expected.mocap["shoulder"].angles, atol=1e-4)
+
+
 @pytest.mark.parametrize(("args", "message"), [
-    (["--protocol", "walk"], "use 'paper' or 'mot:FILE"),
+    (["--protocol", "walk"], "use 'paper', 'calibration' or 'mot:FILE"),
+    (["--protocol", "calibration:45"], "use 'paper', 'calibration' or 'mot:FILE"),
     (["--protocol", "mot:/nonexistent.mot"], "no such .mot file"),
     (["--without", "glue"], "unknown effect kind"),
     (["--profile", "/nonexistent.toml"], "does not exist"),
