@@ -53,13 +53,15 @@ def _files(spec: str) -> list[Path]:
 
 
 def _blocks(est, paths: list[Path]):
+    """The recordings' blocks cut at movement segments, as ``exohil calibrate`` sees them."""
     from exohil.estimator.dataset import recording_blocks
+    from exohil.estimator.splits import cut_at_segments
     from exohil.formats.recording_reader import read_recording
 
     out = []
     for p in paths:
         out += recording_blocks(read_recording(p), est.target, offset_frames=est.offset_frames)
-    return [b for b in out if len(b)]
+    return [b for b in cut_at_segments(out) if len(b)]
 
 
 def combined_rmse(est, blocks) -> float:

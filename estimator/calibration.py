@@ -10,7 +10,8 @@ adapted network tolerate the offset drift a sensor shows over the following minu
 cost of precision where the sensors do not drift. How much jitter suits a suit is chosen from
 the calibration data (``jitter=None``): each of :data:`JITTER_CANDIDATES` fine-tunes on the
 first part of every calibration block and is scored on the rest (the last
-:data:`HOLDOUT_SHARE`); the one with the lowest error there is used on all the data.
+:data:`HOLDOUT_SHARE`); the largest within one standard error of the best score is used on
+all the data (:func:`_select_jitter`).
 
 The normalisation, window and target of the trained model are kept, so the calibrated model
 runs on every engine like the one it came from. On both wearer pairs of the graphene knee
@@ -101,11 +102,10 @@ def calibrate(
     if cfg.steps < 1 or cfg.batch_size < 1 or (cfg.jitter is not None and cfg.jitter < 0):
         raise ValueError(f"bad calibration settings {cfg}")
     start = time.monotonic()
-    selection: dict[str, float] = {}
+    selection: dict[str, dict[str, float]] = {}
     jitter = cfg.jitter
     if jitter is None:
-        selection = _select_jitter(base, blocks, cfg, progress)
-        jitter = float(min(selection, key=selection.__getitem__))
+        jitter, selection = _select_jitter(base, blocks, cfg, progress)
     est = _copy(base)
     _fine_tune(est, NormalisedFrames(est, blocks), cfg.steps, jitter, cfg, progress)
     before, after = evaluate(base, blocks), evaluate(est, blocks)
@@ -121,7 +121,8 @@ def calibrate(
             "frames": frames,
             "config": asdict(cfg),
             "jitter": jitter,
-            # held-out MSE of each candidate jitter; empty when the jitter was given
+            # each candidate jitter's held-out MSE and its standard error; empty when the
+            # jitter was given
             "jitter_selection": selection,
             "elapsed_s": round(time.monotonic() - start, 1),
             "accuracy_before": before["accuracy"],  # on the calibration frames
@@ -141,22 +142,35 @@ def _copy(base: TrainedEstimator) -> TrainedEstimator:
 
 
 def _select_jitter(base: TrainedEstimator, blocks: list[Block], cfg: CalibrationConfig,
-                   progress: Callable[[str], None] | None) -> dict[str, float]:
-    """Held-out MSE (normalised network targets) of each of :data:`JITTER_CANDIDATES`,
-    fine-tuned :data:`SELECTION_STEPS` steps on the first part of every block and scored on
-    its last :data:`HOLDOUT_SHARE`."""
+                   progress: Callable[[str], None] | None,
+                   ) -> tuple[float, dict[str, dict[str, float]]]:
+    """The jitter to calibrate with, and each candidate's held-out score.
+
+    Each of :data:`JITTER_CANDIDATES` fine-tunes :data:`SELECTION_STEPS` steps on the first
+    part of every block and is scored on the rest (its last :data:`HOLDOUT_SHARE`): the MSE
+    of the normalised network targets, and its standard error over the held-out blocks. The
+    largest jitter within one standard error of the best score is chosen (the
+    one-standard-error rule): the held-out frames lie seconds after the fitted ones, so they
+    cannot show the drift of the following minutes that the jitter guards against, and the
+    more robust model is preferred unless it measurably costs accuracy.
+    """
     cuts = [len(b) - max(1, round(len(b) * HOLDOUT_SHARE)) for b in blocks]
     fit = [b.slice(0, c) for b, c in zip(blocks, cuts, strict=True) if c > 0]
     held = [b.slice(c, len(b)) for b, c in zip(blocks, cuts, strict=True)]
-    scores: dict[str, float] = {}
+    scores: dict[str, dict[str, float]] = {}
     for jitter in JITTER_CANDIDATES:
         est = _copy(base)
         _fine_tune(est, NormalisedFrames(est, fit), SELECTION_STEPS, jitter, cfg, progress)
         data = NormalisedFrames(est, held)
-        err = sum(float(np.sum((est.network_outputs(data.table.x[a:b]) - data.table.y[a:b])
-                               ** 2)) for a, b in data.bounds)
-        scores[f"{jitter:g}"] = err / data.table.y.size
-    return scores
+        per_block = np.array([np.mean((est.network_outputs(data.table.x[a:b])
+                                       - data.table.y[a:b]) ** 2) for a, b in data.bounds])
+        sizes = np.array([b - a for a, b in data.bounds])
+        se = float(np.std(per_block, ddof=1) / np.sqrt(len(per_block))) \
+            if len(per_block) > 1 else 0.0
+        scores[f"{jitter:g}"] = {"mse": float(np.average(per_block, weights=sizes)), "se": se}
+    best = min(scores.values(), key=lambda s: s["mse"])
+    chosen = max(float(j) for j, s in scores.items() if s["mse"] <= best["mse"] + best["se"])
+    return chosen, scores
 
 
 def _fine_tune(est: TrainedEstimator, data: NormalisedFrames, steps: int, jitter: float,

@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from estimator_synth import shoulder_recording
 
 from exohil.estimator.calibration import (
+    JITTER_CANDIDATES,
     METHOD,
     CalibrationConfig,
     CalibrationError,
@@ -18,7 +19,7 @@ from exohil.estimator.calibration import (
 )
 from exohil.estimator.checkpoint import load_checkpoint
 from exohil.estimator.dataset import DatasetError, TargetSpec, recording_blocks
-from exohil.estimator.splits import Split
+from exohil.estimator.splits import Split, cut_at_segments
 from exohil.estimator.training import TrainConfig, train
 from exohil.formats.digest import sha256_file
 from exohil.formats.recording import cut_recording
@@ -28,7 +29,7 @@ from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
 
 TARGET = TargetSpec("shoulder", ("elv_angle", "shoulder_elv"))
 SENSORS = ("F", "SF", "SR", "R")
-FAST = CalibrationConfig(steps=150)
+FAST = CalibrationConfig(steps=150, jitter=0.1)
 
 
 def blocks(rec):
@@ -84,11 +85,26 @@ def test_calibrated_info_names_what_it_came_from(base):
     assert est.info["base_info"] == base.info
 
 
+def test_the_jitter_is_the_largest_within_one_standard_error_of_the_best(base):
+    part = cut_at_segments(blocks(wearer_b(12.0, seed=5)))  # as exohil calibrate cuts them
+    est = calibrate(base, part, CalibrationConfig(steps=50))
+    cal = est.info["calibration"]
+    scores = {float(j): s for j, s in cal["jitter_selection"].items()}
+    assert sorted(scores) == sorted(JITTER_CANDIDATES)
+    best = min(scores.values(), key=lambda s: s["mse"])
+    within = [j for j, s in scores.items() if s["mse"] <= best["mse"] + best["se"]]
+    assert cal["jitter"] == max(within)
+    assert all(s["se"] > 0 for s in scores.values())  # two segments: two held-out blocks
+    given = calibrate(base, blocks(wearer_b(6.0, seed=5)), CalibrationConfig(steps=5, jitter=0))
+    assert given.info["calibration"]["jitter"] == 0 and not \
+        given.info["calibration"]["jitter_selection"]
+
+
 def test_calibration_is_reproducible_for_a_seed(base):
     part = blocks(wearer_b(6.0, seed=5))
-    a = calibrate(base, part, CalibrationConfig(steps=20, seed=3)).weights()
-    b = calibrate(base, part, CalibrationConfig(steps=20, seed=3)).weights()
-    c = calibrate(base, part, CalibrationConfig(steps=20, seed=4)).weights()
+    a = calibrate(base, part, CalibrationConfig(steps=20, jitter=0.1, seed=3)).weights()
+    b = calibrate(base, part, CalibrationConfig(steps=20, jitter=0.1, seed=3)).weights()
+    c = calibrate(base, part, CalibrationConfig(steps=20, jitter=0.1, seed=4)).weights()
     assert all(np.array_equal(a[k], b[k]) for k in a)
     assert not all(np.array_equal(a[k], c[k]) for k in a)
 
@@ -171,7 +187,7 @@ def test_conformance_takes_a_calibrated_model_and_refuses_its_calibration_data(t
     write_recording(rest, cut_recording(whole, 8.0, 40.0))
     calibrated = tmp_path / "calibrated.npz"
     result = invoke("calibrate", MODELS_DIR / "ennet.npz", cal, "--out", calibrated,
-                    "--steps", "20")
+                    "--steps", "20", "--jitter", "0.1")
     assert result.exit_code == 0, result.output
     profile = tmp_path / "p.toml"
     profile.write_text('name = "cal"\ndescription = "held-out and accuracy"\n[settings]\n'
