@@ -14,7 +14,7 @@ from exohil.harness.cli_types import (
     Seed,
     refuse_overwriting_inputs,
 )
-from exohil.harness.cmd_train import _accuracy_line, _command_line, _load
+from exohil.harness.cmd_train import _accuracy_line, _command_line, _model_and_recordings
 
 #: Most fine-tuning steps accepted (far beyond any useful value; a typo cannot run for days).
 MAX_STEPS = 1_000_000
@@ -55,26 +55,12 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
         exohil evaluate ennet-wearer2.npz wearer2-session.mcap
     """
     from exohil.estimator.calibration import CalibrationConfig, CalibrationError, calibrate
-    from exohil.estimator.checkpoint import (
-        CheckpointError,
-        ensure_fits,
-        load_checkpoint,
-        save_checkpoint,
-    )
+    from exohil.estimator.checkpoint import save_checkpoint
     from exohil.estimator.training import progress_printer
     from exohil.formats.digest import sha256_file
 
     refuse_overwriting_inputs([("--out", out)], [checkpoint, *recordings])
-    try:
-        base = load_checkpoint(checkpoint)
-    except CheckpointError as exc:
-        raise click.ClickException(str(exc)) from None
-    data = _load(recordings, base.target.joint, ",".join(base.target.angles))
-    try:
-        for path, rec in zip(data.paths, data.recordings, strict=True):
-            ensure_fits(base, rec, str(path))
-    except CheckpointError as exc:
-        raise click.ClickException(str(exc)) from None
+    base, data = _model_and_recordings(checkpoint, recordings)
     if abs(data.rate_hz - base.sensor_rate_hz) > RATE_TOLERANCE * base.sensor_rate_hz:
         raise click.ClickException(
             f"the recordings' sensor rate is {data.rate_hz:g} Hz, the model's "

@@ -110,6 +110,24 @@ def _load(paths, joint=None, angles=None, expected=None):
         raise click.ClickException(str(exc)) from None
 
 
+def _model_and_recordings(checkpoint, recordings):
+    """The checkpoint and the recordings with its sensors and target angles (LoadedData), or
+    a one-line error."""
+    from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
+
+    try:
+        est = load_checkpoint(checkpoint)
+    except CheckpointError as exc:
+        raise click.ClickException(str(exc)) from None
+    data = _load(recordings, est.target.joint, ",".join(est.target.angles))
+    try:
+        for path, rec in zip(data.paths, data.recordings, strict=True):
+            ensure_fits(est, rec, str(path))
+    except CheckpointError as exc:
+        raise click.ClickException(str(exc)) from None
+    return est, data
+
+
 def _accuracy_line(accuracy: dict) -> str:
     """The one accuracy definition (estimator.evaluation.accuracy_measurements) as one line."""
     from exohil.estimator.evaluation import OBSERVABLE_ELEVATION_DEG
@@ -216,21 +234,11 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     \b
         exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
     """
-    from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
     from exohil.estimator.evaluation import evaluate
     from exohil.estimator.splits import tail_cut
 
     refuse_overwriting_inputs([("--json", json_out)], [checkpoint, *recordings])
-    try:
-        est = load_checkpoint(checkpoint)
-    except CheckpointError as exc:
-        raise click.ClickException(str(exc)) from None
-    data = _load(recordings, est.target.joint, ",".join(est.target.angles))
-    try:
-        for path, rec in zip(data.paths, data.recordings, strict=True):
-            ensure_fits(est, rec, str(path))
-    except CheckpointError as exc:
-        raise click.ClickException(str(exc)) from None
+    est, data = _model_and_recordings(checkpoint, recordings)
     blocks = data.blocks(est.offset_frames)
     if test_fraction > 0:
         blocks = [tail_cut(b, test_fraction)[1] for b in blocks]
