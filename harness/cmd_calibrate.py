@@ -45,7 +45,7 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
 
     Every weight of the network is fine-tuned on the calibration frames, each window given a
     random per-sensor offset and gain (--jitter, chosen on held-out calibration frames
-    unless given); it takes 15–25 s on one CPU core. The new checkpoint
+    unless given); 60 s of data take about 25 s on one CPU core. The new checkpoint
     records the base checkpoint's and the recordings' sha256, the method and the seconds used;
     the recordings count as training data, so score the calibrated model on other recordings
     of the same wearer. Example:
