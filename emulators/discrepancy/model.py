@@ -260,11 +260,19 @@ def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
     the first frame) with ``build_s`` while it grows and ``recover_s`` while it shrinks."""
     key = ("CA", build_s, recover_s)
     if key not in inputs.cache:
-        t = np.arange(inputs.static.shape[0]) / rate_hz
-        signal = Signal.from_values(t, inputs.static)
+        # The state moves over seconds: step it at about FIT_RATE_HZ (exact step-invariant
+        # updates over the longer steps) and interpolate back to every frame.
+        n = inputs.static.shape[0]
+        t = np.arange(n) / rate_hz
+        at = np.arange(0, n, max(1, int(round(rate_hz / FIT_RATE_HZ))))
+        if at[-1] != n - 1:
+            at = np.append(at, n - 1)
+        signal = Signal.from_values(t[at], inputs.static[at])
         crept = Creep(gain=1.0, tau_build_s=build_s, tau_recover_s=recover_s).apply(
             signal, np.random.default_rng(0))
-        inputs.cache[key] = crept.values - inputs.static
+        state = crept.values - inputs.static[at]
+        inputs.cache[key] = np.column_stack([np.interp(t, t[at], state[:, j])
+                                             for j in range(state.shape[1])])
     return inputs.cache[key]
 
 
@@ -273,9 +281,24 @@ def drift_columns(t_norm: np.ndarray, degree: int) -> np.ndarray:
     return legendre_products(t_norm[:, None], degree)[0][:, 1:]
 
 
+def lagged_static_basis(inputs: Inputs, spec: Spec, rate_hz: float) -> np.ndarray:
+    """The static basis with ``spec``'s lag applied: the same for every sensor, so it is
+    computed once per (degree, lag) and kept until another one is asked for (a single entry:
+    the lag refinement visits many lags, each on a full-rate (N, P) array)."""
+    basis = static_basis(inputs, spec.degree)
+    if not spec.lag_kind:
+        return basis
+    key = (spec.degree, spec.lag_kind, spec.lag_s)
+    kept = inputs.cache.get("BL")
+    if kept is None or kept[0] != key:
+        kept = (key, apply_lag(basis, spec.lag_kind, spec.lag_s, rate_hz))
+        inputs.cache["BL"] = kept
+    return kept[1]
+
+
 def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
     """(N, P) design matrix of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
-    pose = [static_basis(inputs, spec.degree)]
+    pose = []
     if spec.hysteresis:
         pose.append(hysteresis_columns(inputs)[:, j, :])
     for tau in spec.creep_tau_s:
@@ -283,8 +306,10 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
     if spec.creep_asym_s:
         build_s, recover_s = spec.creep_asym_s
         pose.append(creep_asym_columns(inputs, build_s, recover_s, rate_hz)[:, j:j + 1])
-    x = np.hstack(pose)
-    x = apply_lag(x, spec.lag_kind, spec.lag_s, rate_hz)
+    # the lag acts column by column, so the shared static part is lagged once (cached)
+    x = lagged_static_basis(inputs, spec, rate_hz)
+    if pose:
+        x = np.hstack([x, apply_lag(np.hstack(pose), spec.lag_kind, spec.lag_s, rate_hz)])
     if spec.drift_degree:
         x = np.hstack([x, drift_columns(inputs.t_norm, spec.drift_degree)])
     return x

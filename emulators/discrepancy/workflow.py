@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import minimize, minimize_scalar
 
 from exohil.emulators.discrepancy.data import Trial, prepare_trial
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
@@ -48,6 +48,11 @@ LAG_LOG_TOL = 0.02
 CREEP_TAU_S = (1.5, 5.0, 15.0, 45.0)
 #: (build, recover) pairs of the asymmetric creep state, s.
 CREEP_ASYM_S = ((3.0, 9.0), (10.0, 30.0), (30.0, 90.0))
+#: Refinement of a named creep's time constants (Nelder–Mead on log seconds): first step,
+#: tolerance and the most fits it may spend.
+CREEP_LOG_STEP = math.log(1.6)
+CREEP_LOG_TOL = 0.03
+CREEP_MAX_FITS = 16
 DRIFT_DEGREES = (1, 2, 3)
 
 
@@ -121,6 +126,38 @@ def _refine_lag(trial: Trial, inputs: Inputs, spec: Spec, lag_kind: str,
 
     minimize_scalar(gap, bounds=(lo, hi), method="bounded",
                     options={"xatol": LAG_LOG_TOL, "maxiter": 8})
+    return min(fits.values(), key=lambda f: f.gap)
+
+
+def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
+    """Refine the continuous shape parameters of a named effect from its best grid point.
+
+    The candidates' grids are coarse (creep: time constants a factor of 3 apart) so that every
+    effect is compared at a modest cost; once one is named its parameters are fitted properly.
+    Creep: a Nelder–Mead search on the log time constants (one or two low-passes, or the
+    build/recover pair of the asymmetric state) minimising the held-out error. Lag is already
+    refined on its grid (:func:`_refine_lag`); the other effects have no shape parameter.
+    """
+    spec = current.spec
+    if kind != "creep":
+        return current
+    asym = bool(spec.creep_asym_s)
+    start = np.log(np.asarray(spec.creep_asym_s if asym else spec.creep_tau_s, dtype=float))
+    fits = {tuple(start.round(6)): current}
+
+    def gap(log_s: np.ndarray) -> float:
+        key = tuple(np.asarray(log_s).round(6))
+        if key not in fits:
+            values = tuple(float(f"{v:.4g}") for v in np.exp(key))
+            fits[key] = fit(trial, inputs, replace(spec, creep_asym_s=values) if asym
+                            else replace(spec, creep_tau_s=values))
+        return fits[key].gap
+
+    simplex = np.vstack([start] + [start + CREEP_LOG_STEP * np.eye(start.size)[i]
+                                   for i in range(start.size)])
+    minimize(gap, start, method="Nelder-Mead",
+             options={"initial_simplex": simplex, "xatol": CREEP_LOG_TOL, "fatol": 0.0,
+                      "maxfev": CREEP_MAX_FITS})
     return min(fits.values(), key=lambda f: f.gap)
 
 
@@ -244,7 +281,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     static_fit, inputs = min(fits, key=lambda pair: pair[0].gap)
     spec = static_fit.spec
     for kind in in_model:
-        spec = _best(trial, inputs, kind, spec).spec
+        spec = _refine(trial, inputs, kind, _best(trial, inputs, kind, spec)).spec
     base = fit(trial, inputs, spec) if in_model else static_fit
     before = base
     progress(f"[2] simulated with the calibrated model (degree {spec.degree}"
@@ -277,7 +314,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
                      f"{floor:.4g}; tried {table}): nothing added")
             break
         kind, cand, _ = winners[0]
-        cand = _best_degree(trial, inputs, cand)
+        cand = _best_degree(trial, inputs, _refine(trial, inputs, kind, cand))
         evidence = _evidence(base, cand, floor)
         spec, base = cand.spec, cand
         steps.append({"effect": kind, "gap": round(cand.gap, 6),
