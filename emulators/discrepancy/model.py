@@ -44,8 +44,14 @@ PLATEAU_SHARE = 0.02
 COVER_RADIUS = 0.1
 #: Play-operator thresholds as fractions of the sensor's range (p1–p99).
 PLAY_FRACTIONS = (0.005, 0.015, 0.04, 0.1, 0.25)
-#: Relative ridge: numerical regularisation only (columns are scaled to unit norm).
+#: Relative ridge of the static map's columns (columns are scaled to unit norm) when none is
+#: chosen: the largest of ``STATIC_RIDGES``.
 RIDGE = 1e-7
+#: Relative ridges of the static map tried with each degree (chosen on the held-out blocks):
+#: the Legendre products of a unit arm vector are nearly collinear over the poses a recording
+#: visits, so even a small ridge biases the map between poses and a smaller one can interpolate
+#: better (or, at a higher degree, worse).
+STATIC_RIDGES = (1e-10, 1e-9, 1e-8, RIDGE)
 #: Relative ridge of the effect columns (0.1 % of each column's energy: a negligible bias).
 EFFECT_RIDGE = 1e-3
 
@@ -64,6 +70,7 @@ class Spec:
         lag_s: the lag's time constant or delay, s.
         drift_degree: degree of the time polynomial (0 = no drift).
         saturation: hard stops at the plateaus the sensor sits on while the joint moves.
+        ridge: relative ridge of the static map's columns.
     """
 
     degree: int = 3
@@ -74,6 +81,7 @@ class Spec:
     lag_s: float = 0.0
     drift_degree: int = 0
     saturation: bool = False
+    ridge: float = RIDGE
 
     def effects(self) -> set[str]:
         """The vocabulary names of the effect terms that are on."""
@@ -380,13 +388,13 @@ def _solve(gram: np.ndarray, rhs: np.ndarray, penalty: np.ndarray) -> np.ndarray
     return np.linalg.solve(g, rhs / scale) / scale
 
 
-def penalties(n_static: int, n_columns: int) -> np.ndarray:
-    """Relative ridge per design column: numerical only for the static map's ``n_static``
+def penalties(n_static: int, n_columns: int, ridge: float = RIDGE) -> np.ndarray:
+    """Relative ridge per design column: ``ridge`` for the static map's ``n_static``
     columns, ``EFFECT_RIDGE`` for the effect columns, which can be nearly constant in a fold
     (a play operator that never reverses in its training blocks) and must not extrapolate
     with a huge coefficient."""
     out = np.full(n_columns, EFFECT_RIDGE)
-    out[:n_static] = RIDGE
+    out[:n_static] = ridge
     return out
 
 
@@ -447,7 +455,8 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
         n_static = static_basis(inputs, spec.degree).shape[1]
         lo, hi = plateaus(trial, inputs, j) if spec.saturation else (-np.inf, np.inf)
         free = (y > lo + 3.0 * trial.noise[j]) & (y < hi - 3.0 * trial.noise[j])
-        r, c, p = fit_design(trial, x, y, penalties(n_static, x.shape[1]), fit_mask=free)
+        r, c, p = fit_design(trial, x, y, penalties(n_static, x.shape[1], spec.ridge),
+                             fit_mask=free)
         r = y - np.clip(y - r, lo, hi)  # NaN (unscored) stays NaN
         p = np.clip(p, lo, hi)
         clips.append((float(lo), float(hi)))
@@ -483,9 +492,12 @@ def restrict_to_coverage(trial: Trial, u: np.ndarray) -> float:
     return 1.0 - scored.sum() / max(int(trial.valid.sum()), 1)
 
 
-def make_inputs(trial: Trial, static_degree: int) -> Inputs:
-    """Scale angles and time, fit the static map of ``static_degree`` on all valid frames
-    (its prediction ŝ is the input of the history terms) and place the play thresholds."""
+def make_inputs(trial: Trial, static_degree: int, ridge: float = RIDGE,
+                fit_static: bool = True) -> Inputs:
+    """Scale angles and time, fit the static map of ``static_degree`` (relative ridge
+    ``ridge``) on all valid frames (its prediction ŝ is the input of the history terms) and
+    place the play thresholds. Without ``fit_static`` only the scaling is done (enough to fit
+    a model with no effect terms)."""
     lo = np.min(trial.angles[trial.valid], axis=0)
     hi = np.max(trial.angles[trial.valid], axis=0)
     t0, t1 = float(trial.t[0]), float(trial.t[-1])
@@ -494,8 +506,11 @@ def make_inputs(trial: Trial, static_degree: int) -> Inputs:
                     static=np.empty(0), static_coef=np.empty(0), static_degree=static_degree,
                     thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
                     t_span=(t0, t1))
+    if not fit_static:
+        return inputs
     basis = static_basis(inputs, static_degree)
-    coef = np.column_stack([fit_design(trial, basis, trial.y[:, j])[1]
+    penalty = np.full(basis.shape[1], ridge)
+    coef = np.column_stack([fit_design(trial, basis, trial.y[:, j], penalty)[1]
                             for j in range(trial.n_sensors)])
     inputs.static_coef = coef
     inputs.static = basis @ coef

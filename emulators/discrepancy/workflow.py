@@ -29,6 +29,7 @@ from scipy.optimize import minimize, minimize_scalar
 from exohil.emulators.discrepancy.data import Trial, prepare_trial
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
+    STATIC_RIDGES,
     Fit,
     Inputs,
     Spec,
@@ -89,8 +90,9 @@ def _candidates(kind: str, spec: Spec) -> list[Spec]:
                 + [replace(spec, creep_asym_s=pair) for pair in CREEP_ASYM_S])
     if kind == "drift":
         return [replace(spec, drift_degree=d) for d in DRIFT_DEGREES]
-    if kind == "saturation":
-        return [replace(spec, saturation=True)]
+    if kind == "saturation":  # fitted off the plateaus, the map extrapolates onto them: its
+        # ridge is chosen again (a small one that interpolates well can extrapolate wildly)
+        return [replace(spec, saturation=True, ridge=r) for r in STATIC_RIDGES]
     raise ValueError(f"unknown effect {kind!r}; known: {', '.join(VOCABULARY)}")
 
 
@@ -162,10 +164,11 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
 
 
 def _best_degree(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
-    """Re-choose the static map's degree with the effect terms in place: an unexplained
-    effect makes the static-only fit prefer a stiffer map than the suit needs."""
-    others = [fit(trial, inputs, replace(current.spec, degree=d))
-              for d in _degrees(inputs.u.shape[1]) if d != current.spec.degree]
+    """Re-choose the static map's degree and ridge with the effect terms in place: an
+    unexplained effect makes the static-only fit prefer a stiffer map than the suit needs."""
+    others = [fit(trial, inputs, replace(current.spec, degree=d, ridge=r))
+              for d in _degrees(inputs.u.shape[1]) for r in STATIC_RIDGES
+              if (d, r) != (current.spec.degree, current.spec.ridge)]
     return min([current] + others, key=lambda f: f.gap)
 
 
@@ -237,7 +240,8 @@ def _config(spec: Spec) -> dict:
     return {"degree": spec.degree, "hysteresis": spec.hysteresis,
             "creep_tau_s": list(spec.creep_tau_s), "creep_asym_s": list(spec.creep_asym_s),
             "lag": spec.lag_kind, "lag_s": spec.lag_s,
-            "drift_degree": spec.drift_degree, "saturation": spec.saturation}
+            "drift_degree": spec.drift_degree, "saturation": spec.saturation,
+            "ridge": spec.ridge}
 
 
 def _conclusion(steps: list[dict], spec: Spec) -> str:
@@ -269,17 +273,18 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
-    fits = []
-    u = make_inputs(trial, 1).u
+    fits: list[Fit] = []
+    u = make_inputs(trial, 1, fit_static=False).u
     n_inputs = u.shape[1]
     uncovered = restrict_to_coverage(trial, u)
     if uncovered > 0:
         progress(f"    {uncovered:.1%} of frames are poses no other fold covers: not scored")
     for degree in _degrees(n_inputs):
-        inputs = make_inputs(trial, degree)
-        fits.append((fit(trial, inputs, Spec(degree=degree)), inputs))
-    static_fit, inputs = min(fits, key=lambda pair: pair[0].gap)
+        scaled = make_inputs(trial, degree, fit_static=False)  # one basis for every ridge
+        fits += [fit(trial, scaled, Spec(degree=degree, ridge=ridge)) for ridge in STATIC_RIDGES]
+    static_fit = min(fits, key=lambda f: f.gap)
     spec = static_fit.spec
+    inputs = make_inputs(trial, spec.degree, spec.ridge)
     for kind in in_model:
         spec = _refine(trial, inputs, kind, _best(trial, inputs, kind, spec)).spec
     base = fit(trial, inputs, spec) if in_model else static_fit
@@ -344,7 +349,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "invalid_frames": int((~trial.valid).sum()),
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
-        "static_map": {"kind": "legendre_polynomial", "degree": spec.degree},
+        "static_map": {"kind": "legendre_polynomial", "degree": spec.degree,
+                       "ridge": spec.ridge},
         "heldout_blocks": int(trial.blocks.max()) + 1,
         "localisation_before": local_before,
         "localisation_after": localise(trial, after.residual, mot),
