@@ -54,14 +54,10 @@ def _files(spec: str) -> list[Path]:
 
 def _blocks(est, paths: list[Path]):
     """The recordings' blocks cut at movement segments, as ``exohil calibrate`` sees them."""
-    from exohil.estimator.dataset import recording_blocks
-    from exohil.estimator.splits import cut_at_segments
-    from exohil.formats.recording_reader import read_recording
+    from exohil.estimator.workflow import load_recordings
 
-    out = []
-    for p in paths:
-        out += recording_blocks(read_recording(p), est.target, offset_frames=est.offset_frames)
-    return [b for b in cut_at_segments(out) if len(b)]
+    data = load_recordings(paths, est.target.joint, est.target.angles, est.sensor_names)
+    return [b for b in data.blocks(est.offset_frames) if len(b)]
 
 
 def combined_rmse(est, blocks) -> float:

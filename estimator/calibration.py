@@ -162,9 +162,8 @@ def _select_jitter(base: TrainedEstimator, blocks: list[Block], cfg: Calibration
         est = _copy(base)
         _fine_tune(est, NormalisedFrames(est, fit), SELECTION_STEPS, jitter, cfg, progress)
         data = NormalisedFrames(est, held)
-        per_block = np.array([np.mean((est.network_outputs(data.table.x[a:b])
-                                       - data.table.y[a:b]) ** 2) for a, b in data.bounds])
         sizes = np.array([b - a for a, b in data.bounds])
+        per_block = np.array(data.squared_errors(est)) / (sizes * data.table.y.shape[1])
         se = float(np.std(per_block, ddof=1) / np.sqrt(len(per_block))) \
             if len(per_block) > 1 else 0.0
         scores[f"{jitter:g}"] = {"mse": float(np.average(per_block, weights=sizes)), "se": se}

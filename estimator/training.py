@@ -171,6 +171,12 @@ class NormalisedFrames:
     def __len__(self) -> int:
         return len(self.table)
 
+    def squared_errors(self, est: TrainedEstimator) -> list[float]:
+        """The sum of squared errors of ``est``'s network outputs over each block (in
+        ``bounds`` order), on the normalised targets."""
+        return [float(np.sum((est.network_outputs(self.table.x[a:b]) - self.table.y[a:b]) ** 2))
+                for a, b in self.bounds]
+
 
 def _fit_network(
     est: TrainedEstimator, split: Split, cfg: TrainConfig,
@@ -192,9 +198,7 @@ def _fit_network(
     batches = (_stream_batches if est.config.stateful else _window_batches)(est, tr, cfg, rng)
 
     def val_mse() -> float:
-        total = 0.0
-        for a, b in va.bounds:
-            total += float(np.sum((est.network_outputs(va.table.x[a:b]) - va.table.y[a:b]) ** 2))
+        total = sum(va.squared_errors(est))
         net.train()
         return total / (len(va) * va.table.y.shape[1])
 
