@@ -8,14 +8,23 @@ import pytest
 from click.testing import CliRunner
 
 from exohil.emulators.discrepancy import DiscrepancyError, noise_floor, prepare_trial, run
-from exohil.emulators.discrepancy.hidden import Case, make_recording, random_trajectory
-from exohil.emulators.discrepancy.model import delay, low_pass, play
+from exohil.emulators.discrepancy.hidden import (
+    NOISE_MM,
+    Case,
+    make_recording,
+    random_geometry,
+    random_trajectory,
+    suit_lengths,
+    suit_recording,
+)
+from exohil.emulators.discrepancy.model import Stops, delay, low_pass, play
 from exohil.emulators.discrepancy.profile import (
     calibrated_suit,
     load_calibrated_profile,
     simulate_calibrated,
     simulate_calibrated_recording,
 )
+from exohil.emulators.effects import Noise
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
@@ -70,6 +79,51 @@ def test_play_delay_and_low_pass():
                                [0, 0, 0, 1, 2, 3])
     step = low_pass(np.r_[np.zeros(3), np.ones(2000)][:, None], 0.1, 1000.0)[:, 0]
     assert step[2] == 0.0 and abs(step[3 + 100] - (1 - np.exp(-1))) < 0.01
+
+
+def test_stops_bend_hard_and_soft():
+    x = np.linspace(-10.0, 10.0, 2001)
+    hard = Stops(lo=-2.0, hi=3.0)
+    np.testing.assert_array_equal(hard.apply(x), np.clip(x, -2.0, 3.0))
+    soft = Stops(lo=-2.0, hi=3.0, soft_lo=1.0, soft_hi=2.0)
+    out = soft.apply(x)
+    assert out.min() > -3.0 and out.max() < 5.0  # asymptotes lo − soft_lo, hi + soft_hi
+    assert out.min() < -2.99 and out.max() > 4.9
+    inside = (x > -2.0) & (x < 3.0)
+    np.testing.assert_array_equal(out[inside], x[inside])
+    np.testing.assert_allclose(soft.slope(x)[1:-1], np.gradient(out, x)[1:-1], atol=2e-3)
+    assert np.isnan(soft.apply(np.array([np.nan]))[0])
+
+
+def _soft_stop_recording(seed: int) -> Recording:
+    """A suit whose readings stop rising at the top of their range: beyond the 85 % quantile
+    they approach an asymptote exponentially (not the tanh the workflow models)."""
+    trajectory = random_trajectory(seed, 60.0)
+    geometry, gains, offsets = random_geometry(seed)
+    ideal = suit_lengths(trajectory, geometry, gains, offsets)
+    x = ideal.values
+    knee = np.quantile(x, 0.85, axis=0)
+    soft = 0.4 * (x.max(axis=0) - knee)
+    bent = np.where(x > knee, knee + soft * (1.0 - np.exp(-(x - knee) / soft)), x)
+    signal = Noise(sigma_mm=NOISE_MM).apply(ideal.with_values(bent), np.random.default_rng(seed))
+    return suit_recording(trajectory, geometry, signal, {"case": "soft stop"})
+
+
+def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
+    outcome = run(_soft_stop_recording(102), "soft stop")
+    s = outcome.summary
+    assert s["effects"][:1] == ["saturation"], s["effects"]
+    softness = s["steps"][0]["params"]["softness"]
+    assert any(hi > 0 for _, hi in softness), softness  # knees at the upper end, soft
+    # most of the systematic error (above the noise floor) is explained
+    floor = s["noise_floor"]
+    assert s["gap_after"] ** 2 - floor**2 < 0.25 * (s["gap_before"] ** 2 - floor**2), s
+    from exohil.emulators.discrepancy.profile import write_calibrated_profile
+
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "soft"))
+    loaded = load_calibrated_profile(tmp_path / "p.toml")
+    sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
+    np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
 
 
 def test_hidden_hysteresis_is_named_and_the_gap_shrinks(hysteresis_outcome):

@@ -7,7 +7,7 @@ cross-validation costs one Gram matrix per block (fold fit = total − held-out 
 For sensor j with static prediction ŝⱼ (a polynomial of the angles, fitted first and then
 held fixed as the *input* of the history-dependent terms) the model is
 
-    yⱼ = clip( Lag( B(angles)·β + H(ŝⱼ)·w + C(ŝⱼ)·c ) + D(t)·d , lowerⱼ, upperⱼ )
+    yⱼ = stops( Lag( B(angles)·β + H(ŝⱼ)·w + C(ŝⱼ)·c ) + D(t)·d , lowerⱼ, upperⱼ )
 
 * B: Legendre-product polynomial of the normalised angles (total degree chosen by held-out
   error): geometry, routing, gains, offsets and units in one calibrated map.
@@ -18,15 +18,17 @@ held fixed as the *input* of the history-dependent terms) the model is
 * Lag (``lag``): first-order low-pass (time constant τ) or a pure delay, applied to every
   pose-driven column, so the fitted map is the map of the lagged response.
 * D (``drift``): Legendre polynomials of time (degree 1–3): a slow offset independent of pose.
-* Stops (``saturation``): the sensor sits on a plateau at an end of its range while the joint
-  moves; the model is fitted on the frames off the plateaus and clipped at their levels.
+* Stops (``saturation``): at an end of its range the sensor stops following the pose: a hard
+  stop (it sits on a plateau while the joint moves; the map is fitted off the plateau and
+  clipped at its level) or a soft knee (the reading bends toward an asymptote, a tanh; the map
+  is fitted through the knee by Gauss–Newton). Which, and where, is chosen on held-out blocks.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
@@ -40,6 +42,15 @@ from exohil.kinematics import ms_to_matrix
 FIT_RATE_HZ = 25.0
 #: Share of moving frames a sensor must sit at an end of its range to count as a stop.
 PLATEAU_SHARE = 0.02
+#: Knee candidates of a soft stop: the share of a sensor's valid frames beyond the knee.
+KNEE_SHARES = (0.03, 0.07, 0.12, 0.2, 0.3)
+#: Softness candidates of a knee, as multiples of the distance from the knee to the sensor's
+#: extreme reading (the tanh bend's asymptote lies that far beyond the knee).
+KNEE_SOFTNESS = (1.0, 1.5, 2.5)
+#: Gauss–Newton iterations of a fit through soft stops: linearised at the all-block fit, then
+#: at each fold's own (:func:`fit_through_stops`).
+SHARED_ITERATIONS = 2
+OWN_ITERATIONS = 1
 #: Coverage radius in the static map's input space (unit arm vector or scaled angles).
 COVER_RADIUS = 0.1
 #: Play-operator thresholds as fractions of the sensor's range (p1–p99).
@@ -57,6 +68,55 @@ EFFECT_RIDGE = 1e-3
 
 
 @dataclass(frozen=True)
+class Stops:
+    """A sensor's stops: the levels where its reading stops following the pose.
+
+    Below ``lo`` the reading bends with slope 1 at the knee toward the asymptote
+    ``lo − soft_lo`` (``lo − soft_lo·tanh((lo − x)/soft_lo)``); ``soft_lo = 0`` is a hard
+    stop (clipped at ``lo``). Likewise above ``hi``. ±inf: no stop on that side.
+    """
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    soft_lo: float = 0.0
+    soft_hi: float = 0.0
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """x (N,) through the stops (NaN stays NaN)."""
+        out = np.array(x, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            below, above = out < self.lo, out > self.hi
+        if self.soft_lo > 0:
+            out[below] = self.lo - self.soft_lo * np.tanh((self.lo - out[below]) / self.soft_lo)
+        else:
+            out[below] = self.lo
+        if self.soft_hi > 0:
+            out[above] = self.hi + self.soft_hi * np.tanh((out[above] - self.hi) / self.soft_hi)
+        else:
+            out[above] = self.hi
+        return out
+
+    def slope(self, x: np.ndarray) -> np.ndarray:
+        """d apply(x) / dx (1 between the stops, 0 beyond a hard one)."""
+        out = np.ones_like(x)
+        with np.errstate(invalid="ignore"):
+            below, above = x < self.lo, x > self.hi
+        out[below] = (1.0 - np.tanh((self.lo - x[below]) / self.soft_lo) ** 2
+                      if self.soft_lo > 0 else 0.0)
+        out[above] = (1.0 - np.tanh((x[above] - self.hi) / self.soft_hi) ** 2
+                      if self.soft_hi > 0 else 0.0)
+        return out
+
+    @property
+    def soft(self) -> bool:
+        """A soft knee on either side."""
+        return self.soft_lo > 0 or self.soft_hi > 0
+
+
+NO_STOPS = Stops()
+
+
+@dataclass(frozen=True)
 class Spec:
     """Which effect terms a model has and their shape parameters.
 
@@ -69,7 +129,8 @@ class Spec:
         lag_kind: "" (none), "first_order" or "delay".
         lag_s: the lag's time constant or delay, s.
         drift_degree: degree of the time polynomial (0 = no drift).
-        saturation: hard stops at the plateaus the sensor sits on while the joint moves.
+        saturation: stops at the ends of the sensors' ranges (hard or soft, :class:`Stops`).
+        stops: the stops per sensor, once chosen (empty: choose them in every fit).
         ridge: relative ridge of the static map's columns.
     """
 
@@ -81,6 +142,7 @@ class Spec:
     lag_s: float = 0.0
     drift_degree: int = 0
     saturation: bool = False
+    stops: tuple[Stops, ...] = ()
     ridge: float = RIDGE
 
     def effects(self) -> set[str]:
@@ -360,7 +422,7 @@ class Fit:
         block_mse: (N_BLOCKS,) held-out mean squared residual per block (all sensors).
         coef: per sensor, the (P,) coefficients fitted on all valid frames.
         prediction: (N, S) full-data prediction.
-        clip: per sensor, the (lower, upper) stop levels (±inf when none).
+        stops: per sensor, its stops (:class:`Stops`; none without the saturation term).
     """
 
     spec: Spec
@@ -368,7 +430,7 @@ class Fit:
     block_mse: np.ndarray
     coef: list[np.ndarray]
     prediction: np.ndarray
-    clip: list[tuple[float, float]]
+    stops: list[Stops]
 
     @property
     def gap(self) -> float:
@@ -398,8 +460,37 @@ def penalties(n_static: int, n_columns: int, ridge: float = RIDGE) -> np.ndarray
     return out
 
 
+@dataclass(frozen=True)
+class Reduced:
+    """A design and measurement averaged down to about ``FIT_RATE_HZ`` for the fits.
+
+    Attributes:
+        xd: (M, P) design, mean of groups of ``m`` frames.
+        yd: (M,) measurement, same groups.
+        bd: (M,) the held-out block of each group.
+        m: frames per group.
+    """
+
+    xd: np.ndarray
+    yd: np.ndarray
+    bd: np.ndarray
+    m: int
+
+    def usable(self, mask: np.ndarray) -> np.ndarray:
+        """(M,) groups whose frames are all in ``mask`` (N,)."""
+        return _decimate(mask[:, None].astype(np.float64), self.m)[:, 0] == 1.0
+
+
+def reduce(trial: Trial, x: np.ndarray, y: np.ndarray) -> Reduced:
+    """The design x (N, P) and measurement y (N,) averaged to about ``FIT_RATE_HZ``."""
+    m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
+    xd = _decimate(x, m)
+    return Reduced(xd=xd, yd=_decimate(y[:, None], m)[:, 0],
+                   bd=trial.blocks[: xd.shape[0] * m: m], m=m)
+
+
 def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, penalty: np.ndarray | None = None,
-               fit_mask: np.ndarray | None = None,
+               fit_mask: np.ndarray | None = None, reduced: Reduced | None = None,
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Blocked CV and full-data fit of one sensor on design x (N, P).
 
@@ -410,6 +501,8 @@ def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, penalty: np.ndarray |
         penalty: (P,) relative ridge per column (default: ``RIDGE``).
         fit_mask: (N,) frames allowed in the fits (default: all valid frames); held-out
             residuals are reported for every scored frame.
+        reduced: ``reduce(trial, x, y)`` when the caller already has it (several masks on
+            one design).
 
     Returns:
         held-out residual (N,) (NaN where not scored), full-data coefficients (P,), and the
@@ -417,55 +510,211 @@ def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, penalty: np.ndarray |
     """
     mask = trial.valid if fit_mask is None else trial.valid & fit_mask
     penalty = np.full(x.shape[1], RIDGE) if penalty is None else penalty
-    m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
-    xd = _decimate(x, m)
-    yd = _decimate(y[:, None], m)[:, 0]
-    okd = _decimate(mask[:, None].astype(np.float64), m)[:, 0] == 1.0
-    bd = trial.blocks[: xd.shape[0] * m: m]
-    grams = np.empty((N_BLOCKS, x.shape[1], x.shape[1]))
-    rhs = np.empty((N_BLOCKS, x.shape[1]))
+    red = reduce(trial, x, y) if reduced is None else reduced
+    coefs = fold_coefs(red, red.usable(mask), penalty)
+    return heldout_residual(trial, x, y, coefs), coefs[-1], x @ coefs[-1]
+
+
+def fold_coefs(red: Reduced, ok: np.ndarray, penalty: np.ndarray) -> np.ndarray:
+    """(N_BLOCKS + 1, P) ridge coefficients: row b fitted without block b, the last row on
+    every block (one Gram matrix per block; a fold's is the total minus its block's)."""
+    p = red.xd.shape[1]
+    grams = np.empty((N_BLOCKS, p, p))
+    rhs = np.empty((N_BLOCKS, p))
     for b in range(N_BLOCKS):
-        sel = okd & (bd == b)
-        grams[b] = xd[sel].T @ xd[sel]
-        rhs[b] = xd[sel].T @ yd[sel]
+        sel = ok & (red.bd == b)
+        grams[b] = red.xd[sel].T @ red.xd[sel]
+        rhs[b] = red.xd[sel].T @ red.yd[sel]
     gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
+    return np.vstack([_solve(gram_all - grams[b], rhs_all - rhs[b], penalty)
+                      for b in range(N_BLOCKS)] + [_solve(gram_all, rhs_all, penalty)])
+
+
+def heldout_residual(trial: Trial, x: np.ndarray, y: np.ndarray, coefs: np.ndarray,
+                     stops: Stops = NO_STOPS) -> np.ndarray:
+    """(N,) measurement minus the prediction (through ``stops``) of the fold that did not see
+    the frame; NaN where not scored."""
     residual = np.full(y.shape, np.nan)
     for b in range(N_BLOCKS):
-        coef = _solve(gram_all - grams[b], rhs_all - rhs[b], penalty)
         sel = trial.scored & (trial.blocks == b)
-        residual[sel] = y[sel] - x[sel] @ coef
-    coef = _solve(gram_all, rhs_all, penalty)
-    return residual, coef, x @ coef
+        residual[sel] = y[sel] - stops.apply(x[sel] @ coefs[b])
+    return residual
+
+
+def fit_through_stops(red: Reduced, ok: np.ndarray, penalty: np.ndarray, stops: Stops,
+                      coefs: np.ndarray, shared: int = SHARED_ITERATIONS,
+                      own: int = OWN_ITERATIONS) -> np.ndarray:
+    """Refit every fold through soft stops by Gauss–Newton from ``coefs`` (N_BLOCKS + 1, P).
+
+    Linearised at the current prediction ŝ, the stop's output is h(ŝ) + h′(ŝ)·X(β − β₀): a
+    ridge solve with the rows weighted by the slope h′ (1 between the stops, → 0 deep in a
+    stop). Unlike a fit on the frames between the stops, the map is fitted on the frames in
+    the knees too, where it would otherwise be extrapolated. The first ``shared`` iterations
+    linearise every fold at the all-block fit's prediction (one Gram matrix per block, as in
+    :func:`fold_coefs`); the last ``own`` linearise each fold at its own prediction, so that no
+    fold's fit depends on its held-out block.
+    """
+    coefs = coefs.copy()
+    for _ in range(shared):
+        pred = red.xd @ coefs[-1]
+        slope = stops.slope(pred)
+        coefs = fold_coefs(Reduced(xd=red.xd * slope[:, None],
+                                   yd=red.yd - stops.apply(pred) + slope * pred,
+                                   bd=red.bd, m=red.m), ok, penalty)
+    for _ in range(own):
+        for b in range(N_BLOCKS + 1):
+            sel = ok & (red.bd != b)
+            x = red.xd[sel]
+            pred = x @ coefs[b]
+            slope = stops.slope(pred)
+            xw = x * slope[:, None]
+            target = red.yd[sel] - stops.apply(pred) + slope * pred
+            coefs[b] = _solve(xw.T @ xw, xw.T @ target, penalty)
+    return coefs
+
+
+def between_stops(y: np.ndarray, stops: Stops, sigma: float) -> np.ndarray:
+    """(N,) frames between the stops: more than 3 σ of noise inside a hard stop (a reading on
+    the plateau says nothing about the map), inside a soft knee's level."""
+    lo = stops.lo + (0.0 if stops.soft_lo > 0 else 3.0 * sigma)
+    hi = stops.hi - (0.0 if stops.soft_hi > 0 else 3.0 * sigma)
+    return (y > lo) & (y < hi)
+
+
+def off_hard_stops(y: np.ndarray, stops: Stops, sigma: float) -> np.ndarray:
+    """(N,) frames a fit through ``stops`` uses: all but those on or within 3 σ of a hard
+    stop (a soft knee's frames are fitted through it)."""
+    return between_stops(y, replace(stops, lo=-math.inf if stops.soft_lo > 0 else stops.lo,
+                                    hi=math.inf if stops.soft_hi > 0 else stops.hi), sigma)
+
+
+def choose_stops(trial: Trial, inputs: Inputs, x: np.ndarray, y: np.ndarray,
+                 penalty: np.ndarray, j: int, red: Reduced) -> Stops:
+    """Sensor j's stops, chosen on the held-out blocks.
+
+    Each end's stop is one of: none, the plateau the sensor sits on while the joint moves (a
+    hard stop, :func:`plateaus`), or a soft knee at one of the ``KNEE_SHARES`` quantiles of
+    the reading with one of the ``KNEE_SOFTNESS`` softnesses. A compressive end of range
+    without a plateau is thus told from a hard stop by the data, not assumed. Each option is
+    scored with the map fitted between the stops and bent at them. Each end's knee is searched
+    with the other end as found without knees; the better end is kept and the other end's
+    knee searched again given it.
+    """
+    sigma = float(trial.noise[j])
+    seen = y[trial.valid]
+    extremes = float(np.min(seen)), float(np.max(seen))
+    best: tuple[float, Stops] | None = None
+
+    plain = fold_coefs(red, red.usable(trial.valid), penalty)  # where every search starts
+
+    def consider(options: list[Stops]) -> float:
+        """Score every option; the best score. Hard stops: the map fitted between them (the
+        first option's); soft knees: fitted through them (one shared Gauss–Newton step from
+        the fit without stops: extrapolated from between the knees, a map can be far off)."""
+        nonlocal best
+        if options[0].soft:
+            scores = []
+            for stop in options:
+                ok = red.usable(trial.valid & off_hard_stops(y, stop, sigma))
+                coefs = fit_through_stops(red, ok, penalty, stop, plain, shared=1, own=0)
+                r = heldout_residual(trial, x, y, coefs, stop)
+                scores.append(float(np.nanmean(r**2)))
+        else:
+            r = fit_design(trial, x, y, penalty, fit_mask=between_stops(y, options[0], sigma),
+                           reduced=red)[0]
+            raw = y - r  # held-out prediction before the stops (NaN where not scored)
+            scores = [float(np.nanmean((y - stop.apply(raw)) ** 2)) for stop in options]
+        k = int(np.argmin(scores))
+        if best is None or scores[k] < best[0]:
+            best = (scores[k], options[k])
+        return scores[k]
+
+    def side(end: int, other: Stops) -> None:
+        """Knees at the lower (0) or upper (1) end, the other end as in ``other``: the
+        ``KNEE_SHARES`` grid, then, if a knee beat ``other``, the shares halfway
+        (geometrically) to the best one's neighbours."""
+
+        def at(share: float) -> float:
+            level = float(np.quantile(seen, share if end == 0 else 1.0 - share))
+            reach = abs(level - extremes[end])
+            if reach <= 3.0 * sigma:
+                return math.inf
+            softs = [f * reach for f in KNEE_SOFTNESS]
+            return consider([Stops(level, other.hi, soft, 0.0) if end == 0
+                             else Stops(other.lo, level, other.soft_lo, soft) for soft in softs])
+
+        grid = list(KNEE_SHARES)
+        before = best[0] if best is not None else math.inf
+        scores = [at(share) for share in grid]
+        k = int(np.argmin(scores))
+        if scores[k] < before:  # a knee helps here: place it better
+            for n in (k - 1, k + 1):
+                if 0 <= n < len(grid):
+                    at(math.sqrt(grid[k] * grid[n]))
+
+    consider([NO_STOPS])
+    consider([Stops(*plateaus(trial, inputs, j))])
+    assert best is not None
+    start = best
+    firsts = []
+    for end in (0, 1):
+        best = start
+        side(end, start[1])
+        firsts.append(best)
+    best = min(firsts, key=lambda item: item[0])
+    if best is not start:  # the other end, given the better one's knee
+        side(1 - firsts.index(best), best[1])
+    return best[1]
+
+
+def fit_with_stops(trial: Trial, x: np.ndarray, y: np.ndarray, penalty: np.ndarray,
+                   stops: Stops, sigma: float, red: Reduced,
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`fit_design`'s outputs for a sensor with ``stops``: the map fitted between the
+    stops or, with a soft knee, fitted through the knees (:func:`fit_through_stops`, starting
+    from the fit without stops), whichever has the lower held-out error."""
+    between = red.usable(trial.valid & between_stops(y, stops, sigma))
+    coefs = fold_coefs(red, between, penalty)
+    residual = heldout_residual(trial, x, y, coefs, stops)
+    if stops.soft:
+        ok = red.usable(trial.valid & off_hard_stops(y, stops, sigma))
+        through = fit_through_stops(red, ok, penalty, stops,
+                                    fold_coefs(red, red.usable(trial.valid), penalty))
+        polished = heldout_residual(trial, x, y, through, stops)
+        if np.nanmean(polished**2) < np.nanmean(residual**2):
+            coefs, residual = through, polished
+    return residual, coefs[-1], stops.apply(x @ coefs[-1])
 
 
 def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     """Held-out residuals and full-data coefficients of ``spec`` for every sensor.
 
-    With the saturation term the model is fitted on the frames off the plateaus
-    (:func:`plateaus`) and clipped at the stop levels.
+    With the saturation term each sensor's map bends at its stops: ``spec.stops`` when
+    given, else chosen (:func:`choose_stops`), then fitted (:func:`fit_with_stops`).
     """
     s = trial.n_sensors
     residual = np.empty_like(trial.y)
     prediction = np.empty_like(trial.y)
     coefs: list[np.ndarray] = []
-    clips: list[tuple[float, float]] = []
+    stops: list[Stops] = []
     for j in range(s):
         y = trial.y[:, j]
         x = design(trial.rate_hz, inputs, spec, j)
-        n_static = static_basis(inputs, spec.degree).shape[1]
-        lo, hi = plateaus(trial, inputs, j) if spec.saturation else (-np.inf, np.inf)
-        free = (y > lo + 3.0 * trial.noise[j]) & (y < hi - 3.0 * trial.noise[j])
-        r, c, p = fit_design(trial, x, y, penalties(n_static, x.shape[1], spec.ridge),
-                             fit_mask=free)
-        r = y - np.clip(y - r, lo, hi)  # NaN (unscored) stays NaN
-        p = np.clip(p, lo, hi)
-        clips.append((float(lo), float(hi)))
+        penalty = penalties(static_basis(inputs, spec.degree).shape[1], x.shape[1], spec.ridge)
+        if spec.saturation:
+            red = reduce(trial, x, y)
+            stop = (spec.stops[j] if spec.stops
+                    else choose_stops(trial, inputs, x, y, penalty, j, red))
+            r, c, p = fit_with_stops(trial, x, y, penalty, stop, float(trial.noise[j]), red)
+        else:
+            (r, c, p), stop = fit_design(trial, x, y, penalty), NO_STOPS
+        stops.append(stop)
         residual[:, j], prediction[:, j] = r, p
         coefs.append(c)
     block_mse = np.array([np.nanmean(residual[trial.blocks == b] ** 2)
                           for b in range(N_BLOCKS)])
     return Fit(spec=spec, residual=residual, block_mse=block_mse, coef=coefs,
-               prediction=prediction, clip=clips)
+               prediction=prediction, stops=stops)
 
 
 def restrict_to_coverage(trial: Trial, u: np.ndarray) -> float:

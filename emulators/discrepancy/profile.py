@@ -21,6 +21,7 @@ import numpy as np
 from exohil.emulators.discrepancy.model import (
     Inputs,
     Spec,
+    Stops,
     design,
     legendre_products,
     map_inputs,
@@ -51,7 +52,7 @@ class CalibratedSuit:
         spec: the model's terms and shape parameters.
         inputs: the static map's scaling, static input coefficients and play thresholds.
         coef: (S, P) coefficients per sensor in design-column order.
-        stops: (S, 2) hard-stop levels (lower, upper; ±inf when none).
+        stops: per sensor, its stops (levels ±inf when none; softness 0 for a hard stop).
         noise: (S,) white-noise standard deviation, sensor units.
     """
 
@@ -65,7 +66,7 @@ class CalibratedSuit:
     spec: Spec
     inputs: Inputs
     coef: np.ndarray
-    stops: np.ndarray
+    stops: tuple[Stops, ...]
     noise: np.ndarray
 
 
@@ -139,7 +140,8 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             {"name": name,
              "input_coef": suit.inputs.static_coef[:, j].tolist(),
              "play_thresholds": suit.inputs.thresholds[j].tolist(),
-             "stops": suit.stops[j].tolist(),
+             "stops": [suit.stops[j].lo, suit.stops[j].hi],
+             "stop_softness": [suit.stops[j].soft_lo, suit.stops[j].soft_hi],
              "coef": suit.coef[j].tolist(),
              "noise_sigma": float(suit.noise[j])}
             for j, name in enumerate(suit.sensors)
@@ -151,6 +153,15 @@ def write_calibrated_profile(path: str | Path, suit: CalibratedSuit, description
                              ) -> None:
     """Write ``suit`` as TOML (temporary name, renamed when complete)."""
     write_text(path, to_toml(profile_dict(suit, description)))
+
+
+def _stops(sensor: dict) -> Stops:
+    """A sensor table's stops; ``stop_softness`` is optional (hard stops, the first form)."""
+    lo, hi = (float(v) for v in sensor["stops"])
+    soft_lo, soft_hi = (float(v) for v in sensor.get("stop_softness", (0.0, 0.0)))
+    if soft_lo < 0 or soft_hi < 0 or lo > hi:
+        raise ValueError(f"stops {[lo, hi]} with softness {[soft_lo, soft_hi]}")
+    return Stops(lo, hi, soft_lo, soft_hi)
 
 
 def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
@@ -183,7 +194,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
             angles=tuple(data["angles"]), rate_hz=float(data["rate_hz"]),
             effects=tuple(data["effects"]), spec=spec, inputs=inputs,
             coef=np.asarray([s["coef"] for s in sensors], dtype=np.float64),
-            stops=np.asarray([s["stops"] for s in sensors], dtype=np.float64),
+            stops=tuple(_stops(s) for s in sensors),
             noise=np.asarray([s["noise_sigma"] for s in sensors], dtype=np.float64))
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise ProfileError(f"{path}: malformed calibrated suit profile ({exc!r})") from exc
@@ -204,8 +215,8 @@ def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndar
     inputs.static = legendre_products(u, inputs.static_degree)[0] @ inputs.static_coef
     out = np.empty((t.shape[0], len(suit.sensors)))
     for j in range(len(suit.sensors)):
-        out[:, j] = np.clip(design(suit.rate_hz, inputs, suit.spec, j) @ suit.coef[j],
-                            suit.stops[j, 0], suit.stops[j, 1])
+        out[:, j] = suit.stops[j].apply(design(suit.rate_hz, inputs, suit.spec, j)
+                                        @ suit.coef[j])
     return out
 
 
@@ -243,5 +254,5 @@ def calibrated_suit(outcome: Outcome, name: str) -> CalibratedSuit:
         effects=tuple(outcome.summary["already_in_model"]) + tuple(outcome.summary["effects"]),
         spec=after.spec, inputs=outcome.inputs,
         coef=np.asarray(after.coef),
-        stops=np.asarray(after.clip, dtype=np.float64),
+        stops=tuple(after.stops),
         noise=np.asarray(outcome.summary["noise_floor_per_sensor"]))

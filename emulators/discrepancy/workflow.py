@@ -90,9 +90,8 @@ def _candidates(kind: str, spec: Spec) -> list[Spec]:
                 + [replace(spec, creep_asym_s=pair) for pair in CREEP_ASYM_S])
     if kind == "drift":
         return [replace(spec, drift_degree=d) for d in DRIFT_DEGREES]
-    if kind == "saturation":  # fitted off the plateaus, the map extrapolates onto them: its
-        # ridge is chosen again (a small one that interpolates well can extrapolate wildly)
-        return [replace(spec, saturation=True, ridge=r) for r in STATIC_RIDGES]
+    if kind == "saturation":  # see _best
+        return [replace(spec, saturation=True)]
     raise ValueError(f"unknown effect {kind!r}; known: {', '.join(VOCABULARY)}")
 
 
@@ -103,6 +102,12 @@ def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
                     _refine_lag(trial, inputs, spec, "delay", LAG_DELAY_S)],
                    key=lambda f: f.gap)
     best = min((fit(trial, inputs, s) for s in _candidates(kind, spec)), key=lambda f: f.gap)
+    if kind == "saturation":  # fitted between the stops, the map extrapolates into them: its
+        # ridge is chosen again (a small one that interpolates well can extrapolate wildly),
+        # through the stops chosen with the current one
+        kept = _keep_stops(best).spec
+        best = min([best] + [fit(trial, inputs, replace(kept, ridge=r)) for r in STATIC_RIDGES
+                             if r != spec.ridge], key=lambda f: f.gap)
     if kind == "creep" and best.spec.creep_tau_s:  # a second time constant, if it helps
         tau = best.spec.creep_tau_s[0]
         pairs = [replace(spec, creep_tau_s=(tau, other)) for other in CREEP_TAU_S if other != tau]
@@ -138,7 +143,8 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     effect is compared at a modest cost; once one is named its parameters are fitted properly.
     Creep: a Nelder–Mead search on the log time constants (one or two low-passes, or the
     build/recover pair of the asymmetric state) minimising the held-out error. Lag is already
-    refined on its grid (:func:`_refine_lag`); the other effects have no shape parameter.
+    refined on its grid (:func:`_refine_lag`); saturation's stops are chosen in every fit
+    until they are kept (:func:`_keep_stops`); the other effects have no shape parameter.
     """
     spec = current.spec
     if kind != "creep":
@@ -161,6 +167,15 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
              options={"initial_simplex": simplex, "xatol": CREEP_LOG_TOL, "fatol": 0.0,
                       "maxfev": CREEP_MAX_FITS})
     return min(fits.values(), key=lambda f: f.gap)
+
+
+def _keep_stops(current: Fit) -> Fit:
+    """Keep the stops (levels and softness per sensor) chosen in ``current`` from here on:
+    later candidates refit the map through them instead of choosing them again in every fit.
+    Without the saturation term, ``current`` as it is."""
+    if not current.spec.saturation or current.spec.stops:
+        return current
+    return replace(current, spec=replace(current.spec, stops=tuple(current.stops)))
 
 
 def _best_degree(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
@@ -212,8 +227,13 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
                 "mean_rate_per_s": [round(c / span, 7) for c in change]}
     if kind == "saturation":
         pred = result.prediction[trial.valid]
-        return {"stops": [[None if not np.isfinite(v) else round(v, 5) for v in pair]
-                          for pair in result.clip],
+
+        def level(v: float) -> float | None:
+            return round(v, 5) if np.isfinite(v) else None
+
+        return {"stops": [[level(st.lo), level(st.hi)] for st in result.stops],
+                "softness": [[round(st.soft_lo, 5), round(st.soft_hi, 5)]
+                             for st in result.stops],
                 "lower": np.round(pred.min(axis=0), 5).tolist(),
                 "upper": np.round(pred.max(axis=0), 5).tolist()}
     raise ValueError(kind)
@@ -286,7 +306,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     spec = static_fit.spec
     inputs = make_inputs(trial, spec.degree, spec.ridge)
     for kind in in_model:
-        spec = _refine(trial, inputs, kind, _best(trial, inputs, kind, spec)).spec
+        spec = _keep_stops(_refine(trial, inputs, kind, _best(trial, inputs, kind, spec))).spec
     base = fit(trial, inputs, spec) if in_model else static_fit
     before = base
     progress(f"[2] simulated with the calibrated model (degree {spec.degree}"
@@ -319,7 +339,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
                      f"{floor:.4g}; tried {table}): nothing added")
             break
         kind, cand, _ = winners[0]
-        cand = _best_degree(trial, inputs, _refine(trial, inputs, kind, cand))
+        cand = _best_degree(trial, inputs, _keep_stops(_refine(trial, inputs, kind, cand)))
         evidence = _evidence(base, cand, floor)
         spec, base = cand.spec, cand
         steps.append({"effect": kind, "gap": round(cand.gap, 6),
