@@ -606,24 +606,30 @@ def choose_stops(trial: Trial, inputs: Inputs, x: np.ndarray, y: np.ndarray,
     best: tuple[float, Stops] | None = None
 
     plain = fold_coefs(red, red.usable(trial.valid), penalty)  # where every search starts
+    # options are compared on the averaged groups (as the fits see them) of scored frames
+    scored = red.usable(trial.scored)
+    rows = [np.flatnonzero(scored & (red.bd == b)) for b in range(N_BLOCKS)]
+
+    def heldout_mse(coefs: np.ndarray, stops: Stops) -> float:
+        r = np.concatenate([red.yd[i] - stops.apply(red.xd[i] @ coefs[b])
+                            for b, i in enumerate(rows)])
+        return float(np.mean(r**2))
 
     def consider(options: list[Stops]) -> float:
         """Score every option; the best score. Hard stops: the map fitted between them (the
-        first option's); soft knees: fitted through them (one shared Gauss–Newton step from
+        first option's); soft knees: fitted through them (two shared Gauss–Newton steps from
         the fit without stops: extrapolated from between the knees, a map can be far off)."""
         nonlocal best
         if options[0].soft:
             scores = []
             for stop in options:
                 ok = red.usable(trial.valid & off_hard_stops(y, stop, sigma))
-                coefs = fit_through_stops(red, ok, penalty, stop, plain, shared=1, own=0)
-                r = heldout_residual(trial, x, y, coefs, stop)
-                scores.append(float(np.nanmean(r**2)))
+                coefs = fit_through_stops(red, ok, penalty, stop, plain, shared=2, own=0)
+                scores.append(heldout_mse(coefs, stop))
         else:
-            r = fit_design(trial, x, y, penalty, fit_mask=between_stops(y, options[0], sigma),
-                           reduced=red)[0]
-            raw = y - r  # held-out prediction before the stops (NaN where not scored)
-            scores = [float(np.nanmean((y - stop.apply(raw)) ** 2)) for stop in options]
+            coefs = fold_coefs(red, red.usable(trial.valid & between_stops(y, options[0], sigma)),
+                               penalty)
+            scores = [heldout_mse(coefs, stop) for stop in options]
         k = int(np.argmin(scores))
         if best is None or scores[k] < best[0]:
             best = (scores[k], options[k])
@@ -670,20 +676,17 @@ def choose_stops(trial: Trial, inputs: Inputs, x: np.ndarray, y: np.ndarray,
 def fit_with_stops(trial: Trial, x: np.ndarray, y: np.ndarray, penalty: np.ndarray,
                    stops: Stops, sigma: float, red: Reduced,
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`fit_design`'s outputs for a sensor with ``stops``: the map fitted between the
-    stops or, with a soft knee, fitted through the knees (:func:`fit_through_stops`, starting
-    from the fit without stops), whichever has the lower held-out error."""
-    between = red.usable(trial.valid & between_stops(y, stops, sigma))
-    coefs = fold_coefs(red, between, penalty)
-    residual = heldout_residual(trial, x, y, coefs, stops)
+    """:func:`fit_design`'s outputs for a sensor with ``stops``: with hard stops only, the map
+    fitted between them; with a soft knee, fitted through the knees
+    (:func:`fit_through_stops`, starting from the fit without stops)."""
     if stops.soft:
         ok = red.usable(trial.valid & off_hard_stops(y, stops, sigma))
-        through = fit_through_stops(red, ok, penalty, stops,
-                                    fold_coefs(red, red.usable(trial.valid), penalty))
-        polished = heldout_residual(trial, x, y, through, stops)
-        if np.nanmean(polished**2) < np.nanmean(residual**2):
-            coefs, residual = through, polished
-    return residual, coefs[-1], stops.apply(x @ coefs[-1])
+        coefs = fit_through_stops(red, ok, penalty, stops,
+                                  fold_coefs(red, red.usable(trial.valid), penalty))
+    else:
+        coefs = fold_coefs(red, red.usable(trial.valid & between_stops(y, stops, sigma)),
+                           penalty)
+    return heldout_residual(trial, x, y, coefs, stops), coefs[-1], stops.apply(x @ coefs[-1])
 
 
 def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
