@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
@@ -554,58 +554,51 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, penalty: np.ndarray, stops: 
     :func:`fold_coefs`); the last ``own`` linearise each fold at its own prediction, so that no
     fold's fit depends on its held-out block.
     """
+    def linearised(x: np.ndarray, y: np.ndarray, coef: np.ndarray,
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """Rows weighted by h′(ŝ) and the target y − h(ŝ) + h′(ŝ)·ŝ, at ŝ = x·coef."""
+        pred = x @ coef
+        slope = stops.slope(pred)
+        return x * slope[:, None], y - stops.apply(pred) + slope * pred
+
     coefs = coefs.copy()
     for _ in range(shared):
-        pred = red.xd @ coefs[-1]
-        slope = stops.slope(pred)
-        coefs = fold_coefs(Reduced(xd=red.xd * slope[:, None],
-                                   yd=red.yd - stops.apply(pred) + slope * pred,
-                                   bd=red.bd, m=red.m), ok, penalty)
+        xw, target = linearised(red.xd, red.yd, coefs[-1])
+        coefs = fold_coefs(Reduced(xd=xw, yd=target, bd=red.bd, m=red.m), ok, penalty)
     for _ in range(own):
         for b in range(N_BLOCKS + 1):
             sel = ok & (red.bd != b)
-            x = red.xd[sel]
-            pred = x @ coefs[b]
-            slope = stops.slope(pred)
-            xw = x * slope[:, None]
-            target = red.yd[sel] - stops.apply(pred) + slope * pred
+            xw, target = linearised(red.xd[sel], red.yd[sel], coefs[b])
             coefs[b] = _solve(xw.T @ xw, xw.T @ target, penalty)
     return coefs
 
 
-def between_stops(y: np.ndarray, stops: Stops, sigma: float) -> np.ndarray:
-    """(N,) frames between the stops: more than 3 σ of noise inside a hard stop (a reading on
-    the plateau says nothing about the map), inside a soft knee's level."""
-    lo = stops.lo + (0.0 if stops.soft_lo > 0 else 3.0 * sigma)
-    hi = stops.hi - (0.0 if stops.soft_hi > 0 else 3.0 * sigma)
+def off_hard_stops(y: np.ndarray, stops: Stops, sigma: float) -> np.ndarray:
+    """(N,) frames a fit with ``stops`` uses: all but those on or within 3 σ of noise of a
+    hard stop (a reading on the plateau says nothing about the map); a soft knee's frames
+    are fitted through it."""
+    lo = stops.lo + 3.0 * sigma if stops.soft_lo == 0 else -math.inf
+    hi = stops.hi - 3.0 * sigma if stops.soft_hi == 0 else math.inf
     return (y > lo) & (y < hi)
 
 
-def off_hard_stops(y: np.ndarray, stops: Stops, sigma: float) -> np.ndarray:
-    """(N,) frames a fit through ``stops`` uses: all but those on or within 3 σ of a hard
-    stop (a soft knee's frames are fitted through it)."""
-    return between_stops(y, replace(stops, lo=-math.inf if stops.soft_lo > 0 else stops.lo,
-                                    hi=math.inf if stops.soft_hi > 0 else stops.hi), sigma)
-
-
-def choose_stops(trial: Trial, inputs: Inputs, x: np.ndarray, y: np.ndarray,
-                 penalty: np.ndarray, j: int, red: Reduced) -> Stops:
+def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, penalty: np.ndarray, j: int,
+                 red: Reduced, plain: np.ndarray) -> Stops:
     """Sensor j's stops, chosen on the held-out blocks.
 
     Each end's stop is one of: none, the plateau the sensor sits on while the joint moves (a
     hard stop, :func:`plateaus`), or a soft knee at one of the ``KNEE_SHARES`` quantiles of
-    the reading with one of the ``KNEE_SOFTNESS`` softnesses. A compressive end of range
-    without a plateau is thus told from a hard stop by the data, not assumed. Each option is
-    scored with the map fitted between the stops and bent at them. Each end's knee is searched
-    with the other end as found without knees; the better end is kept and the other end's
-    knee searched again given it.
+    the reading (then halfway to the best one's neighbours) with one of the
+    ``KNEE_SOFTNESS`` softnesses. A compressive end of range without a plateau is thus told
+    from a hard stop by the data, not assumed. Hard stops are scored with the map fitted off
+    them, soft knees with the map fitted through them from ``plain`` (the fold fits without
+    stops, :func:`fold_coefs`). Each end's knee is searched with the other end as found
+    without knees; the better end is kept and the other end's knee searched again given it.
     """
     sigma = float(trial.noise[j])
     seen = y[trial.valid]
     extremes = float(np.min(seen)), float(np.max(seen))
     best: tuple[float, Stops] | None = None
-
-    plain = fold_coefs(red, red.usable(trial.valid), penalty)  # where every search starts
     # options are compared on the averaged groups (as the fits see them) of scored frames
     scored = red.usable(trial.scored)
     rows = [np.flatnonzero(scored & (red.bd == b)) for b in range(N_BLOCKS)]
@@ -627,7 +620,7 @@ def choose_stops(trial: Trial, inputs: Inputs, x: np.ndarray, y: np.ndarray,
                 coefs = fit_through_stops(red, ok, penalty, stop, plain, shared=2, own=0)
                 scores.append(heldout_mse(coefs, stop))
         else:
-            coefs = fold_coefs(red, red.usable(trial.valid & between_stops(y, options[0], sigma)),
+            coefs = fold_coefs(red, red.usable(trial.valid & off_hard_stops(y, options[0], sigma)),
                                penalty)
             scores = [heldout_mse(coefs, stop) for stop in options]
         k = int(np.argmin(scores))
@@ -674,18 +667,14 @@ def choose_stops(trial: Trial, inputs: Inputs, x: np.ndarray, y: np.ndarray,
 
 
 def fit_with_stops(trial: Trial, x: np.ndarray, y: np.ndarray, penalty: np.ndarray,
-                   stops: Stops, sigma: float, red: Reduced,
+                   stops: Stops, sigma: float, red: Reduced, plain: np.ndarray,
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`fit_design`'s outputs for a sensor with ``stops``: with hard stops only, the map
-    fitted between them; with a soft knee, fitted through the knees
-    (:func:`fit_through_stops`, starting from the fit without stops)."""
-    if stops.soft:
-        ok = red.usable(trial.valid & off_hard_stops(y, stops, sigma))
-        coefs = fit_through_stops(red, ok, penalty, stops,
-                                  fold_coefs(red, red.usable(trial.valid), penalty))
-    else:
-        coefs = fold_coefs(red, red.usable(trial.valid & between_stops(y, stops, sigma)),
-                           penalty)
+    fitted off them; with a soft knee, fitted through the knees (:func:`fit_through_stops`,
+    starting from ``plain``, the fold fits without stops)."""
+    ok = red.usable(trial.valid & off_hard_stops(y, stops, sigma))
+    coefs = (fit_through_stops(red, ok, penalty, stops, plain) if stops.soft
+             else fold_coefs(red, ok, penalty))
     return heldout_residual(trial, x, y, coefs, stops), coefs[-1], stops.apply(x @ coefs[-1])
 
 
@@ -706,9 +695,11 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
         penalty = penalties(static_basis(inputs, spec.degree).shape[1], x.shape[1], spec.ridge)
         if spec.saturation:
             red = reduce(trial, x, y)
+            plain = fold_coefs(red, red.usable(trial.valid), penalty)
             stop = (spec.stops[j] if spec.stops
-                    else choose_stops(trial, inputs, x, y, penalty, j, red))
-            r, c, p = fit_with_stops(trial, x, y, penalty, stop, float(trial.noise[j]), red)
+                    else choose_stops(trial, inputs, y, penalty, j, red, plain))
+            r, c, p = fit_with_stops(trial, x, y, penalty, stop, float(trial.noise[j]), red,
+                                     plain)
         else:
             (r, c, p), stop = fit_design(trial, x, y, penalty), NO_STOPS
         stops.append(stop)

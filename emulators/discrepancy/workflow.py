@@ -142,11 +142,14 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     The candidates' grids are coarse (creep: time constants a factor of 3 apart) so that every
     effect is compared at a modest cost; once one is named its parameters are fitted properly.
     Creep: a Nelder–Mead search on the log time constants (one or two low-passes, or the
-    build/recover pair of the asymmetric state) minimising the held-out error. Lag is already
-    refined on its grid (:func:`_refine_lag`); saturation's stops are chosen in every fit
-    until they are kept (:func:`_keep_stops`); the other effects have no shape parameter.
+    build/recover pair of the asymmetric state) minimising the held-out error. Saturation:
+    the stops chosen in its candidate fit are kept from here on (:func:`_keep_stops`). Lag is
+    already refined on its grid (:func:`_refine_lag`); the other effects have no shape
+    parameter.
     """
     spec = current.spec
+    if kind == "saturation":
+        return _keep_stops(current)
     if kind != "creep":
         return current
     asym = bool(spec.creep_asym_s)
@@ -306,7 +309,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     spec = static_fit.spec
     inputs = make_inputs(trial, spec.degree, spec.ridge)
     for kind in in_model:
-        spec = _keep_stops(_refine(trial, inputs, kind, _best(trial, inputs, kind, spec))).spec
+        spec = _refine(trial, inputs, kind, _best(trial, inputs, kind, spec)).spec
     base = fit(trial, inputs, spec) if in_model else static_fit
     before = base
     progress(f"[2] simulated with the calibrated model (degree {spec.degree}"
@@ -339,7 +342,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
                      f"{floor:.4g}; tried {table}): nothing added")
             break
         kind, cand, _ = winners[0]
-        cand = _best_degree(trial, inputs, _keep_stops(_refine(trial, inputs, kind, cand)))
+        cand = _best_degree(trial, inputs, _refine(trial, inputs, kind, cand))
         evidence = _evidence(base, cand, floor)
         spec, base = cand.spec, cand
         steps.append({"effect": kind, "gap": round(cand.gap, 6),
