@@ -1,6 +1,7 @@
 """The discrepancy workflow: data preparation, model pieces, CLI contract, calibrated profile."""
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -8,6 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from exohil.emulators.discrepancy import DiscrepancyError, noise_floor, prepare_trial, run
+from exohil.emulators.discrepancy.data import N_BLOCKS
 from exohil.emulators.discrepancy.hidden import (
     NOISE_MM,
     Case,
@@ -17,7 +19,15 @@ from exohil.emulators.discrepancy.hidden import (
     suit_lengths,
     suit_recording,
 )
-from exohil.emulators.discrepancy.model import Stops, delay, low_pass, play
+from exohil.emulators.discrepancy.model import (
+    Reduced,
+    Ridge,
+    Stops,
+    delay,
+    fold_coefs,
+    low_pass,
+    play,
+)
 from exohil.emulators.discrepancy.profile import (
     calibrated_suit,
     load_calibrated_profile,
@@ -25,6 +35,7 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated_recording,
 )
 from exohil.emulators.effects import Noise
+from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
@@ -95,6 +106,53 @@ def test_stops_bend_hard_and_soft():
     assert np.isnan(soft.apply(np.array([np.nan]))[0])
 
 
+def test_the_effect_ridge_shrinks_only_what_the_column_adds_beyond_the_static_map():
+    # a creep-like column: mostly offset and stretch the static map [1, u] carries, plus a
+    # small part only it can explain; its coefficient must come back unshrunk
+    n = 4000
+    u = np.linspace(-1.0, 1.0, n)
+    own = 0.5 * np.sin(40.0 * u)
+    column = 500.0 + 15.0 * u + own
+    x = np.column_stack([np.ones(n), u, column])
+    y = 3.0 + 2.0 * u + 0.06 * column + np.random.default_rng(0).normal(0.0, 0.001, n)
+    red = Reduced(xd=x, yd=y, bd=np.arange(n) * N_BLOCKS // n, m=1)
+    coefs = fold_coefs(red, np.ones(n, dtype=bool), Ridge(n_static=2))
+    np.testing.assert_allclose(coefs[:, 2], 0.06, rtol=0.03)
+    heldout = np.concatenate([y[red.bd == b] - x[red.bd == b] @ coefs[b]
+                              for b in range(N_BLOCKS)])
+    assert np.sqrt(np.mean(heldout**2)) < 0.1 * np.std(0.06 * own)  # own part: 0.021
+    # a column that adds nothing in a fold (constant there) gets no huge coefficient
+    flat = np.where(red.bd == 0, own, 0.3)
+    coefs = fold_coefs(Reduced(xd=np.column_stack([x[:, :2], flat]), yd=y, bd=red.bd, m=1),
+                       np.ones(n, dtype=bool), Ridge(n_static=2))
+    assert np.all(np.abs(coefs[1:, 2]) < 1.0), coefs[:, 2]
+
+
+def _power_law_creep_recording(seed: int) -> Recording:
+    """A suit whose fabric creeps with a power-law memory (weights t^-0.7 over 60 s), not the
+    one or two exponential time constants the workflow models."""
+    trajectory = random_trajectory(seed, 60.0)
+    geometry, gains, offsets = random_geometry(seed)
+    ideal = suit_lengths(trajectory, geometry, gains, offsets)
+    x = ideal.values
+    kernel = np.arange(1, 60 * 250) ** -0.7
+    kernel /= kernel.sum()
+    stretch = x - x[0]
+    memory = np.column_stack([np.convolve(stretch[:, j], np.r_[0.0, kernel])[: len(x)]
+                              for j in range(x.shape[1])])
+    gain = 0.08 * np.random.default_rng(seed).choice([-1.0, 1.0], x.shape[1])
+    signal = Noise(sigma_mm=NOISE_MM).apply(ideal.with_values(x + gain * memory),
+                                            np.random.default_rng(seed))
+    return suit_recording(trajectory, geometry, signal, {"case": "power-law creep"})
+
+
+def test_a_creep_of_another_memory_is_named_and_explained():
+    s = run(_power_law_creep_recording(100), "power-law creep").summary
+    assert s["effects"][:1] == ["creep"], s["effects"]
+    floor = s["noise_floor"]
+    assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
+
+
 def _soft_stop_recording(seed: int) -> Recording:
     """A suit whose readings stop rising at the top of their range: beyond the 85 % quantile
     they approach an asymptote exponentially (not the tanh the workflow models)."""
@@ -124,6 +182,40 @@ def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
     loaded = load_calibrated_profile(tmp_path / "p.toml")
     sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
+
+
+def _delayed_low_pass_recording(seed: int) -> Recording:
+    """A suit whose readings follow the arm through a 30 ms low-pass and then 20 ms of
+    transport delay: neither a low-pass alone nor a delay alone."""
+    trajectory = random_trajectory(seed, 60.0)
+    geometry, gains, offsets = random_geometry(seed)
+    ideal = suit_lengths(trajectory, geometry, gains, offsets)
+    lagged = delay(low_pass(ideal.values, 0.03, 250.0), 0.02, 250.0)
+    signal = Noise(sigma_mm=NOISE_MM).apply(ideal.with_values(lagged),
+                                            np.random.default_rng(seed))
+    return suit_recording(trajectory, geometry, signal, {"case": "delayed low-pass"})
+
+
+def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):
+    from exohil.emulators.discrepancy.profile import write_calibrated_profile
+
+    outcome = run(_delayed_low_pass_recording(102), "delayed low-pass")
+    s = outcome.summary
+    assert s["effects"][:1] == ["lag"], s["effects"]
+    params = s["steps"][0]["params"]
+    assert params["model"] == "first_order_delay", params
+    assert abs(params["tau_s"] - 0.03) < 0.006 and abs(params["delay_s"] - 0.02) < 0.006, params
+    floor = s["noise_floor"]
+    assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "lag"))
+    loaded = load_calibrated_profile(tmp_path / "p.toml")
+    assert replace(loaded.spec, ridge=outcome.after.spec.ridge) == outcome.after.spec
+    sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
+    np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
+    text = (tmp_path / "p.toml").read_text().replace('"first_order_delay"', '"second_order"')
+    (tmp_path / "bad.toml").write_text(text)
+    with pytest.raises(ProfileError, match="lag_kind 'second_order'"):
+        load_calibrated_profile(tmp_path / "bad.toml")
 
 
 def test_hidden_hysteresis_is_named_and_the_gap_shrinks(hysteresis_outcome):

@@ -35,6 +35,7 @@ from exohil.formats.recording import AngleStream, Recording, SensorStream
 
 CALIBRATED_SCHEMA = "exohil-calibrated-suit-profile"
 CALIBRATED_VERSION = 1
+LAG_KINDS = ("none", "first_order", "delay", "first_order_delay")
 
 
 @dataclass(frozen=True)
@@ -133,6 +134,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             "creep_build_recover_s": list(spec.creep_asym_s),
             "lag_kind": spec.lag_kind or "none",
             "lag_s": spec.lag_s,
+            "lag_delay_s": spec.lag_delay_s,
             "drift_degree": spec.drift_degree,
             "saturation": spec.saturation,
         },
@@ -164,6 +166,13 @@ def _stops(sensor: dict) -> Stops:
     return Stops(lo, hi, soft_lo, soft_hi)
 
 
+def _lag_kind(name: object) -> str:
+    """The ``lag_kind`` term as :class:`Spec` holds it (``none`` → empty)."""
+    if name not in LAG_KINDS:
+        raise ValueError(f"lag_kind {name!r} is not one of {', '.join(LAG_KINDS)}")
+    return "" if name == "none" else str(name)
+
+
 def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
     """Read a calibrated suit profile; one :class:`ProfileError` line on any problem."""
     path = Path(path)
@@ -176,8 +185,9 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
         spec = Spec(degree=int(sm["degree"]), hysteresis=bool(terms["hysteresis"]),
                     creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
                     creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
-                    lag_kind="" if terms["lag_kind"] == "none" else str(terms["lag_kind"]),
-                    lag_s=float(terms["lag_s"]), drift_degree=int(terms["drift_degree"]),
+                    lag_kind=_lag_kind(terms["lag_kind"]), lag_s=float(terms["lag_s"]),
+                    lag_delay_s=float(terms.get("lag_delay_s", 0.0)),
+                    drift_degree=int(terms["drift_degree"]),
                     saturation=bool(terms["saturation"]))
         inputs = Inputs(u=np.empty((0, 0)), input_kind=str(sm["inputs"]),
                         angle_lo=np.asarray(sm["angle_lo_deg"], dtype=np.float64),
