@@ -11,13 +11,9 @@ from click.testing import CliRunner
 from exohil.emulators.discrepancy import DiscrepancyError, noise_floor, prepare_trial, run
 from exohil.emulators.discrepancy.data import N_BLOCKS
 from exohil.emulators.discrepancy.hidden import (
-    NOISE_MM,
     Case,
     make_recording,
-    random_geometry,
     random_trajectory,
-    suit_lengths,
-    suit_recording,
 )
 from exohil.emulators.discrepancy.model import (
     Reduced,
@@ -34,7 +30,6 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated,
     simulate_calibrated_recording,
 )
-from exohil.emulators.effects import Noise
 from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
@@ -128,47 +123,19 @@ def test_the_effect_ridge_shrinks_only_what_the_column_adds_beyond_the_static_ma
     assert np.all(np.abs(coefs[1:, 2]) < 1.0), coefs[:, 2]
 
 
-def _power_law_creep_recording(seed: int) -> Recording:
-    """A suit whose fabric creeps with a power-law memory (weights t^-0.7 over 60 s), not the
-    one or two exponential time constants the workflow models."""
-    trajectory = random_trajectory(seed, 60.0)
-    geometry, gains, offsets = random_geometry(seed)
-    ideal = suit_lengths(trajectory, geometry, gains, offsets)
-    x = ideal.values
-    kernel = np.arange(1, 60 * 250) ** -0.7
-    kernel /= kernel.sum()
-    stretch = x - x[0]
-    memory = np.column_stack([np.convolve(stretch[:, j], np.r_[0.0, kernel])[: len(x)]
-                              for j in range(x.shape[1])])
-    gain = 0.08 * np.random.default_rng(seed).choice([-1.0, 1.0], x.shape[1])
-    signal = Noise(sigma_mm=NOISE_MM).apply(ideal.with_values(x + gain * memory),
-                                            np.random.default_rng(seed))
-    return suit_recording(trajectory, geometry, signal, {"case": "power-law creep"})
-
-
 def test_a_creep_of_another_memory_is_named_and_explained():
-    s = run(_power_law_creep_recording(100), "power-law creep").summary
+    """Creep with a power-law memory (hidden.py's ``other`` family), not the one or two
+    exponential time constants the workflow models."""
+    s = run(make_recording(Case("creep", "other", 1, seed=100)), "power-law creep").summary
     assert s["effects"][:1] == ["creep"], s["effects"]
     floor = s["noise_floor"]
     assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
 
 
-def _soft_stop_recording(seed: int) -> Recording:
-    """A suit whose readings stop rising at the top of their range: beyond the 85 % quantile
-    they approach an asymptote exponentially (not the tanh the workflow models)."""
-    trajectory = random_trajectory(seed, 60.0)
-    geometry, gains, offsets = random_geometry(seed)
-    ideal = suit_lengths(trajectory, geometry, gains, offsets)
-    x = ideal.values
-    knee = np.quantile(x, 0.85, axis=0)
-    soft = 0.4 * (x.max(axis=0) - knee)
-    bent = np.where(x > knee, knee + soft * (1.0 - np.exp(-(x - knee) / soft)), x)
-    signal = Noise(sigma_mm=NOISE_MM).apply(ideal.with_values(bent), np.random.default_rng(seed))
-    return suit_recording(trajectory, geometry, signal, {"case": "soft stop"})
-
-
 def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
-    outcome = run(_soft_stop_recording(102), "soft stop")
+    """Readings that stop rising at the top of their range, approaching an asymptote
+    exponentially beyond the 85 % quantile (not the tanh the workflow models)."""
+    outcome = run(make_recording(Case("saturation", "other", 1, seed=102)), "soft stop")
     s = outcome.summary
     assert s["effects"][:1] == ["saturation"], s["effects"]
     softness = s["steps"][0]["params"]["softness"]
@@ -184,22 +151,11 @@ def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
 
 
-def _delayed_low_pass_recording(seed: int) -> Recording:
-    """A suit whose readings follow the arm through a 30 ms low-pass and then 20 ms of
-    transport delay: neither a low-pass alone nor a delay alone."""
-    trajectory = random_trajectory(seed, 60.0)
-    geometry, gains, offsets = random_geometry(seed)
-    ideal = suit_lengths(trajectory, geometry, gains, offsets)
-    lagged = delay(low_pass(ideal.values, 0.03, 250.0), 0.02, 250.0)
-    signal = Noise(sigma_mm=NOISE_MM).apply(ideal.with_values(lagged),
-                                            np.random.default_rng(seed))
-    return suit_recording(trajectory, geometry, signal, {"case": "delayed low-pass"})
-
-
 def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):
+    """A 30 ms low-pass followed by 20 ms of transport delay: neither single lag model."""
     from exohil.emulators.discrepancy.profile import write_calibrated_profile
 
-    outcome = run(_delayed_low_pass_recording(102), "delayed low-pass")
+    outcome = run(make_recording(Case("lag", "other", 1, seed=102)), "delayed low-pass")
     s = outcome.summary
     assert s["effects"][:1] == ["lag"], s["effects"]
     params = s["steps"][0]["params"]

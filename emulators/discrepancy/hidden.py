@@ -7,7 +7,10 @@ cap radius 45–65 mm, per-sensor gains 0.7–1.4 and offsets, 3–5 tendons), o
 uses :mod:`exohil.emulators.effects`; ``alt`` is written here independently with another
 model family (backlash play or Bouc–Wen hysteresis, two-time-constant creep, tanh saturation,
 pure delay or second-order lag, exponential warm-up or sinusoidal drift), so the tests do not
-only check the workflow against its own equations.
+only check the workflow against its own equations. A third family, ``other``, is kept out of
+the suite's default and used to probe generality (docs/discrepancy.md): a Preisach ensemble
+of relays, creep with a power-law memory, a stop at the *upper* end that approaches its
+asymptote exponentially, a low-pass behind a transport delay, and a random-walk offset.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import fftconvolve, lfilter
 
 from exohil.emulators.effects import Creep, Drift, Hysteresis, Lag, Noise, Saturation, Signal
 from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory
@@ -25,6 +29,7 @@ from exohil.formats.recording import AngleStream, Recording, SensorStream
 SENSOR_RATE_HZ = 250.0
 NOISE_MM = 0.15
 KINDS = ("clean", "hysteresis", "creep", "saturation", "lag", "drift")
+FAMILIES = ("lib", "alt", "other")
 
 
 def random_trajectory(seed: int, duration_s: float) -> Trajectory:
@@ -100,6 +105,58 @@ def _bouc_wen(x: np.ndarray, amplitude: np.ndarray, travel: np.ndarray) -> np.nd
     return out
 
 
+def _preisach(x: np.ndarray, width: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """x plus a Preisach ensemble per sensor: 60 relays centred over the 5–95 % range of the
+    reading, each switching ±(1–5 % of that range) from its centre; the ensemble's mean
+    state, −1…1, scaled to ± ``width`` (mm)."""
+    out = x.copy()
+    for j in range(x.shape[1]):
+        lo, hi = np.quantile(x[:, j], [0.05, 0.95])
+        centre = rng.uniform(lo, hi, 60)
+        half = rng.uniform(0.01, 0.05, 60) * (hi - lo)
+        up, down = centre + half, centre - half
+        state = -np.ones(60)
+        for i, v in enumerate(x[:, j]):
+            state = np.where(v > up, 1.0, np.where(v < down, -1.0, state))
+            out[i, j] += width[j] * state.mean()
+    return out
+
+
+def _power_law_creep(x: np.ndarray, gain: np.ndarray, rate_hz: float) -> np.ndarray:
+    """x plus ``gain`` times the stretch since the first frame remembered with weights
+    ∝ t^−0.7 over the last 60 s (a spectrum of relaxation times, not one or two)."""
+    kernel = np.arange(1, int(60 * rate_hz)) ** -0.7
+    kernel /= kernel.sum()
+    stretch = x - x[0]
+    memory = np.column_stack([fftconvolve(stretch[:, j], np.r_[0.0, kernel])[: len(x)]
+                              for j in range(x.shape[1])])
+    return x + gain * memory
+
+
+def _other_effect(kind: str, magnitude: float, x: np.ndarray, t: np.ndarray,
+                  rng: np.random.Generator) -> np.ndarray:
+    """The ``other`` family's version of ``kind`` applied to the ideal readings x (N, S)."""
+    s = x.shape[1]
+    if kind == "hysteresis":
+        return _preisach(x, magnitude * np.asarray(rng.uniform(1.5, 2.5, s)), rng)
+    if kind == "creep":
+        gain = magnitude * rng.uniform(0.05, 0.08, s) * rng.choice([-1.0, 1.0], s)
+        return _power_law_creep(x, gain, SENSOR_RATE_HZ)
+    if kind == "saturation":  # beyond the knee: knee + r·(1 − exp(−(x − knee)/r))
+        knee = np.quantile(x, 1.0 - 0.15 * magnitude, axis=0)
+        reach = 0.4 * (x.max(axis=0) - knee)
+        return np.where(x > knee, knee + reach * (1.0 - np.exp(-(x - knee) / reach)), x)
+    if kind == "lag":  # a 30 ms low-pass, then 20 ms of transport delay (× magnitude)
+        a = 1.0 - np.exp(-1.0 / (SENSOR_RATE_HZ * 0.03 * magnitude))
+        smooth = lfilter([a], [1.0, a - 1.0], x - x[0], axis=0) + x[0]
+        return np.column_stack([np.interp(t - 0.02 * magnitude, t, smooth[:, j])
+                                for j in range(s)])
+    if kind == "drift":  # a random walk, 0.25 mm/√s (× magnitude)
+        steps = rng.normal(0.0, 0.25 * magnitude / np.sqrt(SENSOR_RATE_HZ), x.shape)
+        return x + np.cumsum(steps, axis=0)
+    raise ValueError(f"unknown hidden effect {kind!r}")
+
+
 def apply_hidden_effect(kind: str, family: str, magnitude: float, signal: Signal,
                         rng: np.random.Generator) -> Signal:
     """One hidden effect. ``magnitude`` ∈ {1, 2}: small and large. Small is chosen so the
@@ -107,6 +164,10 @@ def apply_hidden_effect(kind: str, family: str, magnitude: float, signal: Signal
     a held-out gap can only halve when the effect stands that far above the noise floor."""
     x, t = signal.values, signal.t
     s = x.shape[1]
+    if family not in FAMILIES:
+        raise ValueError(f"unknown family {family!r}; known: {', '.join(FAMILIES)}")
+    if family == "other" and kind != "clean":
+        return signal.with_values(_other_effect(kind, magnitude, x, t, rng))
     if kind == "hysteresis":
         width = magnitude * np.asarray(rng.uniform(1.5, 2.5, s))  # full loop width, mm
         if family == "lib":
@@ -215,7 +276,7 @@ def make_recording(case: Case) -> Recording:
     trajectory = random_trajectory(case.seed, case.duration_s)
     geometry, gains, offsets = random_geometry(case.seed)
     rng = np.random.default_rng([case.seed, KINDS.index(case.kind), case.magnitude,
-                                 int(case.family == "alt")])
+                                 FAMILIES.index(case.family)])
     signal = apply_hidden_effect(case.kind, case.family, case.magnitude,
                                  suit_lengths(trajectory, geometry, gains, offsets), rng)
     signal = Noise(sigma_mm=NOISE_MM).apply(signal, rng)

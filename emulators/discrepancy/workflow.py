@@ -413,7 +413,11 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
                      f"{floor:.4g}; tried {table}): nothing added")
             break
         kind, cand, _ = winners[0]
-        cand = _best_degree(trial, inputs, _refine(trial, inputs, kind, cand))
+        refined = _refine(trial, inputs, kind, cand)
+        cand = _best_degree(trial, inputs, refined)
+        if kind == "lag" and cand.spec != refined.spec:  # a lag refined on the map chosen
+            # without it is biased toward that map: refine it again on the map now chosen
+            cand = _refine_lag_delay(trial, inputs, cand)
         lag_before = cand.spec.lag_kind, cand.spec.lag_s, cand.spec.lag_delay_s
         if kind != "lag" and "lag" in named_since:  # a lag named while a larger effect was
             # still missing was fitted against it: refit it once, with the next effect added
