@@ -198,7 +198,7 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     Creep: a Nelder–Mead search on the log time constants minimising the held-out error, from
     the best grid point of each family (one or two low-passes; the build/recover pair of the
     asymmetric state): the family that wins on the grid need not win refined (a symmetric
-    pair 0.199 mm on the grid, 0.194 refined; the asymmetric state 0.222 and 0.156). Saturation:
+    pair 0.199 mm on the grid, 0.194 refined; the asymmetric state 0.222 and 0.157). Saturation:
     the stops chosen in its candidate fit are kept from here on (:func:`_keep_stops`). Lag: each
     single model is already refined on its grid (:func:`_refine_lag`), then the low-pass and
     the delay together (:func:`_refine_lag_delay`). The other effects have no shape
@@ -392,7 +392,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
              f"{[c['rms'] for c in local_before['by_speed']]}")
     steps: list[dict] = []
     rejected: list[dict] = []
-    named_since = ""  # the effect named in the previous step
+    previous = ""  # the effect named in the previous step
     step = 4
     while True:
         missing = [k for k in VOCABULARY if k not in spec.effects()]
@@ -419,10 +419,10 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
             # without it is biased toward that map: refine it again on the map now chosen
             cand = _refine_lag_delay(trial, inputs, cand)
         lag_before = cand.spec.lag_kind, cand.spec.lag_s, cand.spec.lag_delay_s
-        if kind != "lag" and "lag" in named_since:  # a lag named while a larger effect was
+        if previous == "lag":  # a lag named while a larger effect was
             # still missing was fitted against it: refit it once, with the next effect added
             cand = _refine_lag_delay(trial, inputs, cand)
-        named_since = kind
+        previous = kind
         evidence = _evidence(base, cand, floor)
         spec, base = cand.spec, cand
         refit = ({"lag": effect_params("lag", cand, inputs, trial)}
