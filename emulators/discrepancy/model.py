@@ -15,8 +15,9 @@ held fixed as the *input* of the history-dependent terms) the model is
   r spread over the sensor's range; any weighted sum is a rate-independent loop.
 * C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
   relaxation toward the current stretch).
-* Lag (``lag``): first-order low-pass (time constant τ) or a pure delay, applied to every
-  pose-driven column, so the fitted map is the map of the lagged response.
+* Lag (``lag``): first-order low-pass (time constant τ), a pure delay, or the low-pass
+  followed by a delay, applied to every pose-driven column, so the fitted map is the map of
+  the lagged response.
 * D (``drift``): Legendre polynomials of time (degree 1–3): a slow offset independent of pose.
 * Stops (``saturation``): at an end of its range the sensor stops following the pose: a hard
   stop (it sits on a plateau while the joint moves; the map is fitted off the plateau and
@@ -481,17 +482,23 @@ class Ridge:
     static: float = RIDGE
     effect: float = EFFECT_RIDGE
 
-    def loading(self, gram: np.ndarray, gram_all: np.ndarray) -> np.ndarray:
-        """(P,) diagonal loading for a fold's ``gram``, the design's Gram matrix over every
-        block being ``gram_all``."""
+    def effect_loading(self, gram_all: np.ndarray) -> np.ndarray:
+        """(P − n_static,) diagonal loading of the effect columns, from the design's Gram
+        matrix over every block (the same for every fold)."""
         n = self.n_static
+        if gram_all.shape[0] == n:
+            return np.empty(0)
+        diag_all = np.diag(gram_all)
+        g_ss = gram_all[:n, :n] + np.diag(self.static * diag_all[:n])
+        g_se = gram_all[:n, n:]
+        added = diag_all[n:] - np.einsum("ij,ij->j", g_se, np.linalg.solve(g_ss, g_se))
+        return self.effect * np.maximum(added, 1e-12 * diag_all[n:])
+
+    def loading(self, gram: np.ndarray, effect: np.ndarray) -> np.ndarray:
+        """(P,) diagonal loading for a fold's ``gram``: the static columns' from the fold,
+        the effect columns' ``effect`` (:meth:`effect_loading`)."""
         out = self.static * np.diag(gram)
-        if gram.shape[0] > n:
-            diag_all = np.diag(gram_all)
-            g_ss = gram_all[:n, :n] + np.diag(self.static * diag_all[:n])
-            g_se = gram_all[:n, n:]
-            added = diag_all[n:] - np.einsum("ij,ij->j", g_se, np.linalg.solve(g_ss, g_se))
-            out[n:] = self.effect * np.maximum(added, 1e-12 * diag_all[n:])
+        out[self.n_static:] = effect
         return out
 
 
@@ -561,8 +568,9 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
         grams[b] = red.xd[sel].T @ red.xd[sel]
         rhs[b] = red.xd[sel].T @ red.yd[sel]
     gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
+    effect = ridge.effect_loading(gram_all)
     folds = [(gram_all - grams[b], rhs_all - rhs[b]) for b in range(N_BLOCKS)]
-    return np.vstack([_solve(gram, rhs, ridge.loading(gram, gram_all))
+    return np.vstack([_solve(gram, rhs, ridge.loading(gram, effect))
                       for gram, rhs in folds + [(gram_all, rhs_all)]])
 
 
@@ -603,12 +611,12 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
         coefs = fold_coefs(Reduced(xd=xw, yd=target, bd=red.bd, m=red.m), ok, ridge)
     for _ in range(own):
         xw = linearised(red.xd[ok], red.yd[ok], coefs[-1])[0]
-        gram_all = xw.T @ xw
+        effect = ridge.effect_loading(xw.T @ xw)
         for b in range(N_BLOCKS + 1):
             sel = ok & (red.bd != b)
             xw, target = linearised(red.xd[sel], red.yd[sel], coefs[b])
             gram = xw.T @ xw
-            coefs[b] = _solve(gram, xw.T @ target, ridge.loading(gram, gram_all))
+            coefs[b] = _solve(gram, xw.T @ target, ridge.loading(gram, effect))
     return coefs
 
 

@@ -123,8 +123,18 @@ def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
 
 
 def _creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit]:
-    """The best creep of each family on its grid: low-passes of the stretch (one time
-    constant, then a second if it helps) and the asymmetric build/recover state."""
+    """The best creep of each family on its grid added to ``spec``: low-passes of the stretch
+    (one time constant, then a second if it helps) and the asymmetric build/recover state.
+    Kept for the last ``spec`` asked: a named creep is refined from the grid it was
+    compared on (:func:`_best`, then :func:`_refine`)."""
+    kept = inputs.cache.get("creep_families")
+    if kept is None or kept[0] != spec:
+        kept = (spec, _creep_grids(trial, inputs, spec))
+        inputs.cache["creep_families"] = kept
+    return kept[1]
+
+
+def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit]:
     lows = min((fit(trial, inputs, replace(spec, creep_tau_s=(tau,))) for tau in CREEP_TAU_S),
                key=lambda f: f.gap)
     tau = lows.spec.creep_tau_s[0]
