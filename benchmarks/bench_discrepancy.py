@@ -11,7 +11,8 @@
 Run from the repository root: ``python -m benchmarks.bench_discrepancy [--seeds 10]
 [--duration 90] [--repeats 3] [--families lib,alt] [--first-seed 1000]``. ``--families other``
 runs the third family (hidden.py), which probes effects written yet another way;
-``--repeats 0`` skips the timing.
+``--repeats 0`` skips the timing; ``--workers`` sets how many processes run the sweep's
+cases (default one per CPU).
 """
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ from exohil.emulators.discrepancy.hidden import (
     FAMILIES,
     KINDS,
     cases,
+    default_workers,
     first_effect,
-    make_recording,
+    run_cases,
 )
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.machine import machine
@@ -37,10 +39,10 @@ from exohil.harness.machine import machine
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "paper_protocol.mcap"
 
 
-def sweep(seeds: range, duration_s: float, families: tuple[str, ...]) -> None:
+def sweep(seeds: range, duration_s: float, families: tuple[str, ...], workers: int) -> None:
     results = []
-    for case in cases(seeds, duration_s=duration_s, families=families):
-        summary = run(make_recording(case), case.label).summary
+    for case, summary in run_cases(cases(seeds, duration_s=duration_s, families=families),
+                                   workers):
         named = first_effect(summary)
         shrink = 1.0 - summary["gap_after"] / summary["gap_before"]
         results.append((case, named, shrink))
@@ -95,13 +97,17 @@ def main() -> None:
                         help=f"comma-separated, of {', '.join(FAMILIES)}")
     parser.add_argument("--repeats", type=int, default=3, help="timing repeats (0: none)")
     parser.add_argument("--no-sweep", action="store_true", help="timing only")
+    parser.add_argument("--workers", type=int, default=default_workers(),
+                        help="processes for the sweep (default: one per CPU; the timing "
+                             "always runs alone, after it)")
     args = parser.parse_args()
     families = tuple(args.families.split(","))
     if not set(families) <= set(FAMILIES):
         parser.error(f"--families: choose from {', '.join(FAMILIES)}")
     print(f"machine: {machine()}; numpy {np.__version__}")
     if not args.no_sweep:
-        sweep(range(args.first_seed, args.first_seed + args.seeds), args.duration, families)
+        sweep(range(args.first_seed, args.first_seed + args.seeds), args.duration, families,
+              args.workers)
     if args.repeats > 0:
         timing(args.repeats)
 

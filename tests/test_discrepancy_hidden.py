@@ -8,19 +8,15 @@ gap shrinks by ≥ 50 % whenever an effect is named, and clean recordings get no
 
 import pytest
 
-from exohil.emulators.discrepancy import run
-from exohil.emulators.discrepancy.hidden import cases, first_effect, make_recording
+from exohil.emulators.discrepancy.hidden import cases, first_effect, run_cases
 
 SEEDS = range(100, 102)  # disjoint from the benchmark's seeds (1000 …)
 
 
 @pytest.fixture(scope="module")
 def results():
-    out = []
-    for case in cases(SEEDS, duration_s=60.0):
-        summary = run(make_recording(case), case.label).summary
-        out.append((case, first_effect(summary), summary["gap_before"], summary["gap_after"]))
-    return out
+    return [(case, first_effect(summary), summary["gap_before"], summary["gap_after"])
+            for case, summary in run_cases(cases(SEEDS, duration_s=60.0))]
 
 
 @pytest.mark.slow
