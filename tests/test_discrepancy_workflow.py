@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from exohil.emulators.discrepancy import DiscrepancyError, noise_floor, prepare_trial, run
-from exohil.emulators.discrepancy.data import N_BLOCKS
+from exohil.emulators.discrepancy.data import N_BLOCKS, quantisation_step
 from exohil.emulators.discrepancy.hidden import (
     Case,
     make_recording,
@@ -75,6 +75,27 @@ def test_noise_floor_recovers_white_noise_under_motion():
     rec = make_recording(Case("clean", "lib", 1, seed=5, duration_s=30.0))
     floor = noise_floor(prepare_trial(rec))
     np.testing.assert_allclose(floor, 0.15, rtol=0.08)
+
+
+def _quantised(rec: Recording, step: float) -> Recording:
+    values = np.round(rec.sensors.values / step) * step
+    return replace(rec, sensors=replace(rec.sensors, values=values))
+
+
+def test_quantisation_step_is_the_readings_resolution():
+    rec = make_recording(Case("clean", "lib", 1, seed=5, duration_s=30.0))
+    assert quantisation_step(rec.sensors.values[:, 0]) < 1e-3  # continuous: negligible
+    assert quantisation_step(_quantised(rec, 0.25).sensors.values[:, 0]) == pytest.approx(0.25)
+    assert quantisation_step(np.full(10, 3.0)) == 0.0
+
+
+def test_coarse_quantisation_raises_the_floor_and_names_nothing_on_a_clean_suit():
+    # 1 mm steps against 0.15 mm of noise: most second differences are exactly 0, so the
+    # MAD alone would put the floor near 0 and any model error would look significant.
+    rec = _quantised(make_recording(Case("clean", "lib", 1, seed=100, duration_s=40.0)), 1.0)
+    floor = noise_floor(prepare_trial(rec))
+    assert np.all(floor >= 1.0 / np.sqrt(12.0) - 1e-12)
+    assert run(rec, "quantised").summary["effects"] == []
 
 
 def test_play_delay_and_low_pass():

@@ -141,9 +141,30 @@ def noise_floor(trial: Trial) -> np.ndarray:
     (≈ 0.02 mm at 250 Hz for the fastest protocol moves). A robust scale (1.4826 × MAD) keeps
     the few frames at movement onsets from inflating it. This is the lowest held-out RMSE any
     model can reach: the residual left when every systematic effect is explained.
+
+    Readings quantised coarser than their noise (an ADC count, a rounded logger) make most
+    second differences exactly zero and the MAD collapse towards 0, yet no model can get
+    below the rounding error, whose standard deviation is ``q/√12`` for a step ``q``
+    (:func:`quantisation_step`). The floor is the larger of the two.
     """
     ok = trial.valid[2:] & trial.valid[1:-1] & trial.valid[:-2]
     d2 = trial.y[2:] - 2.0 * trial.y[1:-1] + trial.y[:-2]
     d2 = d2[ok]
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
-    return 1.4826 * mad / np.sqrt(6.0)
+    step = np.array([quantisation_step(trial.y[trial.valid, j]) for j in range(trial.y.shape[1])])
+    return np.maximum(1.4826 * mad / np.sqrt(6.0), step / np.sqrt(12.0))
+
+
+def quantisation_step(values: np.ndarray) -> float:
+    """The resolution of one sensor's readings, in sensor units; 0 when they look continuous.
+
+    The smallest gap between distinct readings, ignoring gaps below 1e-9 of the range (float
+    round-off between readings converted along different paths). For continuous readings the
+    smallest gap shrinks with the number of frames and is negligible against any noise.
+    """
+    levels = np.unique(values[np.isfinite(values)])
+    if len(levels) < 2:
+        return 0.0
+    gaps = np.diff(levels)
+    gaps = gaps[gaps > 1e-9 * (levels[-1] - levels[0])]
+    return float(gaps.min()) if len(gaps) else 0.0
