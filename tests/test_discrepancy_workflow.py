@@ -71,6 +71,38 @@ def test_no_mocap_and_too_short_are_one_clear_error():
         prepare_trial(short, "x.mcap")
 
 
+def _with_values(rec: Recording, values: np.ndarray) -> Recording:
+    return replace(rec, sensors=replace(rec.sensors, values=values))
+
+
+def test_dead_and_unplugged_sensors_are_left_out_with_the_reason(tmp_path):
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    names = rec.sensor_names
+    values = rec.sensors.values.copy()
+    values[:, 1] = 42.0  # a stuck channel: every fit with it would be singular
+    stuck = _with_values(rec, values.copy())
+    values[: 2 * len(values) // 3, 3] = np.nan  # no reading for the first two thirds
+    trial = prepare_trial(_with_values(rec, values))  # NaN: from the Python API only
+    assert trial.sensor_names == (names[0], names[2], names[4])
+    assert [sensor for sensor, _ in trial.ignored] == [names[1], names[3]]
+    assert "constant 42 mm" in trial.ignored[0][1] and "33%" in trial.ignored[1][1]
+    assert trial.valid.mean() > 0.99  # the missing channel does not void the others' frames
+    path, out = tmp_path / "m.mcap", tmp_path / "out"
+    write_recording(path, stuck)
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert f"left out sensor {names[1]}: it never changes" in result.stderr
+    summary = json.loads((out / "discrepancy.json").read_text())
+    kept = [name for name in names if name != names[1]]
+    assert summary["sensors"] == kept
+    assert summary["sensors_ignored"][0]["sensor"] == names[1]
+    assert f"Left out: {names[1]} never changes" in (out / "report.md").read_text()
+    assert list(load_calibrated_profile(out / "suit_profile.toml").sensors) == kept
+    dead = _with_values(rec, np.full_like(values, 7.0))
+    with pytest.raises(DiscrepancyError, match="no usable sensor"):
+        prepare_trial(dead, "x.mcap")
+
+
 def test_noise_floor_recovers_white_noise_under_motion():
     rec = make_recording(Case("clean", "lib", 1, seed=5, duration_s=30.0))
     floor = noise_floor(prepare_trial(rec))
@@ -78,8 +110,7 @@ def test_noise_floor_recovers_white_noise_under_motion():
 
 
 def _quantised(rec: Recording, step: float) -> Recording:
-    values = np.round(rec.sensors.values / step) * step
-    return replace(rec, sensors=replace(rec.sensors, values=values))
+    return _with_values(rec, np.round(rec.sensors.values / step) * step)
 
 
 def test_quantisation_step_is_the_readings_resolution():

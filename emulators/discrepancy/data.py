@@ -8,6 +8,7 @@ at every grid time. Filters and history-dependent effects then run on a uniform 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,6 +22,8 @@ N_BLOCKS = 8
 BLOCK_S = 2.5
 #: Shortest usable recording, s: every fold must hold out at least one block.
 MIN_BLOCK_S = BLOCK_S
+#: A sensor with readings on fewer frames than this share is left out of the analysis.
+MIN_SENSOR_COVERAGE = 0.5
 
 
 class DiscrepancyError(InputError, ValueError):
@@ -45,6 +48,8 @@ class Trial:
         noise: (S,) white-noise standard deviation per sensor (:func:`noise_floor`).
         scored: (N,) bool, valid frames whose held-out residual counts in the gap (see
             :func:`exohil.emulators.discrepancy.model.restrict_to_coverage`).
+        ignored: sensors of the recording left out of the analysis, each with the reason
+            (:func:`unusable_sensors`); ``sensor_names`` lists only the analysed ones.
     """
 
     t: np.ndarray
@@ -59,6 +64,7 @@ class Trial:
     blocks: np.ndarray
     scored: np.ndarray
     noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    ignored: tuple[tuple[str, str], ...] = ()
 
     @property
     def n(self) -> int:
@@ -79,9 +85,12 @@ def _joint(rec: Recording) -> str:
 def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     """Put a recording on its uniform frame grid and split it into held-out blocks.
 
+    Sensors without usable readings (:func:`unusable_sensors`) are left out and listed in
+    ``Trial.ignored``: one dead channel should not hide what the others show.
+
     Raises:
-        DiscrepancyError: no sensors, no motion capture, no moving angle, or too short for
-            ``N_BLOCKS`` blocks of at least ``MIN_BLOCK_S`` seconds.
+        DiscrepancyError: no sensors, no usable sensor, no motion capture, no moving angle, or
+            too short for ``N_BLOCKS`` blocks of at least ``MIN_BLOCK_S`` seconds.
     """
     if len(rec.sensors) < 2 or not rec.sensor_names:
         raise DiscrepancyError(f"{name}: no sensor frames; the workflow needs sensors and "
@@ -100,6 +109,13 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     present = np.zeros(n, dtype=bool)
     present[index] = True
     values = np.asarray(rec.sensors.values, dtype=np.float64)
+    ignored = unusable_sensors(values, rec.sensor_names, rec.sensor_units)
+    if len(ignored) == len(rec.sensor_names):
+        raise DiscrepancyError(f"{name}: no usable sensor: " + "; ".join(
+            f"{sensor} {reason}" for sensor, reason in ignored))
+    keep = [j for j, sensor in enumerate(rec.sensor_names)
+            if sensor not in {s for s, _ in ignored}]
+    values = values[:, keep]
     y = np.column_stack([np.interp(grid, index, values[:, j]) for j in range(values.shape[1])])
     order = np.argsort(stream.t, kind="stable")
     t_mocap = np.asarray(stream.t, dtype=np.float64)[order]
@@ -127,10 +143,36 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     blocks = (rank // per_block) % N_BLOCKS
     trial = Trial(t=t, y=y, valid=valid, angles=angles,
                   angle_names=tuple(stream.names[k] for k in moving), joint=joint,
-                  sensor_names=tuple(rec.sensor_names), units=rec.sensor_units, rate_hz=rate,
-                  blocks=blocks.astype(np.int64), scored=valid.copy())
+                  sensor_names=tuple(rec.sensor_names[j] for j in keep),
+                  units=rec.sensor_units, rate_hz=rate, blocks=blocks.astype(np.int64),
+                  scored=valid.copy(), ignored=ignored)
     trial.noise = noise_floor(trial)
     return trial
+
+
+def unusable_sensors(values: np.ndarray, names: Sequence[str],
+                     units: str) -> tuple[tuple[str, str], ...]:
+    """Sensors whose readings cannot be modelled, each with the reason (one short phrase).
+
+    A sensor is unusable when it reads a finite value on fewer than
+    ``MIN_SENSOR_COVERAGE`` of the frames (unplugged, overflowing) or never changes (a
+    disconnected potentiometer, a stuck channel): neither carries information about the
+    movement, and a constant column makes every fit singular.
+
+    Args:
+        values: (N, S) readings as recorded.
+        names: the S sensor names.
+        units: the sensors' unit, for the message.
+    """
+    out = []
+    for j, sensor in enumerate(names):
+        column = values[:, j]
+        finite = np.isfinite(column)
+        if finite.mean() < MIN_SENSOR_COVERAGE:
+            out.append((sensor, f"has a finite reading on only {finite.mean():.0%} of frames"))
+        elif np.ptp(column[finite]) == 0.0:
+            out.append((sensor, f"never changes (constant {column[finite][0]:.6g} {units})"))
+    return tuple(out)
 
 
 def noise_floor(trial: Trial) -> np.ndarray:

@@ -87,7 +87,9 @@ def markdown(summary: dict) -> str:
              f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
              f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
              f"at {summary['rate_hz']} Hz, {summary['invalid_frames']} invalid (dropped or "
-             "outside motion capture).", "",
+             "outside motion capture)." + "".join(
+                 f" Left out: {item['sensor']} {item['reason']}."
+                 for item in summary["sensors_ignored"]), "",
              f"**{summary['conclusion']}.** Held-out gap (sensor-space RMSE on "
              f"{summary['heldout_blocks']}-fold blocked cross-validation): "
              f"{summary['gap_before']:.4g} {u} before, {summary['gap_after']:.4g} {u} after; "

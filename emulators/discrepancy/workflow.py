@@ -376,6 +376,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
+    for sensor, reason in trial.ignored:
+        progress(f"    left out sensor {sensor}: it {reason}")
     fits: list[Fit] = []
     u = make_inputs(trial, 1, fit_static=False).u
     n_inputs = u.shape[1]
@@ -454,6 +456,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "gap_after": round(after.gap, 6),
         "units": trial.units,
         "sensors": list(trial.sensor_names),
+        "sensors_ignored": [{"sensor": sensor, "reason": reason}
+                            for sensor, reason in trial.ignored],
         "sensor_gap_before": np.round(before.sensor_gap(), 6).tolist(),
         "sensor_gap_after": np.round(after.sensor_gap(), 6).tolist(),
         "noise_floor": round(floor, 6),
