@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from exohil.emulators.discrepancy import DiscrepancyError, noise_floor, prepare_trial, run
-from exohil.emulators.discrepancy.data import N_BLOCKS, quantisation_step
+from exohil.emulators.discrepancy.data import N_BLOCKS, in_mocap_gap, quantisation_step
 from exohil.emulators.discrepancy.hidden import (
     Case,
     make_recording,
@@ -59,6 +59,18 @@ def test_sequence_gaps_become_invalid_grid_frames():
     assert not trial.valid[100:110].any() and not trial.valid[5000]
     assert trial.valid[110:4990].all()
     np.testing.assert_allclose(trial.t, rec.sensors.t, atol=1e-9)
+
+
+def test_frames_in_a_mocap_dropout_are_invalid():
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    stream = rec.mocap["shoulder"]
+    lost = (stream.t > 10.0) & (stream.t < 11.0)  # markers lost for one second
+    kept = replace(stream, t=stream.t[~lost], angles=stream.angles[~lost])
+    trial = prepare_trial(replace(rec, mocap={**rec.mocap, "shoulder": kept}))
+    inside = (trial.t > 10.01) & (trial.t < 10.99)
+    assert not trial.valid[inside].any()
+    assert trial.valid[~inside].mean() > 0.999  # a sample or two each side of the gap
+    assert not in_mocap_gap(trial.t, stream.t).any()
 
 
 def test_no_mocap_and_too_short_are_one_clear_error():

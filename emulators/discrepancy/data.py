@@ -22,6 +22,8 @@ N_BLOCKS = 8
 BLOCK_S = 2.5
 #: Shortest usable recording, s: every fold must hold out at least one block.
 MIN_BLOCK_S = BLOCK_S
+#: Motion-capture samples further apart than this many median intervals are a dropout.
+MOCAP_GAP_INTERVALS = 4.0
 #: A sensor with readings on fewer frames than this share is left out of the analysis.
 MIN_SENSOR_COVERAGE = 0.5
 
@@ -37,7 +39,8 @@ class Trial:
     Attributes:
         t: (N,) s, grid times on the sensor clock.
         y: (N, S) sensor values in ``units`` (interpolated across dropped frames).
-        valid: (N,) bool; False for dropped frames and frames outside the mocap span.
+        valid: (N,) bool; False for dropped frames and frames outside the mocap span or in
+            one of its dropouts (:func:`in_mocap_gap`).
         angles: (N, A) degrees, the joint's moving angles at the grid times.
         angle_names: names of the angle columns.
         joint: mocap joint (topic suffix).
@@ -120,7 +123,7 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     order = np.argsort(stream.t, kind="stable")
     t_mocap = np.asarray(stream.t, dtype=np.float64)[order]
     raw = np.asarray(stream.angles, dtype=np.float64)[order]
-    inside = (t >= t_mocap[0]) & (t <= t_mocap[-1])
+    inside = (t >= t_mocap[0]) & (t <= t_mocap[-1]) & ~in_mocap_gap(t, t_mocap)
     moving = [k for k in range(raw.shape[1]) if np.ptp(raw[:, k]) > 1e-6]
     if not moving:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} never moves")
@@ -148,6 +151,24 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
                   scored=valid.copy(), ignored=ignored)
     trial.noise = noise_floor(trial)
     return trial
+
+
+def in_mocap_gap(t: np.ndarray, t_mocap: np.ndarray) -> np.ndarray:
+    """(N,) bool: grid times that fall in a motion-capture dropout.
+
+    A dropout is a stretch between consecutive mocap samples longer than
+    ``MOCAP_GAP_INTERVALS`` median intervals (markers lost, a paused tracker); the angles
+    interpolated across it are a straight line the arm never drew, so sensors there must be
+    neither fitted nor scored.
+
+    Args:
+        t: (N,) s, grid times; t_mocap: (M,) s, sorted mocap times, M ≥ 2.
+    """
+    spacing = np.diff(t_mocap)
+    steps = spacing[spacing > 0]  # repeated timestamps are not the sampling interval
+    limit = MOCAP_GAP_INTERVALS * float(np.median(steps)) if len(steps) else np.inf
+    after = np.clip(np.searchsorted(t_mocap, t, side="right"), 1, len(t_mocap) - 1)
+    return (spacing[after - 1] > limit) & (t > t_mocap[after - 1]) & (t < t_mocap[after])
 
 
 def unusable_sensors(values: np.ndarray, names: Sequence[str],

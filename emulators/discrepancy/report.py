@@ -87,7 +87,7 @@ def markdown(summary: dict) -> str:
              f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
              f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
              f"at {summary['rate_hz']} Hz, {summary['invalid_frames']} invalid (dropped or "
-             "outside motion capture)." + "".join(
+             "outside motion capture or in its dropouts)." + "".join(
                  f" Left out: {item['sensor']} {item['reason']}."
                  for item in summary["sensors_ignored"]), "",
              f"**{summary['conclusion']}.** Held-out gap (sensor-space RMSE on "
