@@ -81,6 +81,10 @@ def test_no_mocap_and_too_short_are_one_clear_error():
     short = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
     with pytest.raises(DiscrepancyError, match="too short to hold out a block"):
         prepare_trial(short, "x.mcap")
+    stream = rec.mocap["shoulder"]
+    other_clock = replace(rec, mocap={"shoulder": replace(stream, t=stream.t + 1000.0)})
+    with pytest.raises(DiscrepancyError, match="do not overlap in time"):
+        prepare_trial(other_clock, "x.mcap")
 
 
 def _with_values(rec: Recording, values: np.ndarray) -> Recording:

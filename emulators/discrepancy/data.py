@@ -123,6 +123,11 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     order = np.argsort(stream.t, kind="stable")
     t_mocap = np.asarray(stream.t, dtype=np.float64)[order]
     raw = np.asarray(stream.angles, dtype=np.float64)[order]
+    if t_mocap[0] > t[-1] or t_mocap[-1] < t[0]:
+        raise DiscrepancyError(
+            f"{name}: motion capture ({t_mocap[0]:.6g}–{t_mocap[-1]:.6g} s) and sensors "
+            f"({t[0]:.6g}–{t[-1]:.6g} s) do not overlap in time; the workflow needs both on "
+            "one clock")
     inside = (t >= t_mocap[0]) & (t <= t_mocap[-1]) & ~in_mocap_gap(t, t_mocap)
     moving = [k for k in range(raw.shape[1]) if np.ptp(raw[:, k]) > 1e-6]
     if not moving:
