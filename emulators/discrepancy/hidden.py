@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from scipy.signal import fftconvolve, lfilter
@@ -36,6 +37,7 @@ SENSOR_RATE_HZ = 250.0
 NOISE_MM = 0.15
 KINDS = ("clean", "hysteresis", "creep", "saturation", "lag", "drift")
 FAMILIES = ("lib", "alt", "other")
+T = TypeVar("T")
 
 
 def random_trajectory(seed: int, duration_s: float) -> Trajectory:
@@ -323,23 +325,30 @@ def default_workers() -> int:
 
 def run_cases(selected: Iterable[Case], workers: int | None = None
               ) -> Iterator[tuple[Case, dict]]:
-    """``(case, summary)`` for every case, in order, as each completes.
+    """``(case, summary)`` for every case, in order, as each completes (:func:`parallel_map`)."""
+    return parallel_map(run_case, selected, workers)
 
-    Cases are independent, so they run in ``workers`` processes (default: one per CPU; 1 runs
-    them here). Workers are spawned with one BLAS thread each: two processes with a BLAS pool
-    each on two cores took longer than one process alone (184 s against 130 s for the CI
-    suite's 48 cases; 73 s with one thread each).
+
+def parallel_map(job: Callable[[T], dict], items: Iterable[T], workers: int | None = None
+                 ) -> Iterator[tuple[T, dict]]:
+    """``(item, job(item))`` for every item, in order, as each completes.
+
+    Items are independent, so they run in ``workers`` processes (default: one per CPU; 1 runs
+    them here); ``job`` must be a module-level function. Workers are spawned with one BLAS
+    thread each: two processes with a BLAS pool each on two cores took longer than one
+    process alone (184 s against 130 s for the CI suite's 48 cases; 73 s with one thread
+    each).
     """
-    selected = list(selected)
+    items = list(items)
     workers = default_workers() if workers is None else workers
-    if workers <= 1 or len(selected) <= 1:
-        for case in selected:
-            yield case, run_case(case)
+    if workers <= 1 or len(items) <= 1:
+        for item in items:
+            yield item, job(item)
         return
     context = multiprocessing.get_context("spawn")
     with _one_blas_thread_in_children(), \
-            ProcessPoolExecutor(min(workers, len(selected)), mp_context=context) as pool:
-        yield from zip(selected, pool.map(run_case, selected), strict=True)
+            ProcessPoolExecutor(min(workers, len(items)), mp_context=context) as pool:
+        yield from zip(items, pool.map(job, items), strict=True)
 
 
 @contextmanager
