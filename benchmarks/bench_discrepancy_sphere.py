@@ -12,7 +12,8 @@ sensor noise at 250 Hz. One effect per recording, its deviation from the clean r
 scaled to 0.30 mm (m1) or 0.60 mm (m2) RMS, from families the workflow does not contain:
 
 - hysteresis: Dahl friction (even seeds) or Bouc–Wen with exponent 2 (odd);
-- creep: a logarithmic memory over 30 s, or three exponentials of 0.7, 4 and 18 s;
+- creep: a logarithmic memory (a step's creep grows as log(1 + t/t0) and never settles), or
+  three exponentials of 0.7, 4 and 18 s;
 - saturation: a softplus clamp at the upper end, or a soft knee at the lower end;
 - lag: a second-order Butterworth low-pass at 2.5–5 Hz, or a slew-rate limit;
 - drift: a piecewise-linear offset, or a thermal step (1 − e^(−t/τ), τ 5–15 s).
@@ -164,9 +165,8 @@ def _effect(case: SphereCase, x: np.ndarray, t: np.ndarray, rng: np.random.Gener
     if case.kind == "hysteresis":
         return _hysteresis(family, x, dx, rng)
     if case.kind == "creep":
-        if family == "log":
-            tk = np.arange(0, 30, 1 / RATE_HZ)
-            kernel = np.log1p(tk / rng.uniform(0.2, 1.0))
+        if family == "log":  # a step's creep grows as log(1 + t/t0) for the whole recording
+            kernel = np.log1p((t - t[0]) / rng.uniform(0.2, 1.0))
             return fftconvolve(dx, (kernel / kernel[-1])[:, None], axes=0)[: len(x)]
         return sum(rng.uniform(0.3, 1) * (x - _low_pass(x, tau)) for tau in (0.7, 4.0, 18.0))
     if case.kind == "saturation":
