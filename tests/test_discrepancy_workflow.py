@@ -219,6 +219,27 @@ def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
 
 
+def test_soft_knees_at_both_ends_are_both_found():
+    """Every sensor bends softly above its 60 % and below its 30 % quantile. The upper knee
+    is found first; the lower one must then be searched with the upper kept soft (it used to
+    be turned into a hard stop at the knee, which no lower knee could beat)."""
+    rec = make_recording(Case("clean", "lib", 1, seed=101))
+    clean = run(rec, "without knees").summary["gap_before"]
+    y = rec.sensors.values.copy()
+    for j in range(y.shape[1]):
+        c = y[:, j]
+        lo, hi = np.quantile(c, 0.3), np.quantile(c, 0.6)
+        y[:, j] = Stops(lo, hi, 0.3 * (lo - c.min()), 0.3 * (c.max() - hi)).apply(c)
+    sensors = SensorStream(seq=rec.sensors.seq, t=rec.sensors.t, values=y)
+    s = run(replace(rec, sensors=sensors), "two knees").summary
+    assert s["effects"][:1] == ["saturation"], s["effects"]
+    params = s["steps"][0]["params"]
+    assert all(lo is not None and hi is not None for lo, hi in params["stops"]), params
+    assert all(soft_lo > 0 and soft_hi > 0 for soft_lo, soft_hi in params["softness"]), params
+    # explained down to what the same suit and movement leave without the knees
+    assert s["gap_after"] ** 2 - clean**2 < 0.25 * (s["gap_before"] ** 2 - clean**2), s
+
+
 def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):
     """A 30 ms low-pass followed by 20 ms of transport delay: neither single lag model."""
     from exohil.emulators.discrepancy.profile import write_calibrated_profile

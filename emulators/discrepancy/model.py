@@ -686,7 +686,7 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
             if reach <= 3.0 * sigma:
                 return math.inf
             softs = [f * reach for f in KNEE_SOFTNESS]
-            return consider([Stops(level, other.hi, soft, 0.0) if end == 0
+            return consider([Stops(level, other.hi, soft, other.soft_hi) if end == 0
                              else Stops(other.lo, level, other.soft_lo, soft) for soft in softs])
 
         grid = list(KNEE_SHARES)
