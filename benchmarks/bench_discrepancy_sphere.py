@@ -1,6 +1,7 @@
 """Discrepancy workflow on suits and effects written apart from the ones it was built against.
 
-``python -m benchmarks.bench_discrepancy_sphere [--seeds 4] [--workers N] [--out DIR]``
+``python -m benchmarks.bench_discrepancy_sphere [--seeds 4] [--controls] [--workers N]
+[--out DIR]``
 
 Nothing here comes from :mod:`exohil.emulators` (whose effect library and ``hidden.py``
 families the workflow was developed on): a humeral head as a sphere of radius 25–35 mm that
@@ -20,8 +21,10 @@ scaled to 0.30 mm (m1) or 0.60 mm (m2) RMS, from families the workflow does not 
 
 Prints one row per recording (first named effect, held-out gap before → after, noise floor)
 and, per hidden effect, how often the first named effect is right and how often a named
-effect halves the gap. ``--out DIR`` also writes each recording there (``exohil discrepancy``
-reads them; ``truth.json`` lists what each hides).
+effect halves the gap. ``--controls`` adds, per effect recording, the gap before of the same
+suit, movement and noise without the effect: what the calibrated static map alone leaves.
+``--out DIR`` also writes each recording there (``exohil discrepancy`` reads them;
+``truth.json`` lists what each hides).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import json
 import os
 import time
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +62,7 @@ class SphereCase:
     magnitude: int
     seed: int
     duration_s: float
+    with_effect: bool = True
 
     @property
     def family(self) -> str:
@@ -196,9 +200,10 @@ def make_recording(case: SphereCase) -> Recording:
     angles = _reaches(rng, t)
     x = _readings(rng, angles)
     if case.kind != "clean":
-        e = _effect(case, x, t, rng)
+        e = _effect(case, x, t, rng)  # drawn even for a control: the noise stays the same
         e -= e.mean(axis=0)
-        x = x + e * (RMS_PER_MAGNITUDE_MM * case.magnitude / np.sqrt(np.mean(e**2)))
+        if case.with_effect:
+            x = x + e * (RMS_PER_MAGNITUDE_MM * case.magnitude / np.sqrt(np.mean(e**2)))
     y = x + rng.normal(0, NOISE_MM, x.shape)
     mocap_hz = rng.uniform(100, 120)
     tm = np.arange(0, case.duration_s, 1 / mocap_hz)
@@ -238,17 +243,27 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seeds", type=int, default=4, help="seeds 0 … N−1 (default 4)")
     parser.add_argument("--duration", type=float, default=60.0, help="s per recording")
     parser.add_argument("--workers", type=int, default=None, help="processes (default: CPUs)")
+    parser.add_argument("--controls", action="store_true",
+                        help="also run each effect recording's suit and movement without it")
     parser.add_argument("--out", type=Path, default=None, help="also write the recordings here")
     args = parser.parse_args(argv)
     selected = [SphereCase(kind, m, seed, args.duration) for kind in FAMILIES
                 for m in ((1,) if kind == "clean" else (1, 2)) for seed in range(args.seeds)]
+    controls = [replace(case, with_effect=False) for case in selected
+                if args.controls and case.kind != "clean"]
     if args.out is not None:
         write_cases(args.out, selected)
     print(f"machine: {machine()}")
-    print("| recording | family | sensors | effects named | gap before → after, mm | floor |")
-    print("|---|---|---|---|---|---|")
-    right: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
     start = time.perf_counter()
+    if controls:
+        print(f"running the {len(controls)} effect recordings without their effect first ...",
+              flush=True)
+    control_gap = {case.label: s["gap_before"]
+                   for case, s in parallel_map(run_sphere_case, controls, args.workers)}
+    print("| recording | family | sensors | effects named | gap before → after, mm | floor |"
+          + (" without the effect, mm |" if args.controls else ""))
+    print("|---|---|---|---|---|---|" + ("---|" if args.controls else ""))
+    right: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
     for case, s in parallel_map(run_sphere_case, selected, args.workers):
         named = first_effect(s)
         tally = right[case.kind]
@@ -259,8 +274,10 @@ def main(argv: list[str] | None = None) -> None:
             tally[3] += s["gap_after"] <= 0.5 * s["gap_before"]
         print(f"| {case.label} | {case.family} | {len(s['sensors'])} | "
               f"{', '.join(s['effects']) or '—'} | {s['gap_before']:.3f} → "
-              f"{s['gap_after']:.3f} | {s['noise_floor']:.3f} |", flush=True)
-    print(f"\n{len(selected)} recordings in {time.perf_counter() - start:.0f} s")
+              f"{s['gap_after']:.3f} | {s['noise_floor']:.3f} |"
+              + (f" {control_gap[case.label]:.3f} |" if case.label in control_gap else
+                 " — |" if args.controls else ""), flush=True)
+    print(f"\n{len(selected) + len(controls)} recordings in {time.perf_counter() - start:.0f} s")
     for kind, (n, ok, named, halved) in right.items():
         line = f"{kind}: first named right {ok}/{n}"
         print(line + (f", gap halved {halved}/{named} of those named" if kind != "clean"

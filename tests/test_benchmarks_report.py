@@ -4,8 +4,10 @@ arguments. Nothing here runs a benchmark or asserts a timing."""
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from exohil.formats.measurement import Limit, Measurement, distribution
@@ -86,3 +88,15 @@ def test_unseen_suit_sessions_share_the_suit_and_differ_in_movement(monkeypatch)
     assert "--baseline 'lnnet' is not among the models" in refused.stderr
     assert parse_model("w=--model ennet --window 5") == ("w", ["--model", "ennet", "--window",
                                                                "5"])
+
+
+def test_a_sphere_control_differs_from_its_recording_by_the_effect_alone(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks.bench_discrepancy_sphere import SphereCase, make_recording
+
+    case = SphereCase("hysteresis", 2, 3, 6.0)
+    with_effect, control = make_recording(case), make_recording(replace(case, with_effect=False))
+    assert with_effect.mocap["shoulder"].angles.tolist() == control.mocap[
+        "shoulder"].angles.tolist()  # the same movement, seen the same way
+    difference = with_effect.sensors.values - control.sensors.values
+    assert abs(np.sqrt(np.mean(difference**2)) - 0.6) < 1e-9  # the effect, at its RMS
