@@ -272,11 +272,12 @@ def main(argv: list[str] | None = None) -> None:
         if s["effects"] and case.kind != "clean":
             tally[2] += 1
             tally[3] += s["gap_after"] <= 0.5 * s["gap_before"]
-        print(f"| {case.label} | {case.family} | {len(s['sensors'])} | "
-              f"{', '.join(s['effects']) or '—'} | {s['gap_before']:.3f} → "
-              f"{s['gap_after']:.3f} | {s['noise_floor']:.3f} |"
-              + (f" {control_gap[case.label]:.3f} |" if case.label in control_gap else
-                 " — |" if args.controls else ""), flush=True)
+        row = (f"| {case.label} | {case.family} | {len(s['sensors'])} | "
+               f"{', '.join(s['effects']) or '—'} | {s['gap_before']:.3f} → "
+               f"{s['gap_after']:.3f} | {s['noise_floor']:.3f} |")
+        if args.controls:  # a clean recording is its own control
+            row += f" {control_gap[case.label]:.3f} |" if case.label in control_gap else " — |"
+        print(row, flush=True)
     print(f"\n{len(selected) + len(controls)} recordings in {time.perf_counter() - start:.0f} s")
     for kind, (n, ok, named, halved) in right.items():
         line = f"{kind}: first named right {ok}/{n}"

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
@@ -686,8 +686,9 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
             if reach <= 3.0 * sigma:
                 return math.inf
             softs = [f * reach for f in KNEE_SOFTNESS]
-            return consider([Stops(level, other.hi, soft, other.soft_hi) if end == 0
-                             else Stops(other.lo, level, other.soft_lo, soft) for soft in softs])
+            # only this end changes: the other keeps its level and softness as found
+            return consider([replace(other, lo=level, soft_lo=soft) if end == 0
+                             else replace(other, hi=level, soft_hi=soft) for soft in softs])
 
         grid = list(KNEE_SHARES)
         before = best[0] if best is not None else math.inf
