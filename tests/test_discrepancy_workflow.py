@@ -1,6 +1,7 @@
 """The discrepancy workflow: data preparation, model pieces, CLI contract, calibrated profile."""
 
 import json
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,13 +16,17 @@ from exohil.emulators.discrepancy.hidden import (
     make_recording,
     random_trajectory,
 )
+from exohil.emulators.discrepancy.localise import TIME_WINDOWS, localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
     Reduced,
     Ridge,
+    Spec,
     Stops,
     delay,
+    fit,
     fold_coefs,
     low_pass,
+    make_inputs,
     play,
 )
 from exohil.emulators.discrepancy.profile import (
@@ -30,6 +35,7 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated,
     simulate_calibrated_recording,
 )
+from exohil.emulators.discrepancy.workflow import _evidence
 from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
@@ -85,6 +91,38 @@ def test_no_mocap_and_too_short_are_one_clear_error():
     other_clock = replace(rec, mocap={"shoulder": replace(stream, t=stream.t + 1000.0)})
     with pytest.raises(DiscrepancyError, match="do not overlap in time"):
         prepare_trial(other_clock, "x.mcap")
+
+
+def test_what_no_frame_measures_is_null_not_nan():
+    """A sensor whose extremes no other fold covers, a time window and a held-out block with
+    no scored frame, a recording without holds: each statistic says "not measured" (JSON
+    null) or leaves the empty part out, so discrepancy.json stays JSON (NaN is not)."""
+    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
+    inputs = make_inputs(trial, 3)
+    mot = {**motion(trial, inputs.static), "still": np.zeros(trial.n, dtype=bool)}
+    residual = np.random.default_rng(0).normal(0.0, 0.1, trial.y.shape)
+    y0 = trial.y[:, 0]
+    lo, hi = np.quantile(y0[trial.valid], [0.05, 0.95])
+    residual[(y0 < lo) | (y0 > hi), 0] = np.nan
+    first_window = trial.t < trial.t[0] + (trial.t[-1] - trial.t[0]) / TIME_WINDOWS
+    residual[first_window] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sig = signatures(trial, residual, mot, 0.1)
+        where = localise(trial, residual, mot)
+        json.dumps({"signatures": sig, "localisation": where}, allow_nan=False)
+    assert 0.7 < sig["extreme_excess"] < 1.4  # white noise: no excess, from the other sensors
+    assert where["by_time"][0]["rms"] is None and where["by_time"][1]["rms"] is not None
+    assert where["holds"] == {"count": 0, "rms": None, "moving_rms": pytest.approx(0.1, 0.1)}
+
+    trial.scored[trial.blocks == 0] = False
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        base, cand = fit(trial, inputs, Spec(degree=2)), fit(trial, inputs, Spec(degree=3))
+        evidence = _evidence(base, cand, 0.1)
+    assert np.isnan(base.block_mse[0]) and np.isfinite(base.block_mse[1:]).all()
+    json.dumps(evidence, allow_nan=False)
+    assert evidence["blocks_improved"] <= N_BLOCKS - 1
 
 
 def _with_values(rec: Recording, values: np.ndarray) -> Recording:

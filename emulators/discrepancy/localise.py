@@ -34,9 +34,11 @@ def motion(trial: Trial, static: np.ndarray) -> dict[str, np.ndarray]:
     return {"speed_deg_s": speed, "still": still, "velocity": velocity, "direction": direction}
 
 
-def _rms(x: np.ndarray) -> float:
+def _rms(x: np.ndarray) -> float | None:
+    """RMS of the finite values, rounded to 5 decimals; None (JSON null) when there are none
+    (a time window or angle bin with no scored frame, a recording without holds)."""
     x = x[np.isfinite(x)]
-    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+    return round(float(np.sqrt(np.mean(x**2))), 5) if x.size else None
 
 
 def _holds(still: np.ndarray, valid: np.ndarray, rate_hz: float) -> list[tuple[int, int]]:
@@ -57,7 +59,7 @@ def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> 
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         sel = (trial.t >= lo) & (trial.t <= hi)
         by_time.append({"t0_s": round(float(lo), 3), "t1_s": round(float(hi), 3),
-                        "rms": round(_rms(residual[sel]), 5)})
+                        "rms": _rms(residual[sel])})
     by_angle = {}
     for k, name in enumerate(trial.angle_names):
         a = trial.angles[:, k]
@@ -66,11 +68,11 @@ def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> 
         for lo, hi in zip(edges[:-1], edges[1:], strict=True):
             sel = (a >= lo) & (a <= hi)
             cells.append({"lo_deg": round(float(lo), 2), "hi_deg": round(float(hi), 2),
-                          "rms": round(_rms(residual[sel]), 5)})
+                          "rms": _rms(residual[sel])})
         by_angle[name] = cells
     direction = mot["direction"]
     by_direction = {
-        label: round(_rms(residual[direction == sign]), 5)
+        label: _rms(residual[direction == sign])
         for label, sign in (("rising", 1), ("falling", -1), ("still", 0))
     }
     moving = ~mot["still"] & trial.valid
@@ -81,15 +83,15 @@ def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> 
         for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
             sel = moving & (speed >= lo) & (speed <= hi)
             by_speed.append({"lo_deg_s": round(float(lo), 2), "hi_deg_s": round(float(hi), 2),
-                             "rms": round(_rms(residual[sel]), 5)})
+                             "rms": _rms(residual[sel])})
     holds = _holds(mot["still"], trial.valid, trial.rate_hz)
     in_hold = np.zeros(trial.n, dtype=bool)
     for start, stop in holds:
         in_hold[start:stop] = True
     return {"by_time": by_time, "by_angle": by_angle, "by_direction": by_direction,
             "by_speed": by_speed,
-            "holds": {"count": len(holds), "rms": round(_rms(residual[in_hold]), 5),
-                      "moving_rms": round(_rms(residual[moving]), 5)}}
+            "holds": {"count": len(holds), "rms": _rms(residual[in_hold]),
+                      "moving_rms": _rms(residual[moving])}}
 
 
 def signatures(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray],
@@ -137,6 +139,8 @@ def signatures(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray],
         lo, hi = np.quantile(y, [0.05, 0.95])
         outer = valid & np.isfinite(r) & ((trial.y[:, j] < lo) | (trial.y[:, j] > hi))
         mid = valid & np.isfinite(r) & ~outer
+        if not outer.any() or not mid.any():  # its extremes (or middle) are not scored
+            continue
         excess_out.append(np.mean(r[outer] ** 2))
         excess_mid.append(np.mean(r[mid] ** 2))
     slow = float(np.mean(splits["slow"])) if splits["slow"] else 0.0

@@ -430,7 +430,8 @@ class Fit:
         spec: the model.
         residual: (N, S) held-out residual (measurement − prediction of the fold that did not
             see the frame), sensor units; NaN at frames that are not scored.
-        block_mse: (N_BLOCKS,) held-out mean squared residual per block (all sensors).
+        block_mse: (N_BLOCKS,) held-out mean squared residual per block (all sensors); NaN
+            for a block with no scored frame.
         coef: per sensor, the (P,) coefficients fitted on all valid frames.
         prediction: (N, S) full-data prediction.
         stops: per sensor, its stops (:class:`Stops`; none without the saturation term).
@@ -753,8 +754,12 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
         stops.append(stop)
         residual[:, j], prediction[:, j] = r, p
         coefs.append(c)
-    block_mse = np.array([np.nanmean(residual[trial.blocks == b] ** 2)
-                          for b in range(N_BLOCKS)])
+    block_mse = np.full(N_BLOCKS, np.nan)  # NaN: a block with no scored frame
+    for b in range(N_BLOCKS):
+        r = residual[trial.blocks == b]
+        r = r[np.isfinite(r)]
+        if r.size:
+            block_mse[b] = np.mean(r**2)
     return Fit(spec=spec, residual=residual, block_mse=block_mse, coef=coefs,
                prediction=prediction, stops=stops)
 

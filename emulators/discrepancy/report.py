@@ -143,7 +143,9 @@ def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str) -> list[Pa
         suit, f"calibrated by exohil discrepancy from {outcome.summary['recording']}")
     ).encode("utf-8")
     files["report.md"] = markdown(outcome.summary).encode("utf-8")
-    files["discrepancy.json"] = (json.dumps(outcome.summary, indent=1) + "\n").encode("utf-8")
+    # allow_nan=False: NaN is not JSON; a statistic with no frame to measure is null
+    summary = json.dumps(outcome.summary, indent=1, allow_nan=False)
+    files["discrepancy.json"] = (summary + "\n").encode("utf-8")
     written = []
     for name in OUTPUT_NAMES:
         path = out_dir / name

@@ -324,8 +324,9 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
 
 def _evidence(base: Fit, cand: Fit, floor: float) -> dict:
     delta = base.block_mse - cand.block_mse
-    dmse = float(np.mean(delta))
-    robust = float(np.mean(np.sort(delta)[:-1]))
+    delta = delta[np.isfinite(delta)]  # blocks with scored frames
+    dmse = float(np.mean(delta)) if delta.size else 0.0
+    robust = float(np.mean(np.sort(delta)[:-1])) if delta.size > 1 else 0.0
     return {
         "heldout_gap": round(cand.gap, 6),
         "gap_reduction": round((base.gap - cand.gap) / base.gap, 4) if base.gap > 0 else 0.0,
