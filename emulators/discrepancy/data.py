@@ -8,6 +8,7 @@ at every grid time. Filters and history-dependent effects then run on a uniform 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -139,9 +140,9 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     covered = float(valid.sum()) / rate if rate > 0 else 0.0
     if covered < N_BLOCKS * MIN_BLOCK_S:
         raise DiscrepancyError(
-            f"{name}: too short to hold out a block: {covered:.1f} s of sensors with motion "
-            f"capture, need at least {N_BLOCKS * MIN_BLOCK_S:.0f} s ({N_BLOCKS} held-out blocks "
-            f"of {MIN_BLOCK_S:g} s)")
+            f"{name}: too short to hold out a block: {math.floor(covered * 100) / 100:.2f} s "
+            f"of sensors with motion capture, need at least {N_BLOCKS * MIN_BLOCK_S:.0f} s "
+            f"({N_BLOCKS} held-out blocks of {MIN_BLOCK_S:g} s)")
     # Contiguous held-out blocks of BLOCK_S seconds of valid frames, dealt to the N_BLOCKS
     # folds in turn: each fold holds out stretches spread over the whole recording, so a
     # fold's training data cover the poses it must predict (no extrapolation in pose space)
