@@ -14,7 +14,10 @@ from exohil.emulators.discrepancy.data import N_BLOCKS, in_mocap_gap, quantisati
 from exohil.emulators.discrepancy.hidden import (
     Case,
     make_recording,
+    random_geometry,
     random_trajectory,
+    suit_lengths,
+    suit_recording,
 )
 from exohil.emulators.discrepancy.localise import TIME_WINDOWS, localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
@@ -28,14 +31,17 @@ from exohil.emulators.discrepancy.model import (
     low_pass,
     make_inputs,
     play,
+    rate_limit,
 )
 from exohil.emulators.discrepancy.profile import (
     calibrated_suit,
     load_calibrated_profile,
     simulate_calibrated,
     simulate_calibrated_recording,
+    write_calibrated_profile,
 )
 from exohil.emulators.discrepancy.workflow import _evidence
+from exohil.emulators.effects import Signal
 from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
@@ -283,8 +289,6 @@ def test_soft_knees_at_both_ends_are_both_found():
 
 def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):
     """A 30 ms low-pass followed by 20 ms of transport delay: neither single lag model."""
-    from exohil.emulators.discrepancy.profile import write_calibrated_profile
-
     outcome = run(make_recording(Case("lag", "other", 1, seed=102)), "delayed low-pass")
     s = outcome.summary
     assert s["effects"][:1] == ["lag"], s["effects"]
@@ -294,13 +298,59 @@ def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):
     floor = s["noise_floor"]
     assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
     write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "lag"))
-    loaded = load_calibrated_profile(tmp_path / "p.toml")
-    assert replace(loaded.spec, ridge=outcome.after.spec.ridge) == outcome.after.spec
+    loaded = load_calibrated_profile(tmp_path / "p.toml")  # stops are kept per sensor
+    assert replace(loaded.spec, ridge=outcome.after.spec.ridge,
+                   stops=outcome.after.spec.stops) == outcome.after.spec
     sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
     text = (tmp_path / "p.toml").read_text().replace('"first_order_delay"', '"second_order"')
     (tmp_path / "bad.toml").write_text(text)
     with pytest.raises(ProfileError, match="lag_kind 'second_order'"):
+        load_calibrated_profile(tmp_path / "bad.toml")
+
+
+def test_rate_limit_follows_at_most_its_rate():
+    x = np.concatenate([np.zeros(10), np.ones(40), np.zeros(20)])
+    y = rate_limit(x, 25.0, 250.0)  # 0.1 per frame
+    np.testing.assert_allclose(y[:10], 0.0)
+    np.testing.assert_allclose(y[10:20], np.arange(1, 11) / 10, atol=1e-12)  # ramps up
+    np.testing.assert_allclose(y[20:50], 1.0)
+    np.testing.assert_allclose(y[50:60], 1.0 - np.arange(1, 11) / 10, atol=1e-12)
+    np.testing.assert_allclose(rate_limit(x, 1e6, 250.0), x)  # fast enough: no effect
+
+
+def _slew_limited_recording(seed: int, duration_s: float) -> Recording:
+    """A suit whose readings follow at most at the 98th percentile of their own speed (a
+    slew-rate limit, written here apart from the workflow's), then white noise."""
+    trajectory = random_trajectory(seed, duration_s)
+    geometry, gains, offsets = random_geometry(seed)
+    x = suit_lengths(trajectory, geometry, gains, offsets).values
+    limit = np.percentile(np.abs(np.diff(x, axis=0)), 98, axis=0)
+    y = x.copy()
+    for i in range(1, len(x)):
+        y[i] = y[i - 1] + np.clip(x[i] - y[i - 1], -limit, limit)
+    y += np.random.default_rng(seed).normal(0.0, 0.15, y.shape)
+    return suit_recording(trajectory, geometry, Signal.from_values(
+        trajectory.frame_times(250.0), y), {"case": "slew limit"})
+
+
+def test_a_slew_rate_limit_is_named_lag_and_fitted_as_one(tmp_path):
+    """Not a linear filter: the reading falls behind only in the fastest moves."""
+    outcome = run(_slew_limited_recording(seed=7, duration_s=40.0), "slew limit")
+    s = outcome.summary
+    assert s["effects"][:1] == ["lag"], s["effects"]
+    assert s["steps"][0]["params"]["model"] == "rate_limit", s["steps"][0]["params"]
+    floor = s["noise_floor"]
+    assert s["gap_after"] ** 2 - floor**2 < 0.1 * (s["gap_before"] ** 2 - floor**2), s
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "slew"))
+    loaded = load_calibrated_profile(tmp_path / "p.toml")  # stops are kept per sensor
+    assert replace(loaded.spec, ridge=outcome.after.spec.ridge,
+                   stops=outcome.after.spec.stops) == outcome.after.spec
+    sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
+    np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
+    text = (tmp_path / "p.toml").read_text().replace("lag_rates_per_s = [", "lag_rates_per_s = [-")
+    (tmp_path / "bad.toml").write_text(text)  # the first sensor's rate negative
+    with pytest.raises(ProfileError, match="positive lag_rates_per_s per sensor"):
         load_calibrated_profile(tmp_path / "bad.toml")
 
 

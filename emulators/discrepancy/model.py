@@ -17,7 +17,9 @@ held fixed as the *input* of the history-dependent terms) the model is
   relaxation toward the current stretch).
 * Lag (``lag``): first-order low-pass (time constant τ), a pure delay, or the low-pass
   followed by a delay, applied to every pose-driven column, so the fitted map is the map of
-  the lagged response.
+  the lagged response; or a rate limit (a slew-rate limit: the reading follows at most at
+  Lⱼ units/s), the column R_Lⱼ(ŝⱼ) − ŝⱼ, zero except while the pose moves faster than the
+  sensor can follow and until it has caught up.
 * D (``drift``): Legendre polynomials of time (degree 1–3): a slow offset independent of pose.
 * Stops (``saturation``): at an end of its range the sensor stops following the pose: a hard
   stop (it sits on a plateau while the joint moves; the map is fitted off the plateau and
@@ -128,10 +130,12 @@ class Spec:
         creep_tau_s: time constants of the creep low-passes, s (empty = none).
         creep_asym_s: (build, recover) time constants of an asymmetric creep state, s
             (empty = none): builds while the stretch grows, recovers more slowly.
-        lag_kind: "" (none), "first_order", "delay" or "first_order_delay" (a low-pass
-            followed by a delay).
+        lag_kind: "" (none), "first_order", "delay", "first_order_delay" (a low-pass
+            followed by a delay) or "rate_limit".
         lag_s: the lag's time constant (first order, with or without a delay) or delay, s.
         lag_delay_s: the delay after the low-pass of ``first_order_delay``, s.
+        lag_rates: per sensor, the most a ``rate_limit`` reading changes per second, sensor
+            units/s.
         drift_degree: degree of the time polynomial (0 = no drift).
         saturation: stops at the ends of the sensors' ranges (hard or soft, :class:`Stops`).
         stops: the stops per sensor, once chosen (empty: choose them in every fit).
@@ -145,6 +149,7 @@ class Spec:
     lag_kind: str = ""
     lag_s: float = 0.0
     lag_delay_s: float = 0.0
+    lag_rates: tuple[float, ...] = ()
     drift_degree: int = 0
     saturation: bool = False
     stops: tuple[Stops, ...] = ()
@@ -240,11 +245,29 @@ def delay(x: np.ndarray, delay_s: float, rate_hz: float) -> np.ndarray:
     return shifted(k) if frac == 0 else (1.0 - frac) * shifted(k) + frac * shifted(k + 1)
 
 
+def rate_limit(x: np.ndarray, rate: float, rate_hz: float) -> np.ndarray:
+    """x (N,) through a slew-rate limit: the output follows x but changes by at most
+    ``rate`` (units/s) per second, starting at x[0]."""
+    step = rate / rate_hz
+    out = np.empty(x.shape[0])
+    y = float(x[0])
+    for i, target in enumerate(x.tolist()):  # floats: a numpy scalar per frame is 10× slower
+        if target > y + step:
+            y += step
+        elif target < y - step:
+            y -= step
+        else:
+            y = target
+        out[i] = y
+    return out
+
+
 def apply_lag(x: np.ndarray, kind: str, value_s: float, rate_hz: float,
               delay_s: float = 0.0) -> np.ndarray:
     """The lag term applied to the columns of x (N, P): a first-order low-pass of time
     constant ``value_s``, a delay of ``value_s``, or (``first_order_delay``) the low-pass
-    followed by a delay of ``delay_s``."""
+    followed by a delay of ``delay_s``. A rate limit is not applied column by column (it
+    is a column of its own, :func:`rate_limit_column`): x as it is."""
     if kind == "first_order":
         return low_pass(x, value_s, rate_hz)
     if kind == "delay":
@@ -356,6 +379,16 @@ def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
     return inputs.cache[key]
 
 
+def rate_limit_column(inputs: Inputs, j: int, rate: float, rate_hz: float) -> np.ndarray:
+    """(N, 1) R_rate(ŝⱼ) − ŝⱼ: how far a reading limited to ``rate`` (units/s) falls behind
+    sensor j's static prediction."""
+    key = ("R", j, rate)
+    if key not in inputs.cache:
+        x = inputs.static[:, j]
+        inputs.cache[key] = (rate_limit(x, rate, rate_hz) - x)[:, None]
+    return inputs.cache[key]
+
+
 def drift_columns(t_norm: np.ndarray, degree: int) -> np.ndarray:
     """(N, degree) Legendre polynomials P₁…P_degree of time scaled to [−1, 1]."""
     return legendre_products(t_norm[:, None], degree)[0][:, 1:]
@@ -366,7 +399,7 @@ def lagged_static_basis(inputs: Inputs, spec: Spec, rate_hz: float) -> np.ndarra
     computed once per (degree, lag) and kept until another one is asked for (a single entry:
     the lag refinement visits many lags, each on a full-rate (N, P) array)."""
     basis = static_basis(inputs, spec.degree)
-    if not spec.lag_kind:
+    if spec.lag_kind in ("", "rate_limit"):
         return basis
     key = (spec.degree, spec.lag_kind, spec.lag_s, spec.lag_delay_s)
     kept = inputs.cache.get("BL")
@@ -391,6 +424,8 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
     if pose:
         x = np.hstack([x, apply_lag(np.hstack(pose), spec.lag_kind, spec.lag_s, rate_hz,
                                     spec.lag_delay_s)])
+    if spec.lag_kind == "rate_limit":
+        x = np.hstack([x, rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz)])
     if spec.drift_degree:
         x = np.hstack([x, drift_columns(inputs.t_norm, spec.drift_degree)])
     return x

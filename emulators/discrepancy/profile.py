@@ -35,7 +35,7 @@ from exohil.formats.recording import AngleStream, Recording, SensorStream
 
 CALIBRATED_SCHEMA = "exohil-calibrated-suit-profile"
 CALIBRATED_VERSION = 1
-LAG_KINDS = ("none", "first_order", "delay", "first_order_delay")
+LAG_KINDS = ("none", "first_order", "delay", "first_order_delay", "rate_limit")
 
 
 @dataclass(frozen=True)
@@ -135,6 +135,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             "lag_kind": spec.lag_kind or "none",
             "lag_s": spec.lag_s,
             "lag_delay_s": spec.lag_delay_s,
+            "lag_rates_per_s": list(spec.lag_rates),
             "drift_degree": spec.drift_degree,
             "saturation": spec.saturation,
         },
@@ -187,8 +188,13 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                     creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
                     lag_kind=_lag_kind(terms["lag_kind"]), lag_s=float(terms["lag_s"]),
                     lag_delay_s=float(terms.get("lag_delay_s", 0.0)),
+                    lag_rates=tuple(float(v) for v in terms.get("lag_rates_per_s", ())),
                     drift_degree=int(terms["drift_degree"]),
                     saturation=bool(terms["saturation"]))
+        if spec.lag_kind == "rate_limit" and (
+                len(spec.lag_rates) != len(sensors) or min(spec.lag_rates) <= 0):
+            raise ValueError(f"a rate_limit lag needs a positive lag_rates_per_s per sensor "
+                             f"({len(sensors)}), not {list(spec.lag_rates)}")
         inputs = Inputs(u=np.empty((0, 0)), input_kind=str(sm["inputs"]),
                         angle_lo=np.asarray(sm["angle_lo_deg"], dtype=np.float64),
                         angle_hi=np.asarray(sm["angle_hi_deg"], dtype=np.float64),

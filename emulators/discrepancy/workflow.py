@@ -52,6 +52,11 @@ LAG_TOTAL_LOG_STEP = math.log(1.25)
 LAG_SHARE_STEP = 0.3
 LAG_SHARE_TOL = 0.02
 LAG_MAX_FITS = 24
+#: Rate-limit candidates: each sensor's limit at these quantiles of its static prediction's
+#: speed over the valid frames (then searched between the best one's neighbours).
+RATE_LIMIT_QUANTILES = (0.7, 0.85, 0.93, 0.97, 0.99, 0.997, 0.999)
+#: Golden-section steps of each sensor's log limit between its best quantile's neighbours.
+RATE_LIMIT_STEPS = 7
 CREEP_TAU_S = (1.5, 5.0, 15.0, 45.0)
 #: (build, recover) pairs of the asymmetric creep state, s.
 CREEP_ASYM_S = ((3.0, 9.0), (10.0, 30.0), (30.0, 90.0))
@@ -108,7 +113,8 @@ def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
     """The candidate configuration of ``kind`` with the lowest held-out error."""
     if kind == "lag":  # refine each lag model between its grid neighbours, then compare
         return min([_refine_lag(trial, inputs, spec, "first_order", LAG_TAU_S),
-                    _refine_lag(trial, inputs, spec, "delay", LAG_DELAY_S)],
+                    _refine_lag(trial, inputs, spec, "delay", LAG_DELAY_S),
+                    _rate_limit(trial, inputs, spec)],
                    key=lambda f: f.gap)
     if kind == "creep":
         return min(_creep_families(trial, inputs, spec), key=lambda f: f.gap)
@@ -166,6 +172,51 @@ def _refine_lag(trial: Trial, inputs: Inputs, spec: Spec, lag_kind: str,
     return min(fits.values(), key=lambda f: f.gap)
 
 
+def _rate_limit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
+    """The best rate limit per sensor added to ``spec`` (without its lag).
+
+    A slew-rate limit is not a linear filter: the reading falls behind only while the pose
+    moves faster than the limit and catches up afterwards, so the residual lives in the
+    fastest moves, whatever their frequency. Each sensor's limit is searched on its own
+    (sensors are fitted independently, so every fit tries one limit per sensor): at the
+    ``RATE_LIMIT_QUANTILES`` of its static prediction's speed, then by golden-section search
+    on the log limit between the best one's neighbours (the held-out error is sharp in the
+    limit: on a suit limited at its 99.5th percentile of speed, the 99th and 99.7th leave
+    a third of the effect or more).
+    """
+    spec = replace(spec, lag_kind="", lag_s=0.0, lag_delay_s=0.0, lag_rates=())
+    speed = np.abs(np.gradient(inputs.static, axis=0))[trial.valid] * trial.rate_hz
+    grid = np.log(np.quantile(speed, RATE_LIMIT_QUANTILES, axis=0))  # (Q, S) log units/s
+    sensors = np.arange(grid.shape[1])
+
+    def at(log_rates: np.ndarray) -> tuple[Fit, np.ndarray]:
+        """The fit with these limits and its held-out mean squared error per sensor."""
+        rates = tuple(float(f"{r:.5g}") for r in np.exp(log_rates))
+        f = fit(trial, inputs, replace(spec, lag_kind="rate_limit", lag_rates=rates))
+        return f, np.nanmean(f.residual[trial.scored] ** 2, axis=0)
+
+    mse = np.array([at(g)[1] for g in grid])  # (Q, S)
+    k = np.argmin(mse, axis=0)
+    lo = grid[np.maximum(k - 1, 0), sensors] - np.where(k == 0, math.log(2.0), 0.0)
+    hi = grid[np.minimum(k + 1, len(grid) - 1), sensors] + np.where(
+        k == len(grid) - 1, math.log(2.0), 0.0)
+    golden = (math.sqrt(5.0) - 1.0) / 2.0
+    x1, x2 = hi - golden * (hi - lo), lo + golden * (hi - lo)
+    f1, f2 = at(x1)[1], at(x2)[1]
+    for _ in range(RATE_LIMIT_STEPS):  # every sensor's bracket shrinks by the golden ratio
+        left = f1 < f2  # the minimum lies in [lo, x2]
+        hi, lo = np.where(left, x2, hi), np.where(left, lo, x1)
+        x1, x2, f1, f2 = (np.where(left, hi - golden * (hi - lo), x2),
+                          np.where(left, x1, lo + golden * (hi - lo)),
+                          np.where(left, np.nan, f2), np.where(left, f1, np.nan))
+        new = np.where(left, x1, x2)
+        m = at(new)[1]
+        f1, f2 = np.where(left, m, f1), np.where(left, f2, m)
+    candidates = np.vstack([grid[k, sensors], x1, x2])
+    scores = np.vstack([mse[k, sensors], f1, f2])
+    return at(candidates[np.argmin(scores, axis=0), sensors])[0]
+
+
 def _refine_lag_delay(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     """A named lag refined as a low-pass followed by a delay (first order plus dead time),
     of which the low-pass alone and the delay alone are the two ends.
@@ -178,6 +229,8 @@ def _refine_lag_delay(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     20 ms of delay 0.32 mm. The current lag is kept unless another beats it held out.
     """
     spec = current.spec
+    if spec.lag_kind == "rate_limit":  # no low-pass or delay: its limits, searched again
+        return min([current, _rate_limit(trial, inputs, spec)], key=lambda f: f.gap)
     total0 = spec.lag_s + spec.lag_delay_s
     share0 = {"delay": 1.0, "first_order": 0.0}.get(spec.lag_kind, spec.lag_delay_s / total0)
     fits = {(round(math.log(total0), 6), round(share0, 6)): current}
@@ -273,6 +326,7 @@ def _column_slices(spec: Spec, n_static: int, n_play: int) -> dict[str, slice]:
     out, at = {}, n_static
     for kind, width in (("hysteresis", n_play if spec.hysteresis else 0),
                         ("creep", len(spec.creep_tau_s) + (1 if spec.creep_asym_s else 0)),
+                        ("lag", 1 if spec.lag_kind == "rate_limit" else 0),
                         ("drift", spec.drift_degree)):
         out[kind] = slice(at, at + width)
         at += width
@@ -300,6 +354,9 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     if kind == "lag":
         if spec.lag_kind == "first_order_delay":
             return {"model": spec.lag_kind, "tau_s": spec.lag_s, "delay_s": spec.lag_delay_s}
+        if spec.lag_kind == "rate_limit":
+            return {"model": spec.lag_kind, "rate_per_s": list(spec.lag_rates),
+                    "gain": [round(float(c[cols][0]), 5) for c in result.coef]}
         key = "tau_s" if spec.lag_kind == "first_order" else "delay_s"
         return {"model": spec.lag_kind, key: spec.lag_s}
     if kind == "drift":
@@ -344,8 +401,14 @@ def _config(spec: Spec) -> dict:
     return {"degree": spec.degree, "hysteresis": spec.hysteresis,
             "creep_tau_s": list(spec.creep_tau_s), "creep_asym_s": list(spec.creep_asym_s),
             "lag": spec.lag_kind, "lag_s": spec.lag_s, "lag_delay_s": spec.lag_delay_s,
+            "lag_rates": list(spec.lag_rates),
             "drift_degree": spec.drift_degree, "saturation": spec.saturation,
             "ridge": spec.ridge}
+
+
+def _lag_of(spec: Spec) -> tuple:
+    """The lag term's model and parameters (to tell whether a refit changed it)."""
+    return spec.lag_kind, spec.lag_s, spec.lag_delay_s, spec.lag_rates
 
 
 def _conclusion(steps: list[dict], spec: Spec) -> str:
@@ -431,7 +494,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         if kind == "lag" and cand.spec != refined.spec:  # a lag refined on the map chosen
             # without it is biased toward that map: refine it again on the map now chosen
             cand = _refine_lag_delay(trial, inputs, cand)
-        lag_before = cand.spec.lag_kind, cand.spec.lag_s, cand.spec.lag_delay_s
+        lag_before = _lag_of(cand.spec)
         if previous == "lag":  # a lag named while a larger effect was
             # still missing was fitted against it: refit it once, with the next effect added
             cand = _refine_lag_delay(trial, inputs, cand)
@@ -439,7 +502,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         evidence = _evidence(base, cand, floor)
         spec, base = cand.spec, cand
         refit = ({"lag": effect_params("lag", cand, inputs, trial)}
-                 if (cand.spec.lag_kind, cand.spec.lag_s, cand.spec.lag_delay_s) != lag_before
+                 if _lag_of(cand.spec) != lag_before
                  else {})
         steps.append({"effect": kind, "gap": round(cand.gap, 6),
                       "params": effect_params(kind, cand, inputs, trial),
