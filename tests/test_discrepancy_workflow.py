@@ -297,15 +297,22 @@ def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):
     assert abs(params["tau_s"] - 0.03) < 0.006 and abs(params["delay_s"] - 0.02) < 0.006, params
     floor = s["noise_floor"]
     assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
-    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "lag"))
+    _assert_the_profile_reproduces(outcome, tmp_path, ('"first_order_delay"', '"second_order"'),
+                                   "lag_kind 'second_order'")
+
+
+def _assert_the_profile_reproduces(outcome, tmp_path: Path, corrupt: tuple[str, str],
+                                   error: str) -> None:
+    """The calibrated profile of ``outcome`` loads back to its model and simulates its
+    prediction; with ``corrupt`` (old, new) replaced in its text it is refused with ``error``."""
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "calibrated"))
     loaded = load_calibrated_profile(tmp_path / "p.toml")  # stops are kept per sensor
     assert replace(loaded.spec, ridge=outcome.after.spec.ridge,
                    stops=outcome.after.spec.stops) == outcome.after.spec
     sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
-    text = (tmp_path / "p.toml").read_text().replace('"first_order_delay"', '"second_order"')
-    (tmp_path / "bad.toml").write_text(text)
-    with pytest.raises(ProfileError, match="lag_kind 'second_order'"):
+    (tmp_path / "bad.toml").write_text((tmp_path / "p.toml").read_text().replace(*corrupt))
+    with pytest.raises(ProfileError, match=error):
         load_calibrated_profile(tmp_path / "bad.toml")
 
 
@@ -317,6 +324,11 @@ def test_rate_limit_follows_at_most_its_rate():
     np.testing.assert_allclose(y[20:50], 1.0)
     np.testing.assert_allclose(y[50:60], 1.0 - np.arange(1, 11) / 10, atol=1e-12)
     np.testing.assert_allclose(rate_limit(x, 1e6, 250.0), x)  # fast enough: no effect
+    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
+    inputs = make_inputs(trial, 3)
+    never = fit(trial, inputs, Spec(lag_kind="rate_limit", lag_rates=(1e9,) * trial.n_sensors))
+    assert all(c[-1] == 0.0 for c in never.coef)  # a column no move reaches: no singular solve
+    np.testing.assert_allclose(never.residual, fit(trial, inputs, Spec()).residual, atol=1e-9)
 
 
 def _slew_limited_recording(seed: int, duration_s: float) -> Recording:
@@ -342,16 +354,9 @@ def test_a_slew_rate_limit_is_named_lag_and_fitted_as_one(tmp_path):
     assert s["steps"][0]["params"]["model"] == "rate_limit", s["steps"][0]["params"]
     floor = s["noise_floor"]
     assert s["gap_after"] ** 2 - floor**2 < 0.1 * (s["gap_before"] ** 2 - floor**2), s
-    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "slew"))
-    loaded = load_calibrated_profile(tmp_path / "p.toml")  # stops are kept per sensor
-    assert replace(loaded.spec, ridge=outcome.after.spec.ridge,
-                   stops=outcome.after.spec.stops) == outcome.after.spec
-    sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
-    np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
-    text = (tmp_path / "p.toml").read_text().replace("lag_rates_per_s = [", "lag_rates_per_s = [-")
-    (tmp_path / "bad.toml").write_text(text)  # the first sensor's rate negative
-    with pytest.raises(ProfileError, match="positive lag_rates_per_s per sensor"):
-        load_calibrated_profile(tmp_path / "bad.toml")
+    _assert_the_profile_reproduces(  # the first sensor's rate made negative
+        outcome, tmp_path, ("lag_rates_per_s = [", "lag_rates_per_s = [-"),
+        "positive lag_rates_per_s per sensor")
 
 
 def test_hidden_hysteresis_is_named_and_the_gap_shrinks(hysteresis_outcome):

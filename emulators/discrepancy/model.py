@@ -492,10 +492,13 @@ class Fit:
 
 def _solve(gram: np.ndarray, rhs: np.ndarray, loading: np.ndarray) -> np.ndarray:
     """Ridge solve with ``loading`` (P,) added to the Gram matrix's diagonal (the columns are
-    scaled to unit norm for the solve, for conditioning)."""
-    scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
+    scaled to unit norm for the solve, for conditioning). A column that is zero on every
+    fitted frame (a rate limit no move reaches) gets coefficient 0."""
+    diag = np.diag(gram)
+    dead = diag <= 0
+    scale = np.sqrt(np.where(dead, 1.0, diag))
     g = gram / np.outer(scale, scale)
-    g[np.diag_indices_from(g)] += loading / scale**2
+    g[np.diag_indices_from(g)] += loading / scale**2 + dead
     return np.linalg.solve(g, rhs / scale) / scale
 
 
