@@ -1,6 +1,7 @@
 """The discrepancy workflow: data preparation, model pieces, CLI contract, calibrated profile."""
 
 import json
+import math
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -40,7 +41,7 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated_recording,
     write_calibrated_profile,
 )
-from exohil.emulators.discrepancy.workflow import _evidence
+from exohil.emulators.discrepancy.workflow import _evidence, _rate_limit
 from exohil.emulators.effects import Signal
 from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
@@ -331,9 +332,10 @@ def test_rate_limit_follows_at_most_its_rate():
     np.testing.assert_allclose(never.residual, fit(trial, inputs, Spec()).residual, atol=1e-9)
 
 
-def _slew_limited_recording(seed: int, duration_s: float) -> Recording:
+def _slew_limited_recording(seed: int, duration_s: float, sign: float = 1.0) -> Recording:
     """A suit whose readings follow at most at the 98th percentile of their own speed (a
-    slew-rate limit, written here apart from the workflow's), then white noise."""
+    slew-rate limit, written here apart from the workflow's), then white noise. With
+    ``sign`` −1 the reading runs ahead by as much instead (no rate limit does that)."""
     trajectory = random_trajectory(seed, duration_s)
     geometry, gains, offsets = random_geometry(seed)
     x = suit_lengths(trajectory, geometry, gains, offsets).values
@@ -341,9 +343,16 @@ def _slew_limited_recording(seed: int, duration_s: float) -> Recording:
     y = x.copy()
     for i in range(1, len(x)):
         y[i] = y[i - 1] + np.clip(x[i] - y[i - 1], -limit, limit)
-    y += np.random.default_rng(seed).normal(0.0, 0.15, y.shape)
+    y = x + sign * (y - x) + np.random.default_rng(seed).normal(0.0, 0.15, y.shape)
     return suit_recording(trajectory, geometry, Signal.from_values(
         trajectory.frame_times(250.0), y), {"case": "slew limit"})
+
+
+def test_a_reading_that_runs_ahead_gets_no_rate_limit():
+    trial = prepare_trial(_slew_limited_recording(seed=7, duration_s=30.0, sign=-1.0))
+    found = _rate_limit(trial, make_inputs(trial, 3), Spec(degree=3))
+    assert found.spec.lag_rates == (math.inf,) * trial.n_sensors
+    assert all(c[-1] == 0.0 for c in found.coef)
 
 
 def test_a_slew_rate_limit_is_named_lag_and_fitted_as_one(tmp_path):

@@ -38,6 +38,7 @@ from exohil.emulators.discrepancy.model import (
     legendre_products,
     make_inputs,
     restrict_to_coverage,
+    static_basis,
 )
 from exohil.formats.recording import Recording
 
@@ -183,17 +184,25 @@ def _rate_limit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     on the log limit between the best one's neighbours (the held-out error is sharp in the
     limit: on a suit limited at its 99.5th percentile of speed, the 99th and 99.7th leave
     a third of the effect or more).
+
+    A limit counts only with a positive gain: the reading falls behind, it never runs ahead
+    (a negative gain at a very low limit is a filter of the pose's history, creep's
+    ground, not a rate limit). A sensor with no such limit gets none (rate +inf).
     """
     spec = replace(spec, lag_kind="", lag_s=0.0, lag_delay_s=0.0, lag_rates=())
     speed = np.abs(np.gradient(inputs.static, axis=0))[trial.valid] * trial.rate_hz
     grid = np.log(np.quantile(speed, RATE_LIMIT_QUANTILES, axis=0))  # (Q, S) log units/s
     sensors = np.arange(grid.shape[1])
+    n_static = static_basis(inputs, spec.degree).shape[1]
 
     def at(log_rates: np.ndarray) -> tuple[Fit, np.ndarray]:
-        """The fit with these limits and its held-out mean squared error per sensor."""
+        """The fit with these limits and its held-out mean squared error per sensor (+inf
+        where the limit's gain is not positive)."""
         rates = tuple(float(f"{r:.5g}") for r in np.exp(log_rates))
         f = fit(trial, inputs, replace(spec, lag_kind="rate_limit", lag_rates=rates))
-        return f, np.nanmean(f.residual[trial.scored] ** 2, axis=0)
+        col = _column_slices(f.spec, n_static, inputs.thresholds.shape[1])["lag"].start
+        gain = np.array([c[col] for c in f.coef])
+        return f, np.where(gain > 0, np.nanmean(f.residual[trial.scored] ** 2, axis=0), np.inf)
 
     mse = np.array([at(g)[1] for g in grid])  # (Q, S)
     k = np.argmin(mse, axis=0)
@@ -214,7 +223,8 @@ def _rate_limit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
         f1, f2 = np.where(left, m, f1), np.where(left, f2, m)
     candidates = np.vstack([grid[k, sensors], x1, x2])
     scores = np.vstack([mse[k, sensors], f1, f2])
-    return at(candidates[np.argmin(scores, axis=0), sensors])[0]
+    chosen = candidates[np.argmin(scores, axis=0), sensors]
+    return at(np.where(np.isfinite(scores.min(axis=0)), chosen, np.inf))[0]
 
 
 def _refine_lag_delay(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
@@ -355,7 +365,7 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
         if spec.lag_kind == "first_order_delay":
             return {"model": spec.lag_kind, "tau_s": spec.lag_s, "delay_s": spec.lag_delay_s}
         if spec.lag_kind == "rate_limit":
-            return {"model": spec.lag_kind, "rate_per_s": list(spec.lag_rates),
+            return {"model": spec.lag_kind, "rate_per_s": _rates(spec),
                     "gain": [round(float(c[cols][0]), 5) for c in result.coef]}
         key = "tau_s" if spec.lag_kind == "first_order" else "delay_s"
         return {"model": spec.lag_kind, key: spec.lag_s}
@@ -401,9 +411,14 @@ def _config(spec: Spec) -> dict:
     return {"degree": spec.degree, "hysteresis": spec.hysteresis,
             "creep_tau_s": list(spec.creep_tau_s), "creep_asym_s": list(spec.creep_asym_s),
             "lag": spec.lag_kind, "lag_s": spec.lag_s, "lag_delay_s": spec.lag_delay_s,
-            "lag_rates": list(spec.lag_rates),
+            "lag_rates": _rates(spec),
             "drift_degree": spec.drift_degree, "saturation": spec.saturation,
             "ridge": spec.ridge}
+
+
+def _rates(spec: Spec) -> list[float | None]:
+    """The rate limits per sensor for JSON: null where a sensor has none (+inf)."""
+    return [r if math.isfinite(r) else None for r in spec.lag_rates]
 
 
 def _lag_of(spec: Spec) -> tuple:
