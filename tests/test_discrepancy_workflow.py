@@ -355,6 +355,18 @@ def test_a_reading_that_runs_ahead_gets_no_rate_limit():
     assert all(c[-1] == 0.0 for c in found.coef)
 
 
+def test_the_rate_limit_search_ignores_frames_held_still():
+    """The limits tried are quantiles of the speed while the prediction moves: with the
+    prediction still on most frames, quantiles over all frames are 0 units/s (log −inf)."""
+    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
+    inputs = make_inputs(trial, 3)
+    inputs.static[: int(0.8 * trial.n)] = inputs.static[0]  # held still for 80 % of frames
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        found = _rate_limit(trial, inputs, Spec(degree=3))
+    assert not np.isnan(found.spec.lag_rates).any() and min(found.spec.lag_rates) > 0
+
+
 def test_a_slew_rate_limit_is_named_lag_and_fitted_as_one(tmp_path):
     """Not a linear filter: the reading falls behind only in the fastest moves."""
     outcome = run(_slew_limited_recording(seed=7, duration_s=40.0), "slew limit")

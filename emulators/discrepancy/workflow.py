@@ -54,7 +54,8 @@ LAG_SHARE_STEP = 0.3
 LAG_SHARE_TOL = 0.02
 LAG_MAX_FITS = 24
 #: Rate-limit candidates: each sensor's limit at these quantiles of its static prediction's
-#: speed over the valid frames (then searched between the best one's neighbours).
+#: speed over the valid frames where it moves (then searched between the best one's
+#: neighbours).
 RATE_LIMIT_QUANTILES = (0.7, 0.85, 0.93, 0.97, 0.99, 0.997, 0.999)
 #: Golden-section steps of each sensor's log limit between its best quantile's neighbours.
 RATE_LIMIT_STEPS = 7
@@ -191,7 +192,10 @@ def _rate_limit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     """
     spec = replace(spec, lag_kind="", lag_s=0.0, lag_delay_s=0.0, lag_rates=())
     speed = np.abs(np.gradient(inputs.static, axis=0))[trial.valid] * trial.rate_hz
-    grid = np.log(np.quantile(speed, RATE_LIMIT_QUANTILES, axis=0))  # (Q, S) log units/s
+    # quantiles of the speed while the prediction moves: a recording that holds still most
+    # of the time would otherwise put the lower quantiles at 0 units/s
+    grid = np.log(np.column_stack([np.quantile(v[v > 0] if (v > 0).any() else np.ones(1),
+                                               RATE_LIMIT_QUANTILES) for v in speed.T]))
     sensors = np.arange(grid.shape[1])
     n_static = static_basis(inputs, spec.degree).shape[1]
 
