@@ -244,6 +244,7 @@ def _refine_lag_delay(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     """
     spec = current.spec
     if spec.lag_kind == "rate_limit":  # no low-pass or delay: its limits, searched again
+        # on the model as it is now (another degree, or the next effect added)
         return min([current, _rate_limit(trial, inputs, spec)], key=lambda f: f.gap)
     total0 = spec.lag_s + spec.lag_delay_s
     share0 = {"delay": 1.0, "first_order": 0.0}.get(spec.lag_kind, spec.lag_delay_s / total0)
@@ -278,13 +279,15 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     pair 0.199 mm on the grid, 0.194 refined; the asymmetric state 0.222 and 0.157). Saturation:
     the stops chosen in its candidate fit are kept from here on (:func:`_keep_stops`). Lag: each
     single model is already refined on its grid (:func:`_refine_lag`), then the low-pass and
-    the delay together (:func:`_refine_lag_delay`). The other effects have no shape
-    parameter.
+    the delay together (:func:`_refine_lag_delay`); a rate limit was searched in full by
+    :func:`_best` on this very model, so searching it again would return the same fit. The
+    other effects have no shape parameter.
     """
     if kind == "saturation":
         return _keep_stops(current)
     if kind == "lag":
-        return _refine_lag_delay(trial, inputs, current)
+        return (current if current.spec.lag_kind == "rate_limit"
+                else _refine_lag_delay(trial, inputs, current))
     if kind != "creep":
         return current
     bare = replace(current.spec, creep_tau_s=(), creep_asym_s=())
