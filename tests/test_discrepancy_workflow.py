@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -378,6 +379,11 @@ def test_a_slew_rate_limit_is_named_lag_and_fitted_as_one(tmp_path):
     _assert_the_profile_reproduces(  # the first sensor's rate made negative
         outcome, tmp_path, ("lag_rates_per_s = [", "lag_rates_per_s = [-"),
         "positive lag_rates_per_s per sensor")
+    nan_rate = re.sub(r"lag_rates_per_s = \[[^,\]]+", "lag_rates_per_s = [nan",
+                      (tmp_path / "p.toml").read_text())  # the first sensor's rate not a number
+    (tmp_path / "nan.toml").write_text(nan_rate)
+    with pytest.raises(ProfileError, match="positive lag_rates_per_s per sensor"):
+        load_calibrated_profile(tmp_path / "nan.toml")
 
 
 def test_hidden_hysteresis_is_named_and_the_gap_shrinks(hysteresis_outcome):

@@ -192,7 +192,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                     drift_degree=int(terms["drift_degree"]),
                     saturation=bool(terms["saturation"]))
         if spec.lag_kind == "rate_limit" and (
-                len(spec.lag_rates) != len(sensors) or min(spec.lag_rates) <= 0):
+                len(spec.lag_rates) != len(sensors) or not all(r > 0 for r in spec.lag_rates)):
             raise ValueError(f"a rate_limit lag needs a positive lag_rates_per_s per sensor "
                              f"({len(sensors)}), not {list(spec.lag_rates)}")
         inputs = Inputs(u=np.empty((0, 0)), input_kind=str(sm["inputs"]),
