@@ -75,6 +75,58 @@ def test_sequence_gaps_become_invalid_grid_frames():
     np.testing.assert_allclose(trial.t, rec.sensors.t, atol=1e-9)
 
 
+@pytest.mark.parametrize("writer", ["counter in steps of 4", "jittering millisecond clock"])
+def test_seq_that_is_not_a_plain_counter_still_places_one_frame_per_grid_point(writer):
+    """Another tool's seq may count 4 per frame or be a millisecond clock with jitter; either
+    way each frame gets its own grid point at the device's rate and a dropped frame is an
+    empty one (with seq as grid index the frames sat on every 4th point, the trial had
+    three invalid frames in four and was refused as too short)."""
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    n = len(rec.sensors)
+    if writer == "counter in steps of 4":
+        seq = 4 * rec.sensors.seq
+    else:
+        jitter = np.random.default_rng(0).uniform(0.0, 0.0015, n)
+        seq = np.floor((rec.sensors.t + jitter) * 1000.0).astype(np.int64)
+        seq = np.maximum.accumulate(seq - np.arange(n)) + np.arange(n)  # strictly increasing
+    keep = np.ones(n, dtype=bool)
+    keep[2000:2003] = False
+
+    def dropped(seq: np.ndarray) -> Recording:
+        return replace(rec, sensors=SensorStream(seq=seq[keep], t=rec.sensors.t[keep],
+                                                 values=rec.sensors.values[keep]))
+
+    trial, counted = prepare_trial(dropped(seq)), prepare_trial(dropped(rec.sensors.seq))
+    assert trial.n == counted.n == n
+    assert not trial.valid[2000:2003].any()
+    np.testing.assert_array_equal(trial.valid, counted.valid)
+    np.testing.assert_array_equal(trial.y, counted.y)
+    assert trial.rate_hz == pytest.approx(250.0, rel=1e-3)
+    assert "4 per frame" in trial.placed_by and counted.placed_by == "frame counter"
+
+
+def test_a_grid_mostly_empty_is_one_clear_error():
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    seq = rec.sensors.seq.copy()
+    seq[100:] += 10**9  # a counter that jumped: a grid of 10⁹ points would not fit in memory
+    with pytest.raises(DiscrepancyError, match="over 90% of the frames are missing"):
+        prepare_trial(replace(rec, sensors=replace(rec.sensors, seq=seq)), "x.mcap")
+
+
+def test_mocap_samples_without_finite_angles_are_not_interpolated():
+    """A tracker that writes NaN for lost markers (possible in memory, though recording files
+    hold finite values only): the lost samples are dropped, not spread by interpolation."""
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    stream = rec.mocap["shoulder"]
+    angles = stream.angles.copy()
+    angles[::20, 0] = np.nan
+    angles[(stream.t > 10.0) & (stream.t < 11.0), 1] = np.nan
+    trial = prepare_trial(replace(rec, mocap={"shoulder": replace(stream, angles=angles)}))
+    assert np.isfinite(trial.angles).all()
+    assert not trial.valid[(trial.t > 10.01) & (trial.t < 10.99)].any()
+    assert trial.valid.mean() > 0.95
+
+
 def test_frames_in_a_mocap_dropout_are_invalid():
     rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
     stream = rec.mocap["shoulder"]

@@ -25,6 +25,8 @@ BLOCK_S = 2.5
 MIN_BLOCK_S = BLOCK_S
 #: Motion-capture samples further apart than this many median intervals are a dropout.
 MOCAP_GAP_INTERVALS = 4.0
+#: A sensor frame grid may hold at most this many points per frame received (90 % dropped).
+MAX_GRID_PER_FRAME = 10
 #: A sensor with readings on fewer frames than this share is left out of the analysis.
 MIN_SENSOR_COVERAGE = 0.5
 
@@ -54,6 +56,7 @@ class Trial:
             :func:`exohil.emulators.discrepancy.model.restrict_to_coverage`).
         ignored: sensors of the recording left out of the analysis, each with the reason
             (:func:`unusable_sensors`); ``sensor_names`` lists only the analysed ones.
+        placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
     """
 
     t: np.ndarray
@@ -69,6 +72,7 @@ class Trial:
     scored: np.ndarray
     noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ignored: tuple[tuple[str, str], ...] = ()
+    placed_by: str = "frame counter"
 
     @property
     def n(self) -> int:
@@ -93,8 +97,10 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     ``Trial.ignored``: one dead channel should not hide what the others show.
 
     Raises:
-        DiscrepancyError: no sensors, no usable sensor, no motion capture, no moving angle, or
-            too short for ``N_BLOCKS`` blocks of at least ``MIN_BLOCK_S`` seconds.
+        DiscrepancyError: no sensors, no usable sensor, no motion capture (or no two finite
+            mocap samples), no moving angle, most sensor frames missing
+            (``MAX_GRID_PER_FRAME``), or too short for ``N_BLOCKS`` blocks of at least
+            ``MIN_BLOCK_S`` seconds.
     """
     if len(rec.sensors) < 2 or not rec.sensor_names:
         raise DiscrepancyError(f"{name}: no sensor frames; the workflow needs sensors and "
@@ -104,10 +110,13 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
                                "from the measured angles, so it needs a /mocap/<joint> stream")
     joint = _joint(rec)
     stream = rec.mocap[joint]
-    seq = np.asarray(rec.sensors.seq, dtype=np.int64)
     t_frames = np.asarray(rec.sensors.t, dtype=np.float64)
-    index = seq - seq[0]
+    index, placed_by = frame_grid(np.asarray(rec.sensors.seq, dtype=np.int64))
     n = int(index[-1]) + 1
+    if n > MAX_GRID_PER_FRAME * len(index):
+        raise DiscrepancyError(
+            f"{name}: the {len(index)} sensor frames are spread over {n} frame times ({placed_by}):"
+            f" over {1 - 1 / MAX_GRID_PER_FRAME:.0%} of the frames are missing")
     grid = np.arange(n)
     t = np.interp(grid, index, t_frames)
     present = np.zeros(n, dtype=bool)
@@ -124,6 +133,11 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
     order = np.argsort(stream.t, kind="stable")
     t_mocap = np.asarray(stream.t, dtype=np.float64)[order]
     raw = np.asarray(stream.angles, dtype=np.float64)[order]
+    tracked = np.all(np.isfinite(raw), axis=1) & np.isfinite(t_mocap)  # NaN: markers lost
+    t_mocap, raw = t_mocap[tracked], raw[tracked]
+    if len(t_mocap) < 2:
+        raise DiscrepancyError(f"{name}: the mocap joint {joint!r} has fewer than two samples "
+                               "with finite angles")
     if t_mocap[0] > t[-1] or t_mocap[-1] < t[0]:
         raise DiscrepancyError(
             f"{name}: motion capture ({t_mocap[0]:.6g}–{t_mocap[-1]:.6g} s) and sensors "
@@ -154,9 +168,33 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
                   angle_names=tuple(stream.names[k] for k in moving), joint=joint,
                   sensor_names=tuple(rec.sensor_names[j] for j in keep),
                   units=rec.sensor_units, rate_hz=rate, blocks=blocks.astype(np.int64),
-                  scored=valid.copy(), ignored=ignored)
+                  scored=valid.copy(), ignored=ignored, placed_by=placed_by)
     trial.noise = noise_floor(trial)
     return trial
+
+
+def frame_grid(seq: np.ndarray) -> tuple[np.ndarray, str]:
+    """Each frame's index on the uniform grid, and how it was placed (a short phrase).
+
+    The grid step is the most common increment of ``seq``: 1 for a frame counter (dropped
+    frames are the larger increments), k for a counter that counts in steps of k or a
+    millisecond clock sampled every k ms. A frame sits at ``round((seq − seq₀) / step)``,
+    moved on by one where that would repeat its predecessor's index (a jittering
+    millisecond clock). The grid then runs at the device's sampling rate and a dropped
+    frame is an empty grid point, whatever the counter counts.
+
+    Args:
+        seq: (N,) strictly increasing sequence numbers.
+    """
+    increments, counts = np.unique(np.diff(seq), return_counts=True)
+    step = int(increments[np.argmax(counts)]) if increments.size else 1
+    index = np.round((seq - seq[0]) / step).astype(np.int64)
+    order = np.arange(len(seq))
+    index = np.maximum.accumulate(index - order) + order  # at least one step per frame
+    if step == 1:
+        return index, "frame counter"
+    exact = bool(np.all((seq - seq[0]) % step == 0))
+    return index, f"seq counting {step} per frame" + ("" if exact else ", rounded")
 
 
 def in_mocap_gap(t: np.ndarray, t_mocap: np.ndarray) -> np.ndarray:
@@ -217,7 +255,8 @@ def noise_floor(trial: Trial) -> np.ndarray:
     (:func:`quantisation_step`). The floor is the larger of the two.
     """
     ok = trial.valid[2:] & trial.valid[1:-1] & trial.valid[:-2]
-    d2 = trial.y[2:] - 2.0 * trial.y[1:-1] + trial.y[:-2]
+    y = np.where(trial.valid[:, None], trial.y, 0.0)  # invalid frames may hold NaN or inf
+    d2 = y[2:] - 2.0 * y[1:-1] + y[:-2]
     d2 = d2[ok]
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
     step = np.array([quantisation_step(trial.y[trial.valid, j]) for j in range(trial.y.shape[1])])

@@ -458,9 +458,10 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     trial = prepare_trial(rec, name)
     floors = trial.noise
     floor = float(np.sqrt(np.mean(floors**2)))
+    placed = "" if trial.placed_by == "frame counter" else f" (placed by {trial.placed_by})"
     progress(f"[1] calibrating the static map: {trial.n_sensors} sensors ({trial.units}) from "
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
-             f"{trial.rate_hz:.1f} Hz, {int((~trial.valid).sum())} invalid; noise floor "
+             f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
     for sensor, reason in trial.ignored:
         progress(f"    left out sensor {sensor}: it {reason}")
@@ -552,6 +553,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "angles": list(trial.angle_names),
         "rate_hz": round(trial.rate_hz, 4),
         "frames": trial.n,
+        "frames_placed_by": trial.placed_by,
         "invalid_frames": int((~trial.valid).sum()),
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
