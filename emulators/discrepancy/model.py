@@ -451,12 +451,6 @@ def plateaus(trial: Trial, inputs: Inputs, j: int) -> tuple[float, float]:
     return lo, hi
 
 
-def _decimate(x: np.ndarray, m: int) -> np.ndarray:
-    """Mean of consecutive groups of m rows (a trailing partial group is dropped)."""
-    n = (x.shape[0] // m) * m
-    return x[:n].reshape(n // m, m, *x.shape[1:]).mean(axis=1)
-
-
 @dataclass
 class Fit:
     """Blocked cross-validation and full-data fit of one model.
@@ -545,29 +539,59 @@ class Ridge:
 class Reduced:
     """A design and measurement averaged down to about ``FIT_RATE_HZ`` for the fits.
 
+    Rows average the valid frames of a group of ``m`` consecutive grid frames in one
+    held-out block: a group that straddles a block boundary gives one row per block, or
+    the fit that predicts a block would hold some of its frames. A row is fit to use
+    (``whole``) when at least half of its frames are valid.
+
     Attributes:
-        xd: (M, P) design, mean of groups of ``m`` frames.
-        yd: (M,) measurement, same groups.
-        bd: (M,) the held-out block of each group.
+        xd: (M, P) design, mean of each row's valid frames.
+        yd: (M,) measurement, same rows.
+        bd: (M,) the held-out block of each row (−1: no valid frame).
         m: frames per group.
+        group: (M,) the group (grid frames ``group·m … group·m + m − 1``) of each row.
+        frames: (M, m) bool, the valid frames of its group each row averages.
+        whole: (M,) bool, rows fit to use.
     """
 
     xd: np.ndarray
     yd: np.ndarray
     bd: np.ndarray
     m: int
+    group: np.ndarray
+    frames: np.ndarray
+    whole: np.ndarray
 
     def usable(self, mask: np.ndarray) -> np.ndarray:
-        """(M,) groups whose frames are all in ``mask`` (N,)."""
-        return _decimate(mask[:, None].astype(np.float64), self.m)[:, 0] == 1.0
+        """(M,) rows fit to use whose averaged frames are all in ``mask`` (N,)."""
+        inside = mask[: self.m * (self.group.max(initial=-1) + 1)].reshape(-1, self.m)
+        return self.whole & ~np.any(self.frames & ~inside[self.group], axis=1)
 
 
 def reduce(trial: Trial, x: np.ndarray, y: np.ndarray) -> Reduced:
-    """The design x (N, P) and measurement y (N,) averaged to about ``FIT_RATE_HZ``."""
+    """The design x (N, P), finite on every frame, and measurement y (N,), which may be
+    NaN where invalid, averaged to about ``FIT_RATE_HZ`` (a trailing partial group is
+    dropped)."""
     m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
-    xd = _decimate(x, m)
-    return Reduced(xd=xd, yd=_decimate(y[:, None], m)[:, 0],
-                   bd=trial.blocks[: xd.shape[0] * m: m], m=m)
+    n = (trial.n // m) * m
+    valid = trial.valid[:n].reshape(-1, m)
+    blocks = trial.blocks[:n].reshape(-1, m)
+    first = np.where(valid, blocks, N_BLOCKS).min(axis=1)
+    last = np.where(valid, blocks, -1).max(axis=1)
+    # a block holds ≥ 2.5 s, a group 40 ms: a group meets at most two blocks
+    split = np.flatnonzero((first != last) & (last >= 0))
+    group = np.concatenate([np.arange(valid.shape[0]), split])
+    bd = np.concatenate([np.where(last >= 0, first, -1), last[split]])
+    in_block = blocks[group] == bd[:, None]
+    frames = valid[group] & in_block
+    count = frames.sum(axis=1)
+    weights = frames / np.maximum(count, 1)[:, None]  # each row's mean over its valid frames
+    xg = x[:n].reshape(-1, m, x.shape[1])
+    xd = np.concatenate([np.einsum("gk,gkp->gp", weights[: len(first)], xg),
+                         np.einsum("gk,gkp->gp", weights[len(first):], xg[split])])
+    yd = np.sum(weights * np.where(frames, y[:n].reshape(-1, m)[group], 0.0), axis=1)
+    return Reduced(xd=xd, yd=yd, bd=bd, m=m, group=group, frames=frames,
+                   whole=2 * count >= in_block.sum(axis=1))
 
 
 def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, ridge: Ridge | None = None,
@@ -647,7 +671,7 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
     coefs = coefs.copy()
     for _ in range(shared):
         xw, target = linearised(red.xd, red.yd, coefs[-1])
-        coefs = fold_coefs(Reduced(xd=xw, yd=target, bd=red.bd, m=red.m), ok, ridge)
+        coefs = fold_coefs(replace(red, xd=xw, yd=target), ok, ridge)
     for _ in range(own):
         xw = linearised(red.xd[ok], red.yd[ok], coefs[-1])[0]
         effect = ridge.effect_loading(xw.T @ xw)
