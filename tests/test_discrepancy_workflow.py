@@ -130,6 +130,10 @@ def test_frames_dropped_at_random_leave_the_fits_their_data():
     n = trial.n // red.m * red.m
     every = red.group[:, None] * red.m + np.arange(red.m)
     np.testing.assert_array_equal(np.bincount(every[red.frames], minlength=n), trial.valid[:n])
+    trial.valid[1000:1100] = False  # a mocap dropout: rows with no valid frame are not used
+    red = reduce(trial, trial.t[:, None], trial.y[:, 0])
+    empty = red.frames.sum(axis=1) == 0
+    assert empty.sum() >= 8 and not red.usable(trial.valid)[empty].any()
     outcome = run(lossy, "lossy")
     assert outcome.summary["effects"] == []
     # 0.20 mm against a floor of 0.15 (0.17 without the drops: which poses a held-out block

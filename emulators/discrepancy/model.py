@@ -591,7 +591,7 @@ def reduce(trial: Trial, x: np.ndarray, y: np.ndarray) -> Reduced:
                          np.einsum("gk,gkp->gp", weights[len(first):], xg[split])])
     yd = np.sum(weights * np.where(frames, y[:n].reshape(-1, m)[group], 0.0), axis=1)
     return Reduced(xd=xd, yd=yd, bd=bd, m=m, group=group, frames=frames,
-                   whole=2 * count >= in_block.sum(axis=1))
+                   whole=(count > 0) & (2 * count >= in_block.sum(axis=1)))
 
 
 def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, ridge: Ridge | None = None,
