@@ -420,15 +420,15 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
         build_s, recover_s = spec.creep_asym_s
         pose.append(creep_asym_columns(inputs, build_s, recover_s, rate_hz)[:, j:j + 1])
     # the lag acts column by column, so the shared static part is lagged once (cached)
-    x = lagged_static_basis(inputs, spec, rate_hz)
+    parts = [lagged_static_basis(inputs, spec, rate_hz)]
     if pose:
-        x = np.hstack([x, apply_lag(np.hstack(pose), spec.lag_kind, spec.lag_s, rate_hz,
-                                    spec.lag_delay_s)])
+        parts.append(apply_lag(np.hstack(pose), spec.lag_kind, spec.lag_s, rate_hz,
+                               spec.lag_delay_s))
     if spec.lag_kind == "rate_limit":
-        x = np.hstack([x, rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz)])
+        parts.append(rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz))
     if spec.drift_degree:
-        x = np.hstack([x, drift_columns(inputs.t_norm, spec.drift_degree)])
-    return x
+        parts.append(drift_columns(inputs.t_norm, spec.drift_degree))
+    return np.hstack(parts) if len(parts) > 1 else parts[0]
 
 
 def plateaus(trial: Trial, inputs: Inputs, j: int) -> tuple[float, float]:
@@ -547,7 +547,8 @@ class Reduced:
     Attributes:
         xd: (M, P) design, mean of each row's valid frames.
         yd: (M,) measurement, same rows.
-        bd: (M,) the held-out block of each row (−1: no valid frame).
+        bd: (M,) the held-out block of each row (−1: no valid frame), ascending: each
+            block's rows are contiguous.
         m: frames per group.
         group: (M,) the group (grid frames ``group·m … group·m + m − 1``) of each row.
         frames: (M, m) bool, the valid frames of its group each row averages.
@@ -590,8 +591,10 @@ def reduce(trial: Trial, x: np.ndarray, y: np.ndarray) -> Reduced:
     xd = np.concatenate([np.einsum("gk,gkp->gp", weights[: len(first)], xg),
                          np.einsum("gk,gkp->gp", weights[len(first):], xg[split])])
     yd = np.sum(weights * np.where(frames, y[:n].reshape(-1, m)[group], 0.0), axis=1)
-    return Reduced(xd=xd, yd=yd, bd=bd, m=m, group=group, frames=frames,
-                   whole=(count > 0) & (2 * count >= in_block.sum(axis=1)))
+    order = np.argsort(bd, kind="stable")  # each block's rows contiguous (fold_coefs)
+    whole = (count > 0) & (2 * count >= in_block.sum(axis=1))
+    return Reduced(xd=xd[order], yd=yd[order], bd=bd[order], m=m, group=group[order],
+                   frames=frames[order], whole=whole[order])
 
 
 def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, ridge: Ridge | None = None,
@@ -626,10 +629,14 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
     p = red.xd.shape[1]
     grams = np.empty((N_BLOCKS, p, p))
     rhs = np.empty((N_BLOCKS, p))
+    bounds = np.searchsorted(red.bd, np.arange(N_BLOCKS + 1))  # rows sorted by block
     for b in range(N_BLOCKS):
-        sel = ok & (red.bd == b)
-        grams[b] = red.xd[sel].T @ red.xd[sel]
-        rhs[b] = red.xd[sel].T @ red.yd[sel]
+        rows = slice(bounds[b], bounds[b + 1])
+        xb, yb, keep = red.xd[rows], red.yd[rows], ok[rows]
+        if not keep.all():  # a view where every row counts (no copy)
+            xb, yb = xb[keep], yb[keep]
+        grams[b] = xb.T @ xb
+        rhs[b] = xb.T @ yb
     gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
     effect = ridge.effect_loading(gram_all)
     folds = [(gram_all - grams[b], rhs_all - rhs[b]) for b in range(N_BLOCKS)]
@@ -641,11 +648,10 @@ def heldout_residual(trial: Trial, x: np.ndarray, y: np.ndarray, coefs: np.ndarr
                      stops: Stops = NO_STOPS) -> np.ndarray:
     """(N,) measurement minus the prediction (through ``stops``) of the fold that did not see
     the frame; NaN where not scored."""
-    residual = np.full(y.shape, np.nan)
-    for b in range(N_BLOCKS):
-        sel = trial.scored & (trial.blocks == b)
-        residual[sel] = y[sel] - stops.apply(x[sel] @ coefs[b])
-    return residual
+    folds = x @ coefs[:N_BLOCKS].T  # (N, N_BLOCKS): one product, each frame's column picked
+    held = folds[np.arange(len(y)), trial.blocks]
+    with np.errstate(invalid="ignore"):  # y may be NaN or inf where invalid, never scored
+        return np.where(trial.scored, y - stops.apply(held), np.nan)
 
 
 def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
