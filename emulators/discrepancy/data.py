@@ -57,6 +57,8 @@ class Trial:
         ignored: sensors of the recording left out of the analysis, each with the reason
             (:func:`unusable_sensors`); ``sensor_names`` lists only the analysed ones.
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
+        cache: what the fits derive from ``valid`` and ``blocks`` alone (set once, never
+            changed after :func:`prepare_trial`).
     """
 
     t: np.ndarray
@@ -73,6 +75,7 @@ class Trial:
     noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ignored: tuple[tuple[str, str], ...] = ()
     placed_by: str = "frame counter"
+    cache: dict = field(default_factory=dict, repr=False)
 
     @property
     def n(self) -> int:

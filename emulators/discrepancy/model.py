@@ -409,8 +409,35 @@ def lagged_static_basis(inputs: Inputs, spec: Spec, rate_hz: float) -> np.ndarra
     return kept[1]
 
 
-def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
-    """(N, P) design matrix of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
+@dataclass(frozen=True)
+class Design:
+    """One sensor's design matrix [shared | own], (N, Ps + Pe), kept as its two blocks.
+
+    ``shared`` is the (lagged) static basis, the same array for every sensor and every
+    candidate with that lag (cached, never copied); ``own`` holds the sensor's effect
+    columns (Pe ≥ 0). Every fit touches each block once at the full rate: joining them
+    would copy the whole matrix per sensor per fit.
+    """
+
+    shared: np.ndarray
+    own: np.ndarray
+
+    @classmethod
+    def of(cls, x: np.ndarray) -> Design:
+        """A design that is one plain (N, P) matrix."""
+        return cls(shared=x, own=x[:, :0])
+
+    def times(self, coefs: np.ndarray) -> np.ndarray:
+        """(N, K): the design times each row of ``coefs`` (K, P); (N,) for one (P,)."""
+        ps = self.shared.shape[1]
+        out = self.shared @ coefs[..., :ps].T
+        if self.own.shape[1]:
+            out = out + self.own @ coefs[..., ps:].T
+        return out
+
+
+def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
+    """The design of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
     pose = []
     if spec.hysteresis:
         pose.append(hysteresis_columns(inputs)[:, j, :])
@@ -420,15 +447,16 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> np.ndarray:
         build_s, recover_s = spec.creep_asym_s
         pose.append(creep_asym_columns(inputs, build_s, recover_s, rate_hz)[:, j:j + 1])
     # the lag acts column by column, so the shared static part is lagged once (cached)
-    parts = [lagged_static_basis(inputs, spec, rate_hz)]
+    shared = lagged_static_basis(inputs, spec, rate_hz)
+    own = []
     if pose:
-        parts.append(apply_lag(np.hstack(pose), spec.lag_kind, spec.lag_s, rate_hz,
-                               spec.lag_delay_s))
+        own.append(apply_lag(np.hstack(pose), spec.lag_kind, spec.lag_s, rate_hz,
+                             spec.lag_delay_s))
     if spec.lag_kind == "rate_limit":
-        parts.append(rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz))
+        own.append(rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz))
     if spec.drift_degree:
-        parts.append(drift_columns(inputs.t_norm, spec.drift_degree))
-    return np.hstack(parts) if len(parts) > 1 else parts[0]
+        own.append(drift_columns(inputs.t_norm, spec.drift_degree))
+    return Design(shared=shared, own=np.hstack(own) if own else shared[:, :0])
 
 
 def plateaus(trial: Trial, inputs: Inputs, j: int) -> tuple[float, float]:
@@ -569,10 +597,37 @@ class Reduced:
         return self.whole & ~np.any(self.frames & ~inside[self.group], axis=1)
 
 
-def reduce(trial: Trial, x: np.ndarray, y: np.ndarray) -> Reduced:
-    """The design x (N, P), finite on every frame, and measurement y (N,), which may be
-    NaN where invalid, averaged to about ``FIT_RATE_HZ`` (a trailing partial group is
-    dropped)."""
+@dataclass(frozen=True)
+class Groups:
+    """How a trial's frames are averaged into fit rows (:class:`Reduced`, the same for every
+    design): ``weights`` (G + K, m) of each row over its group's frames (rows G… are the
+    second halves of the K groups ``split`` across a block edge), ``order`` the rows sorted
+    by block."""
+
+    m: int
+    n: int
+    weights: np.ndarray
+    split: np.ndarray
+    order: np.ndarray
+    group: np.ndarray
+    frames: np.ndarray
+    bd: np.ndarray
+    whole: np.ndarray
+
+    def mean(self, a: np.ndarray) -> np.ndarray:
+        """(M, P) each row's mean of ``a`` (N, P), finite on every valid frame."""
+        g = self.n // self.m
+        a3 = a[: self.n].reshape(g, self.m, a.shape[1])
+        out = np.concatenate([np.einsum("gk,gkp->gp", self.weights[:g], a3),
+                              np.einsum("gk,gkp->gp", self.weights[g:], a3[self.split])])
+        return out[self.order]
+
+
+def fit_groups(trial: Trial) -> Groups:
+    """The trial's fit rows (see :class:`Reduced`), computed once per trial."""
+    kept = trial.cache.get("groups")
+    if kept is not None:
+        return kept
     m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
     n = (trial.n // m) * m
     valid = trial.valid[:n].reshape(-1, m)
@@ -587,24 +642,37 @@ def reduce(trial: Trial, x: np.ndarray, y: np.ndarray) -> Reduced:
     frames = valid[group] & in_block
     count = frames.sum(axis=1)
     weights = frames / np.maximum(count, 1)[:, None]  # each row's mean over its valid frames
-    xg = x[:n].reshape(-1, m, x.shape[1])
-    xd = np.concatenate([np.einsum("gk,gkp->gp", weights[: len(first)], xg),
-                         np.einsum("gk,gkp->gp", weights[len(first):], xg[split])])
-    yd = np.sum(weights * np.where(frames, y[:n].reshape(-1, m)[group], 0.0), axis=1)
     order = np.argsort(bd, kind="stable")  # each block's rows contiguous (fold_coefs)
     whole = (count > 0) & (2 * count >= in_block.sum(axis=1))
-    return Reduced(xd=xd[order], yd=yd[order], bd=bd[order], m=m, group=group[order],
-                   frames=frames[order], whole=whole[order])
+    groups = Groups(m=m, n=n, weights=weights, split=split, order=order, group=group[order],
+                    frames=frames[order], bd=bd[order], whole=whole[order])
+    trial.cache["groups"] = groups
+    return groups
 
 
-def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, ridge: Ridge | None = None,
+def reduce(trial: Trial, x: Design, y: np.ndarray) -> Reduced:
+    """The design x (finite on every valid frame) and measurement y (N,), which may be NaN
+    where invalid, averaged to about ``FIT_RATE_HZ`` (a trailing partial group is dropped).
+    The shared block's average is kept for the next design that shares it."""
+    groups = fit_groups(trial)
+    kept = trial.cache.get("shared")
+    if kept is None or kept[0] is not x.shared:
+        kept = (x.shared, groups.mean(x.shared))
+        trial.cache["shared"] = kept
+    xd = np.hstack([kept[1], groups.mean(x.own)]) if x.own.shape[1] else kept[1]
+    yd = groups.mean(np.where(trial.valid, y, 0.0)[:, None])[:, 0]
+    return Reduced(xd=xd, yd=yd, bd=groups.bd, m=groups.m, group=groups.group,
+                   frames=groups.frames, whole=groups.whole)
+
+
+def fit_design(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = None,
                fit_mask: np.ndarray | None = None, reduced: Reduced | None = None,
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Blocked CV and full-data fit of one sensor on design x (N, P).
 
     Args:
         trial: blocks, validity and rate.
-        x: (N, P) design matrix.
+        x: the design, (N, P).
         y: (N,) measurement.
         ridge: the relative ridge (default: ``RIDGE`` on every column).
         fit_mask: (N,) frames allowed in the fits (default: all valid frames); held-out
@@ -617,10 +685,10 @@ def fit_design(trial: Trial, x: np.ndarray, y: np.ndarray, ridge: Ridge | None =
         full-data prediction (N,).
     """
     mask = trial.valid if fit_mask is None else trial.valid & fit_mask
-    ridge = Ridge(n_static=x.shape[1]) if ridge is None else ridge
     red = reduce(trial, x, y) if reduced is None else reduced
+    ridge = Ridge(n_static=red.xd.shape[1]) if ridge is None else ridge
     coefs = fold_coefs(red, red.usable(mask), ridge)
-    return heldout_residual(trial, x, y, coefs), coefs[-1], x @ coefs[-1]
+    return heldout_residual(trial, x, y, coefs)
 
 
 def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
@@ -644,14 +712,17 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
                       for gram, rhs in folds + [(gram_all, rhs_all)]])
 
 
-def heldout_residual(trial: Trial, x: np.ndarray, y: np.ndarray, coefs: np.ndarray,
-                     stops: Stops = NO_STOPS) -> np.ndarray:
-    """(N,) measurement minus the prediction (through ``stops``) of the fold that did not see
-    the frame; NaN where not scored."""
-    folds = x @ coefs[:N_BLOCKS].T  # (N, N_BLOCKS): one product, each frame's column picked
-    held = folds[np.arange(len(y)), trial.blocks]
+def heldout_residual(trial: Trial, x: Design, y: np.ndarray, coefs: np.ndarray,
+                     stops: Stops = NO_STOPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Measurement minus the prediction (through ``stops``) of the fold that did not see the
+    frame, (N,) and NaN where not scored; the all-block coefficients (P,); and their
+    prediction through ``stops`` (N,). One product of the design with every row of
+    ``coefs`` (N_BLOCKS + 1, P)."""
+    product = x.times(coefs)  # (N, N_BLOCKS + 1): each frame's fold column picked
+    held = product[np.arange(len(y)), trial.blocks]
     with np.errstate(invalid="ignore"):  # y may be NaN or inf where invalid, never scored
-        return np.where(trial.scored, y - stops.apply(held), np.nan)
+        residual = np.where(trial.scored, y - stops.apply(held), np.nan)
+    return residual, coefs[-1], stops.apply(product[:, -1])
 
 
 def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
@@ -783,7 +854,7 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
     return best[1]
 
 
-def fit_with_stops(trial: Trial, x: np.ndarray, y: np.ndarray, ridge: Ridge,
+def fit_with_stops(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge,
                    stops: Stops, sigma: float, red: Reduced, plain: np.ndarray,
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`fit_design`'s outputs for a sensor with ``stops``: with hard stops only, the map
@@ -792,7 +863,7 @@ def fit_with_stops(trial: Trial, x: np.ndarray, y: np.ndarray, ridge: Ridge,
     ok = red.usable(trial.valid & off_hard_stops(y, stops, sigma))
     coefs = (fit_through_stops(red, ok, ridge, stops, plain) if stops.soft
              else fold_coefs(red, ok, ridge))
-    return heldout_residual(trial, x, y, coefs, stops), coefs[-1], stops.apply(x @ coefs[-1])
+    return heldout_residual(trial, x, y, coefs, stops)
 
 
 def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
@@ -874,7 +945,7 @@ def make_inputs(trial: Trial, static_degree: int, ridge: float = RIDGE,
         return inputs
     basis = static_basis(inputs, static_degree)
     static_ridge = Ridge(n_static=basis.shape[1], static=ridge)
-    coef = np.column_stack([fit_design(trial, basis, trial.y[:, j], static_ridge)[1]
+    coef = np.column_stack([fit_design(trial, Design.of(basis), trial.y[:, j], static_ridge)[1]
                             for j in range(trial.n_sensors)])
     inputs.static_coef = coef
     inputs.static = basis @ coef

@@ -232,7 +232,7 @@ def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndar
     out = np.empty((t.shape[0], len(suit.sensors)))
     for j in range(len(suit.sensors)):
         out[:, j] = suit.stops[j].apply(design(suit.rate_hz, inputs, suit.spec, j)
-                                        @ suit.coef[j])
+                                        .times(suit.coef[j]))
     return out
 
 
