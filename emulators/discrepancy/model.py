@@ -688,7 +688,7 @@ def fit_design(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = Non
     red = reduce(trial, x, y) if reduced is None else reduced
     ridge = Ridge(n_static=red.xd.shape[1]) if ridge is None else ridge
     coefs = fold_coefs(red, red.usable(mask), ridge)
-    return heldout_residual(trial, x, y, coefs)
+    return fold_predictions(trial, x, y, coefs)
 
 
 def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
@@ -712,12 +712,12 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
                       for gram, rhs in folds + [(gram_all, rhs_all)]])
 
 
-def heldout_residual(trial: Trial, x: Design, y: np.ndarray, coefs: np.ndarray,
+def fold_predictions(trial: Trial, x: Design, y: np.ndarray, coefs: np.ndarray,
                      stops: Stops = NO_STOPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Measurement minus the prediction (through ``stops``) of the fold that did not see the
-    frame, (N,) and NaN where not scored; the all-block coefficients (P,); and their
-    prediction through ``stops`` (N,). One product of the design with every row of
-    ``coefs`` (N_BLOCKS + 1, P)."""
+    """A fit's outputs from its fold coefficients ``coefs`` (N_BLOCKS + 1, P), in one
+    product of the design with every row: the held-out residual (N,), measurement minus
+    the prediction (through ``stops``) of the fold that did not see the frame, NaN where not
+    scored; the all-block coefficients (P,); and their prediction through ``stops`` (N,)."""
     product = x.times(coefs)  # (N, N_BLOCKS + 1): each frame's fold column picked
     held = product[np.arange(len(y)), trial.blocks]
     with np.errstate(invalid="ignore"):  # y may be NaN or inf where invalid, never scored
@@ -863,7 +863,7 @@ def fit_with_stops(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge,
     ok = red.usable(trial.valid & off_hard_stops(y, stops, sigma))
     coefs = (fit_through_stops(red, ok, ridge, stops, plain) if stops.soft
              else fold_coefs(red, ok, ridge))
-    return heldout_residual(trial, x, y, coefs, stops)
+    return fold_predictions(trial, x, y, coefs, stops)
 
 
 def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
