@@ -24,6 +24,7 @@ from exohil.emulators.discrepancy.hidden import (
 from exohil.emulators.discrepancy.localise import TIME_WINDOWS, localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
     Design,
+    Groups,
     Reduced,
     Ridge,
     Spec,
@@ -119,24 +120,25 @@ def test_frames_dropped_at_random_leave_the_fits_their_data():
                                               values=rec.sensors.values[keep]))
     trial = prepare_trial(lossy)
     red = reduce(trial, Design.of(trial.t[:, None]), trial.y[:, 0])
-    use = red.usable(trial.valid)
+    rows = red.rows
+    use = rows.usable(trial.valid)
     assert use.mean() > 0.9
-    rows = np.flatnonzero(use)
-    frames = red.group[rows, None] * red.m + np.arange(red.m)
-    averaged = red.frames[rows]
-    np.testing.assert_allclose(red.xd[rows, 0], np.sum(trial.t[frames] * averaged, axis=1)
+    used = np.flatnonzero(use)
+    frames = rows.group[used, None] * rows.m + np.arange(rows.m)
+    averaged = rows.frames[used]
+    np.testing.assert_allclose(red.xd[used, 0], np.sum(trial.t[frames] * averaged, axis=1)
                                / averaged.sum(axis=1))
-    assert np.all((trial.blocks[frames] == red.bd[rows, None]) | ~averaged)
+    assert np.all((trial.blocks[frames] == rows.bd[used, None]) | ~averaged)
     # every valid frame is averaged in exactly one row (a group across blocks: one per block)
-    n = trial.n // red.m * red.m
-    every = red.group[:, None] * red.m + np.arange(red.m)
-    np.testing.assert_array_equal(np.bincount(every[red.frames], minlength=n), trial.valid[:n])
+    n = trial.n // rows.m * rows.m
+    every = rows.group[:, None] * rows.m + np.arange(rows.m)
+    np.testing.assert_array_equal(np.bincount(every[rows.frames], minlength=n), trial.valid[:n])
     valid = trial.valid.copy()
     valid[1000:1100] = False  # a mocap dropout: rows with no valid frame are not used
     trial = replace(trial, valid=valid, cache={})
-    red = reduce(trial, Design.of(trial.t[:, None]), trial.y[:, 0])
-    empty = red.frames.sum(axis=1) == 0
-    assert empty.sum() >= 8 and not red.usable(trial.valid)[empty].any()
+    rows = reduce(trial, Design.of(trial.t[:, None]), trial.y[:, 0]).rows
+    empty = rows.frames.sum(axis=1) == 0
+    assert empty.sum() >= 8 and not rows.usable(trial.valid)[empty].any()
     outcome = run(lossy, "lossy")
     assert outcome.summary["effects"] == []
     # 0.20 mm against a floor of 0.15 (0.17 without the drops: which poses a held-out block
@@ -319,15 +321,18 @@ def test_the_effect_ridge_shrinks_only_what_the_column_adds_beyond_the_static_ma
     x = np.column_stack([np.ones(n), u, column])
     y = 3.0 + 2.0 * u + 0.06 * column + np.random.default_rng(0).normal(0.0, 0.001, n)
     every = np.ones(n, dtype=bool)
-    red = Reduced(xd=x, yd=y, bd=np.arange(n) * N_BLOCKS // n, m=1, group=np.arange(n),
-                  frames=every[:, None], whole=every)
+    bd = np.arange(n) * N_BLOCKS // n
+    one_frame_rows = Groups(m=1, n=n, weights=np.ones((n, 1)), split=np.empty(0, dtype=int),
+                            order=np.arange(n), group=np.arange(n), frames=every[:, None],
+                            bd=bd, whole=every)
+    red = Reduced(xd=x, yd=y, rows=one_frame_rows)
     coefs = fold_coefs(red, every, Ridge(n_static=2))
     np.testing.assert_allclose(coefs[:, 2], 0.06, rtol=0.03)
-    heldout = np.concatenate([y[red.bd == b] - x[red.bd == b] @ coefs[b]
+    heldout = np.concatenate([y[bd == b] - x[bd == b] @ coefs[b]
                               for b in range(N_BLOCKS)])
     assert np.sqrt(np.mean(heldout**2)) < 0.1 * np.std(0.06 * own)  # own part: 0.021
     # a column that adds nothing in a fold (constant there) gets no huge coefficient
-    flat = np.where(red.bd == 0, own, 0.3)
+    flat = np.where(bd == 0, own, 0.3)
     coefs = fold_coefs(replace(red, xd=np.column_stack([x[:, :2], flat])), every,
                        Ridge(n_static=2))
     assert np.all(np.abs(coefs[1:, 2]) < 1.0), coefs[:, 2]

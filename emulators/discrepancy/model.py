@@ -564,45 +564,27 @@ class Ridge:
 
 
 @dataclass(frozen=True)
-class Reduced:
-    """A design and measurement averaged down to about ``FIT_RATE_HZ`` for the fits.
+class Groups:
+    """How a trial's frames are averaged into fit rows, the same for every design.
 
     Rows average the valid frames of a group of ``m`` consecutive grid frames in one
     held-out block: a group that straddles a block boundary gives one row per block, or
     the fit that predicts a block would hold some of its frames. A row is fit to use
-    (``whole``) when at least half of its frames are valid.
+    (``whole``) when at least half of its frames are valid. Rows are sorted by block.
 
     Attributes:
-        xd: (M, P) design, mean of each row's valid frames.
-        yd: (M,) measurement, same rows.
-        bd: (M,) the held-out block of each row (−1: no valid frame), ascending: each
-            block's rows are contiguous.
         m: frames per group.
+        n: grid frames covered (whole groups; a trailing partial group is dropped).
+        weights: (G + K, m) each row's weight on its group's frames, in group order; rows
+            G… are the second halves of the K groups ``split`` across a block edge.
+        split: (K,) the groups split across a block edge.
+        order: (M,) the rows (as in ``weights``) sorted by block.
         group: (M,) the group (grid frames ``group·m … group·m + m − 1``) of each row.
         frames: (M, m) bool, the valid frames of its group each row averages.
+        bd: (M,) the held-out block of each row (−1: no valid frame), ascending: each
+            block's rows are contiguous.
         whole: (M,) bool, rows fit to use.
     """
-
-    xd: np.ndarray
-    yd: np.ndarray
-    bd: np.ndarray
-    m: int
-    group: np.ndarray
-    frames: np.ndarray
-    whole: np.ndarray
-
-    def usable(self, mask: np.ndarray) -> np.ndarray:
-        """(M,) rows fit to use whose averaged frames are all in ``mask`` (N,)."""
-        inside = mask[: self.m * (self.group.max(initial=-1) + 1)].reshape(-1, self.m)
-        return self.whole & ~np.any(self.frames & ~inside[self.group], axis=1)
-
-
-@dataclass(frozen=True)
-class Groups:
-    """How a trial's frames are averaged into fit rows (:class:`Reduced`, the same for every
-    design): ``weights`` (G + K, m) of each row over its group's frames (rows G… are the
-    second halves of the K groups ``split`` across a block edge), ``order`` the rows sorted
-    by block."""
 
     m: int
     n: int
@@ -622,9 +604,29 @@ class Groups:
                               np.einsum("gk,gkp->gp", self.weights[g:], a3[self.split])])
         return out[self.order]
 
+    def usable(self, mask: np.ndarray) -> np.ndarray:
+        """(M,) rows fit to use whose averaged frames are all in ``mask`` (N,)."""
+        inside = mask[: self.n].reshape(-1, self.m)
+        return self.whole & ~np.any(self.frames & ~inside[self.group], axis=1)
+
+
+@dataclass(frozen=True)
+class Reduced:
+    """A design and measurement averaged down to about ``FIT_RATE_HZ`` for the fits.
+
+    Attributes:
+        xd: (M, P) design, mean of each row's valid frames.
+        yd: (M,) measurement, same rows.
+        rows: how the rows were formed (:class:`Groups`).
+    """
+
+    xd: np.ndarray
+    yd: np.ndarray
+    rows: Groups
+
 
 def fit_groups(trial: Trial) -> Groups:
-    """The trial's fit rows (see :class:`Reduced`), computed once per trial."""
+    """The trial's fit rows (see :class:`Groups`), computed once per trial."""
     kept = trial.cache.get("groups")
     if kept is not None:
         return kept
@@ -661,8 +663,7 @@ def reduce(trial: Trial, x: Design, y: np.ndarray) -> Reduced:
         trial.cache["shared"] = kept
     xd = np.hstack([kept[1], groups.mean(x.own)]) if x.own.shape[1] else kept[1]
     yd = groups.mean(np.where(trial.valid, y, 0.0)[:, None])[:, 0]
-    return Reduced(xd=xd, yd=yd, bd=groups.bd, m=groups.m, group=groups.group,
-                   frames=groups.frames, whole=groups.whole)
+    return Reduced(xd=xd, yd=yd, rows=groups)
 
 
 def fit_design(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = None,
@@ -687,7 +688,7 @@ def fit_design(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = Non
     mask = trial.valid if fit_mask is None else trial.valid & fit_mask
     red = reduce(trial, x, y) if reduced is None else reduced
     ridge = Ridge(n_static=red.xd.shape[1]) if ridge is None else ridge
-    coefs = fold_coefs(red, red.usable(mask), ridge)
+    coefs = fold_coefs(red, red.rows.usable(mask), ridge)
     return fold_predictions(trial, x, y, coefs)
 
 
@@ -697,7 +698,7 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
     p = red.xd.shape[1]
     grams = np.empty((N_BLOCKS, p, p))
     rhs = np.empty((N_BLOCKS, p))
-    bounds = np.searchsorted(red.bd, np.arange(N_BLOCKS + 1))  # rows sorted by block
+    bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))  # rows sorted by block
     for b in range(N_BLOCKS):
         rows = slice(bounds[b], bounds[b + 1])
         xb, yb, keep = red.xd[rows], red.yd[rows], ok[rows]
@@ -753,7 +754,7 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
         xw = linearised(red.xd[ok], red.yd[ok], coefs[-1])[0]
         effect = ridge.effect_loading(xw.T @ xw)
         for b in range(N_BLOCKS + 1):
-            sel = ok & (red.bd != b)
+            sel = ok & (red.rows.bd != b)
             xw, target = linearised(red.xd[sel], red.yd[sel], coefs[b])
             gram = xw.T @ xw
             coefs[b] = _solve(gram, xw.T @ target, ridge.loading(gram, effect))
@@ -787,8 +788,8 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
     extremes = float(np.min(seen)), float(np.max(seen))
     best: tuple[float, Stops] | None = None
     # options are compared on the averaged groups (as the fits see them) of scored frames
-    scored = red.usable(trial.scored)
-    rows = [np.flatnonzero(scored & (red.bd == b)) for b in range(N_BLOCKS)]
+    scored = red.rows.usable(trial.scored)
+    rows = [np.flatnonzero(scored & (red.rows.bd == b)) for b in range(N_BLOCKS)]
 
     def heldout_mse(coefs: np.ndarray, stops: Stops) -> float:
         r = np.concatenate([red.yd[i] - stops.apply(red.xd[i] @ coefs[b])
@@ -803,12 +804,12 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
         if options[0].soft:
             scores = []
             for stop in options:
-                ok = red.usable(trial.valid & off_hard_stops(y, stop, sigma))
+                ok = red.rows.usable(trial.valid & off_hard_stops(y, stop, sigma))
                 coefs = fit_through_stops(red, ok, ridge, stop, plain, shared=2, own=0)
                 scores.append(heldout_mse(coefs, stop))
         else:
-            coefs = fold_coefs(red, red.usable(trial.valid & off_hard_stops(y, options[0], sigma)),
-                               ridge)
+            between = red.rows.usable(trial.valid & off_hard_stops(y, options[0], sigma))
+            coefs = fold_coefs(red, between, ridge)
             scores = [heldout_mse(coefs, stop) for stop in options]
         k = int(np.argmin(scores))
         if best is None or scores[k] < best[0]:
@@ -860,7 +861,7 @@ def fit_with_stops(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge,
     """:func:`fit_design`'s outputs for a sensor with ``stops``: with hard stops only, the map
     fitted off them; with a soft knee, fitted through the knees (:func:`fit_through_stops`,
     starting from ``plain``, the fold fits without stops)."""
-    ok = red.usable(trial.valid & off_hard_stops(y, stops, sigma))
+    ok = red.rows.usable(trial.valid & off_hard_stops(y, stops, sigma))
     coefs = (fit_through_stops(red, ok, ridge, stops, plain) if stops.soft
              else fold_coefs(red, ok, ridge))
     return fold_predictions(trial, x, y, coefs, stops)
@@ -883,7 +884,7 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
         ridge = Ridge(n_static=static_basis(inputs, spec.degree).shape[1], static=spec.ridge)
         if spec.saturation:
             red = reduce(trial, x, y)
-            plain = fold_coefs(red, red.usable(trial.valid), ridge)
+            plain = fold_coefs(red, red.rows.usable(trial.valid), ridge)
             stop = (spec.stops[j] if spec.stops
                     else choose_stops(trial, inputs, y, ridge, j, red, plain))
             r, c, p = fit_with_stops(trial, x, y, ridge, stop, float(trial.noise[j]), red,
