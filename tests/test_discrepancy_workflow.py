@@ -135,7 +135,7 @@ def test_frames_dropped_at_random_leave_the_fits_their_data():
     np.testing.assert_array_equal(np.bincount(every[rows.frames], minlength=n), trial.valid[:n])
     valid = trial.valid.copy()
     valid[1000:1100] = False  # a mocap dropout: rows with no valid frame are not used
-    trial = replace(trial, valid=valid, cache={})
+    trial = replace(trial, valid=valid)  # a copy: its fit rows are derived afresh
     rows = reduce(trial, Design.of(trial.t[:, None]), trial.y[:, 0]).rows
     empty = rows.frames.sum(axis=1) == 0
     assert empty.sum() >= 8 and not rows.usable(trial.valid)[empty].any()

@@ -27,6 +27,8 @@ MIN_BLOCK_S = BLOCK_S
 MOCAP_GAP_INTERVALS = 4.0
 #: A sensor frame grid may hold at most this many points per frame received (90 % dropped).
 MAX_GRID_PER_FRAME = 10
+#: ``Trial.placed_by`` when seq is a plain frame counter (one per frame).
+FRAME_COUNTER = "frame counter"
 #: A sensor with readings on fewer frames than this share is left out of the analysis.
 MIN_SENSOR_COVERAGE = 0.5
 
@@ -57,8 +59,9 @@ class Trial:
         ignored: sensors of the recording left out of the analysis, each with the reason
             (:func:`unusable_sensors`); ``sensor_names`` lists only the analysed ones.
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
-        cache: what the fits derive from ``valid`` and ``blocks`` alone (set once, never
-            changed after :func:`prepare_trial`).
+        cache: what the fits derive from this trial (its fit rows, from ``valid`` and
+            ``blocks``; the average of the last shared design block). Not an argument: a
+            copy made with ``dataclasses.replace`` starts with an empty one.
     """
 
     t: np.ndarray
@@ -74,8 +77,8 @@ class Trial:
     scored: np.ndarray
     noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ignored: tuple[tuple[str, str], ...] = ()
-    placed_by: str = "frame counter"
-    cache: dict = field(default_factory=dict, repr=False)
+    placed_by: str = FRAME_COUNTER
+    cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -195,7 +198,7 @@ def frame_grid(seq: np.ndarray) -> tuple[np.ndarray, str]:
     order = np.arange(len(seq))
     index = np.maximum.accumulate(index - order) + order  # at least one step per frame
     if step == 1:
-        return index, "frame counter"
+        return index, FRAME_COUNTER
     exact = bool(np.all((seq - seq[0]) % step == 0))
     return index, f"seq counting {step} per frame" + ("" if exact else ", rounded")
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from exohil.emulators.discrepancy.data import Trial, prepare_trial
+from exohil.emulators.discrepancy.data import FRAME_COUNTER, Trial, prepare_trial
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
     STATIC_RIDGES,
@@ -458,7 +458,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     trial = prepare_trial(rec, name)
     floors = trial.noise
     floor = float(np.sqrt(np.mean(floors**2)))
-    placed = "" if trial.placed_by == "frame counter" else f" (placed by {trial.placed_by})"
+    placed = "" if trial.placed_by == FRAME_COUNTER else f" (placed by {trial.placed_by})"
     progress(f"[1] calibrating the static map: {trial.n_sensors} sensors ({trial.units}) from "
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
