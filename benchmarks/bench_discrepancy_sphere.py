@@ -22,7 +22,8 @@ scaled to 0.30 mm (m1) or 0.60 mm (m2) RMS, from families the workflow does not 
 Prints one row per recording (first named effect, held-out gap before → after, noise floor)
 and, per hidden effect, how often the first named effect is right and how often a named
 effect halves the gap. ``--controls`` adds, per effect recording, the gap before of the same
-suit, movement and noise without the effect: what the calibrated static map alone leaves.
+suit, movement and noise without the effect (what the calibrated static map alone leaves)
+and what was named in it: 40 more clean recordings, a check that nothing is named in them.
 ``--out DIR`` also writes each recording there (``exohil discrepancy`` reads them;
 ``truth.json`` lists what each hides).
 """
@@ -258,8 +259,7 @@ def main(argv: list[str] | None = None) -> None:
     if controls:
         print(f"running the {len(controls)} effect recordings without their effect first ...",
               flush=True)
-    control_gap = {case.label: s["gap_before"]
-                   for case, s in parallel_map(run_sphere_case, controls, args.workers)}
+    control = {case.label: s for case, s in parallel_map(run_sphere_case, controls, args.workers)}
     print("| recording | family | sensors | effects named | gap before → after, mm | floor |"
           + (" without the effect, mm |" if args.controls else ""))
     print("|---|---|---|---|---|---|" + ("---|" if args.controls else ""))
@@ -276,9 +276,16 @@ def main(argv: list[str] | None = None) -> None:
                f"{', '.join(s['effects']) or '—'} | {s['gap_before']:.3f} → "
                f"{s['gap_after']:.3f} | {s['noise_floor']:.3f} |")
         if args.controls:  # a clean recording is its own control
-            row += f" {control_gap[case.label]:.3f} |" if case.label in control_gap else " — |"
+            c = control.get(case.label)
+            row += (f" {c['gap_before']:.3f} ({', '.join(c['effects']) or 'nothing named'}) |"
+                    if c is not None else " — |")
         print(row, flush=True)
     print(f"\n{len(selected) + len(controls)} recordings in {time.perf_counter() - start:.0f} s")
+    if control:
+        false = sorted(f"{label}: {', '.join(c['effects'])}" for label, c in control.items()
+                       if c["effects"])
+        print(f"controls (effect recordings without their effect): nothing named in "
+              f"{len(control) - len(false)}/{len(control)}" + "".join(f"\n  {f}" for f in false))
     for kind, (n, ok, named, halved) in right.items():
         line = f"{kind}: first named right {ok}/{n}"
         print(line + (f", gap halved {halved}/{named} of those named" if kind != "clean"
