@@ -387,6 +387,31 @@ def test_soft_knees_at_both_ends_are_both_found():
     assert s["gap_after"] ** 2 - clean**2 < 0.25 * (s["gap_before"] ** 2 - clean**2), s
 
 
+def test_an_offset_that_wanders_is_named_drift_and_followed(tmp_path):
+    """Each sensor's offset is piecewise linear in time, a new slope every 5–10 s (a knot
+    moves by up to ±1 mm): no polynomial of degree 1–3 follows it (the best leaves 26 % of
+    the error above the drift-free suit's), a named drift must take a higher degree."""
+    rec = make_recording(Case("clean", "lib", 1, seed=101))
+    clean = run(rec, "without the drift").summary["gap_before"]
+    rng = np.random.default_rng(7)
+    t = rec.sensors.t - rec.sensors.t[0]
+    y = rec.sensors.values.copy()
+    for j in range(y.shape[1]):
+        knots = np.concatenate([[0.0], np.cumsum(rng.uniform(5.0, 10.0, 14))])
+        y[:, j] += np.interp(t, knots, np.cumsum(rng.uniform(-1.0, 1.0, len(knots))))
+    sensors = SensorStream(seq=rec.sensors.seq, t=rec.sensors.t, values=y)
+    outcome = run(replace(rec, sensors=sensors), "wandering offset")
+    s = outcome.summary
+    assert s["effects"][:1] == ["drift"], s["effects"]
+    assert outcome.after.spec.drift_degree > 3, outcome.after.spec
+    # explained down to near what the same suit and movement leave without the drift
+    assert s["gap_after"] ** 2 - clean**2 < 0.15 * (s["gap_before"] ** 2 - clean**2), s
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "drifting"))
+    loaded = load_calibrated_profile(tmp_path / "p.toml")
+    sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
+    np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
+
+
 def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):
     """A 30 ms low-pass followed by 20 ms of transport delay: neither single lag model."""
     outcome = run(make_recording(Case("lag", "other", 1, seed=102)), "delayed low-pass")

@@ -20,7 +20,9 @@ held fixed as the *input* of the history-dependent terms) the model is
   the lagged response; or a rate limit (a slew-rate limit: the reading follows at most at
   Lⱼ units/s), the column R_Lⱼ(ŝⱼ) − ŝⱼ, zero except while the pose moves faster than the
   sensor can follow and until it has caught up.
-* D (``drift``): Legendre polynomials of time (degree 1–3): a slow offset independent of pose.
+* D (``drift``): Legendre polynomials of time: a slow offset independent of pose (degree 1–3
+  while candidates are compared; a named drift may take a higher degree, at most one per
+  5 s of recording, chosen on held-out blocks).
 * Stops (``saturation``): at an end of its range the sensor stops following the pose: a hard
   stop (it sits on a plateau while the joint moves; the map is fitted off the plateau and
   clipped at its level) or a soft knee (the reading bends toward an asymptote, a tanh; the map

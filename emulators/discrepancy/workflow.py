@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from exohil.emulators.discrepancy.data import FRAME_COUNTER, Trial, prepare_trial
+from exohil.emulators.discrepancy.data import BLOCK_S, FRAME_COUNTER, Trial, prepare_trial
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
     STATIC_RIDGES,
@@ -73,6 +73,11 @@ CREEP_MAX_FITS = 16
 #: missing delay); slower than ten minutes is a ramp over any recording (drift).
 CREEP_TAU_RANGE_S = (1.0, 600.0)
 DRIFT_DEGREES = (1, 2, 3)
+#: Degrees a named drift is refined over (see _refine_drift), up to one per DRIFT_SPAN_S.
+DRIFT_REFINE_DEGREES = (4, 6, 8, 12, 16, 24, 32, 48)
+#: Shortest span of time one degree of a refined drift may stand for, s: twice a held-out
+#: block, so the drift over a block is interpolated from the blocks around it.
+DRIFT_SPAN_S = 2 * BLOCK_S
 
 
 @dataclass
@@ -288,11 +293,30 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     if kind == "lag":
         return (current if current.spec.lag_kind == "rate_limit"
                 else _refine_lag_delay(trial, inputs, current))
+    if kind == "drift":
+        return _refine_drift(trial, inputs, current)
     if kind != "creep":
         return current
     bare = replace(current.spec, creep_tau_s=(), creep_asym_s=())
     return min((_refine_creep(trial, inputs, start)
                 for start in _creep_families(trial, inputs, bare)), key=lambda f: f.gap)
+
+
+def _refine_drift(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
+    """A named drift refined over higher degrees of its time polynomial, the best held out.
+
+    Degrees 1–3 only rank the candidates: a more flexible function of time would also explain
+    a slow pose-driven relaxation (degrees up to 34 named 4 of 20 creeps drift). Once drift is
+    named it may follow an offset that wanders (a random walk, a piecewise ramp) as finely as
+    the held-out blocks allow: at most one degree per ``DRIFT_SPAN_S`` seconds. The degree is
+    chosen again, from 1 up, after each effect added later (see :func:`run`): one chosen
+    before another effect was in place may have stood in for part of it.
+    """
+    span = inputs.t_span[1] - inputs.t_span[0]
+    degrees = [d for d in DRIFT_DEGREES + DRIFT_REFINE_DEGREES if d * DRIFT_SPAN_S <= span
+               and d != current.spec.drift_degree]
+    return min([current] + [fit(trial, inputs, replace(current.spec, drift_degree=d))
+                            for d in degrees], key=lambda f: f.gap)
 
 
 def _refine_creep(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
@@ -517,6 +541,9 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         if kind == "lag" and cand.spec != refined.spec:  # a lag refined on the map chosen
             # without it is biased toward that map: refine it again on the map now chosen
             cand = _refine_lag_delay(trial, inputs, cand)
+        drift_before = cand.spec.drift_degree
+        if kind != "drift" and drift_before:
+            cand = _refine_drift(trial, inputs, cand)
         lag_before = _lag_of(cand.spec)
         if previous == "lag":  # a lag named while a larger effect was
             # still missing was fitted against it: refit it once, with the next effect added
@@ -524,16 +551,17 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         previous = kind
         evidence = _evidence(base, cand, floor)
         spec, base = cand.spec, cand
-        refit = ({"lag": effect_params("lag", cand, inputs, trial)}
-                 if _lag_of(cand.spec) != lag_before
-                 else {})
+        refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
+                 (("lag", _lag_of(cand.spec) != lag_before),
+                  ("drift", kind != "drift" and cand.spec.drift_degree != drift_before))
+                 if changed}
         steps.append({"effect": kind, "gap": round(cand.gap, 6),
                       "params": effect_params(kind, cand, inputs, trial),
                       "evidence": {**evidence, "signature": sig, "refitted": refit,
                                    "alternatives": {k: e["heldout_gap"] for k, _, e in scored
                                                     if k != kind}}})
         progress(f"[{step}] added {kind}: held-out gap {cand.gap:.4g} {trial.units} "
-                 f"(tried {table})" + (f"; lag refitted: {refit['lag']}" if refit else ""))
+                 f"(tried {table})" + "".join(f"; {k} refitted: {p}" for k, p in refit.items()))
         step += 1
     after = base
     summary = {
