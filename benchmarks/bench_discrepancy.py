@@ -12,7 +12,9 @@ Run from the repository root: ``python -m benchmarks.bench_discrepancy [--seeds 
 [--duration 90] [--repeats 3] [--families lib,alt] [--first-seed 1000]``. ``--families other``
 runs the third family (hidden.py), which probes effects written yet another way;
 ``--repeats 0`` skips the timing; ``--workers`` sets how many processes run the sweep's
-cases (default one per CPU).
+cases (default one per CPU). ``--motion DIR`` drives the suits with the real shoulder motion
+of every ``.mot`` file in DIR, joined in name order (e.g. ``../shared/realdata/shoulder-ik``),
+instead of the seeded random movement; ``--duration`` is then the motion's own length.
 """
 
 from __future__ import annotations
@@ -28,21 +30,24 @@ from exohil.emulators.discrepancy import run
 from exohil.emulators.discrepancy.hidden import (
     FAMILIES,
     KINDS,
+    SENSOR_RATE_HZ,
     cases,
     default_workers,
     first_effect,
     run_cases,
 )
+from exohil.emulators.protocols import mot_trajectory
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.machine import machine
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "paper_protocol.mcap"
 
 
-def sweep(seeds: range, duration_s: float, families: tuple[str, ...], workers: int) -> None:
+def sweep(seeds: range, duration_s: float, families: tuple[str, ...], workers: int,
+          motion: tuple[str, ...] = ()) -> None:
     results = []
-    for case, summary in run_cases(cases(seeds, duration_s=duration_s, families=families),
-                                   workers):
+    for case, summary in run_cases(cases(seeds, duration_s=duration_s, families=families,
+                                         motion=motion), workers):
         named = first_effect(summary)
         shrink = 1.0 - summary["gap_after"] / summary["gap_before"]
         results.append((case, named, shrink))
@@ -97,6 +102,9 @@ def main() -> None:
                         help=f"comma-separated, of {', '.join(FAMILIES)}")
     parser.add_argument("--repeats", type=int, default=3, help="timing repeats (0: none)")
     parser.add_argument("--no-sweep", action="store_true", help="timing only")
+    parser.add_argument("--motion", type=Path, metavar="DIR",
+                        help="drive the suits with the real motion of DIR/*.mot (OpenSim "
+                             "inverse kinematics), joined in name order")
     parser.add_argument("--workers", type=int, default=default_workers(),
                         help="processes for the sweep (default: one per CPU; the timing "
                              "always runs alone, after it)")
@@ -104,10 +112,19 @@ def main() -> None:
     families = tuple(args.families.split(","))
     if not set(families) <= set(FAMILIES):
         parser.error(f"--families: choose from {', '.join(FAMILIES)}")
+    motion: tuple[str, ...] = ()
+    if args.motion is not None:
+        motion = tuple(str(path) for path in sorted(args.motion.glob("*.mot")))
+        if not motion:
+            parser.error(f"--motion: no .mot file in {args.motion}")
     print(f"machine: {machine()}; numpy {np.__version__}")
+    if motion:
+        length = mot_trajectory(motion).frame_times(SENSOR_RATE_HZ)[-1]
+        print(f"motion: {len(motion)} .mot files from {args.motion} ({length:.1f} s): "
+              + ", ".join(Path(path).stem for path in motion))
     if not args.no_sweep:
         sweep(range(args.first_seed, args.first_seed + args.seeds), args.duration, families,
-              args.workers)
+              args.workers, motion)
     if args.repeats > 0:
         timing(args.repeats)
 

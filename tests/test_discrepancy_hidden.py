@@ -6,11 +6,22 @@ gap shrinks by ≥ 50 % whenever an effect is named, and clean recordings get no
 ≥ 90 % of cases. The larger sweep and the confusion matrix: benchmarks/bench_discrepancy.py.
 """
 
+from pathlib import Path
+
+import numpy as np
 import pytest
 
-from exohil.emulators.discrepancy.hidden import cases, first_effect, run_cases
+from exohil.emulators.discrepancy.hidden import (
+    Case,
+    cases,
+    first_effect,
+    make_recording,
+    run_cases,
+)
+from exohil.emulators.protocols import mot_trajectory
 
 SEEDS = range(100, 102)  # disjoint from the benchmark's seeds (1000 …)
+REAL_MOT = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "shoulder-ik"
 
 
 @pytest.fixture(scope="module")
@@ -45,3 +56,18 @@ def test_clean_recordings_get_no_effect_in_90_percent(results):
     clean = [r for r in results if r[0].kind == "clean"]
     named = [f"{case.label} -> {n}" for case, n, _, _ in clean if n != "clean"]
     assert len(named) <= 0.1 * len(clean), named
+
+
+@pytest.mark.skipif(not (REAL_MOT / "FLX01.mot").exists(),
+                    reason="shared/realdata/shoulder-ik absent")
+def test_a_case_can_be_driven_by_real_motion():
+    motion = (str(REAL_MOT / "FLX01.mot"), str(REAL_MOT / "ABD01.mot"))
+    real = make_recording(Case("creep", "alt", 1, 100, duration_s=60.0, motion=motion))
+    random = make_recording(Case("creep", "alt", 1, 100, duration_s=60.0))
+    trajectory = mot_trajectory(motion)
+    stream = real.mocap["shoulder"]
+    assert stream.t[-1] == pytest.approx(trajectory.frame_times(120.0)[-1])
+    assert real.sensors.t[-1] == pytest.approx(trajectory.frame_times(250.0)[-1])
+    assert real.sensors.t[-1] != pytest.approx(random.sensors.t[-1], abs=1.0)
+    np.testing.assert_allclose(stream.angles, trajectory.sample(stream.t))
+    assert real.sensor_names == random.sensor_names  # the same seeded suit

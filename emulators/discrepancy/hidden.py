@@ -1,8 +1,9 @@
 """Recordings with exactly one hidden effect, to test that the workflow names it.
 
 Each case: a seeded random shoulder movement (minimum-jerk moves at 20–120 °/s, holds of
-0.3–5 s, partial reversals), a perturbed suit geometry (tendon anchors moved by up to 15 mm,
-cap radius 45–65 mm, per-sensor gains 0.7–1.4 and offsets, 3–5 tendons), one effect from
+0.3–5 s, partial reversals; or real motion from OpenSim ``.mot`` files), a perturbed suit
+geometry (tendon anchors moved by up to 15 mm, cap radius 45–65 mm, per-sensor gains 0.7–1.4
+and offsets, 3–5 tendons), one effect from
 :data:`IMPLEMENTATIONS` and always white noise (0.15 mm). Two families per effect: ``lib``
 uses :mod:`exohil.emulators.effects`; ``alt`` is written here independently with another
 model family (backlash play or Bouc–Wen hysteresis, two-time-constant creep, tanh saturation,
@@ -28,7 +29,7 @@ from scipy.signal import fftconvolve, lfilter
 
 from exohil.emulators.discrepancy.workflow import run
 from exohil.emulators.effects import Creep, Drift, Hysteresis, Lag, Noise, Saturation, Signal
-from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory
+from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory, mot_trajectory
 from exohil.emulators.suit_geometry import SuitGeometry, Tendon
 from exohil.emulators.suit_profile import load_default_profile
 from exohil.formats.recording import AngleStream, Recording, SensorStream
@@ -242,13 +243,19 @@ def apply_hidden_effect(kind: str, family: str, magnitude: float, signal: Signal
 
 @dataclass(frozen=True)
 class Case:
-    """One hidden-effect case: the effect (``clean`` for none), its family and magnitude."""
+    """One hidden-effect case: the effect (``clean`` for none), its family and magnitude.
+
+    ``motion``: OpenSim ``.mot`` files of real shoulder motion (:func:`mot_trajectory`,
+    joined in order) to drive the suit instead of the seeded random movement; the
+    recording then lasts as long as they do and ``duration_s`` is not used.
+    """
 
     kind: str
     family: str
     magnitude: int
     seed: int
     duration_s: float = 60.0
+    motion: tuple[str, ...] = ()
 
     @property
     def label(self) -> str:
@@ -281,7 +288,8 @@ def suit_recording(trajectory: Trajectory, geometry: SuitGeometry, signal: Signa
 
 def make_recording(case: Case) -> Recording:
     """The recording of ``case`` (sensors at 250 Hz, mocap at 120 Hz, exact angles)."""
-    trajectory = random_trajectory(case.seed, case.duration_s)
+    trajectory = (mot_trajectory(case.motion) if case.motion
+                  else random_trajectory(case.seed, case.duration_s))
     geometry, gains, offsets = random_geometry(case.seed)
     rng = np.random.default_rng([case.seed, KINDS.index(case.kind), case.magnitude,
                                  FAMILIES.index(case.family)])
@@ -294,15 +302,17 @@ def make_recording(case: Case) -> Recording:
 
 
 def cases(seeds: range, magnitudes: tuple[int, ...] = (1, 2), duration_s: float = 60.0,
-          families: tuple[str, ...] = ("lib", "alt")) -> list[Case]:
+          families: tuple[str, ...] = ("lib", "alt"), motion: tuple[str, ...] = ()
+          ) -> list[Case]:
     """Every effect × family × magnitude × seed, plus one clean control per (seed, magnitude)
-    and family so that clean cases are as many as one effect's."""
+    and family so that clean cases are as many as one effect's (``motion``: see
+    :class:`Case`)."""
     out = []
     for seed in seeds:
         for magnitude in magnitudes:
             for family in families:
                 for kind in KINDS:
-                    out.append(Case(kind, family, magnitude, seed, duration_s))
+                    out.append(Case(kind, family, magnitude, seed, duration_s, motion))
     return out
 
 
