@@ -282,10 +282,11 @@ def main(argv: list[str] | None = None) -> None:
         print(row, flush=True)
     print(f"\n{len(selected) + len(controls)} recordings in {time.perf_counter() - start:.0f} s")
     if control:
-        false = sorted(f"{label}: {', '.join(c['effects'])}" for label, c in control.items()
-                       if c["effects"])
+        in_controls = sorted(f"{label}: {', '.join(c['effects'])}"
+                             for label, c in control.items() if c["effects"])
         print(f"controls (effect recordings without their effect): nothing named in "
-              f"{len(control) - len(false)}/{len(control)}" + "".join(f"\n  {f}" for f in false))
+              f"{len(control) - len(in_controls)}/{len(control)}"
+              + "".join(f"\n  {entry}" for entry in in_controls))
     for kind, (n, ok, named, halved) in right.items():
         line = f"{kind}: first named right {ok}/{n}"
         print(line + (f", gap halved {halved}/{named} of those named" if kind != "clean"

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 
 from exohil.emulators.discrepancy.hidden import (
+    MOCAP_RATE_HZ,
+    SENSOR_RATE_HZ,
     Case,
     cases,
     first_effect,
@@ -66,8 +68,8 @@ def test_a_case_can_be_driven_by_real_motion():
     random = make_recording(Case("creep", "alt", 1, 100, duration_s=60.0))
     trajectory = mot_trajectory(motion)
     stream = real.mocap["shoulder"]
-    assert stream.t[-1] == pytest.approx(trajectory.frame_times(120.0)[-1])
-    assert real.sensors.t[-1] == pytest.approx(trajectory.frame_times(250.0)[-1])
+    assert stream.t[-1] == pytest.approx(trajectory.frame_times(MOCAP_RATE_HZ)[-1])
+    assert real.sensors.t[-1] == pytest.approx(trajectory.frame_times(SENSOR_RATE_HZ)[-1])
     assert real.sensors.t[-1] != pytest.approx(random.sensors.t[-1], abs=1.0)
     np.testing.assert_allclose(stream.angles, trajectory.sample(stream.t))
     assert real.sensor_names == random.sensor_names  # the same seeded suit

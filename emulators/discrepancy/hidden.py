@@ -3,8 +3,8 @@
 Each case: a seeded random shoulder movement (minimum-jerk moves at 20–120 °/s, holds of
 0.3–5 s, partial reversals; or real motion from OpenSim ``.mot`` files), a perturbed suit
 geometry (tendon anchors moved by up to 15 mm, cap radius 45–65 mm, per-sensor gains 0.7–1.4
-and offsets, 3–5 tendons), one effect from
-:data:`IMPLEMENTATIONS` and always white noise (0.15 mm). Two families per effect: ``lib``
+and offsets, 3–5 tendons), one effect (:func:`apply_hidden_effect`) and always white noise
+(0.15 mm). Two families per effect: ``lib``
 uses :mod:`exohil.emulators.effects`; ``alt`` is written here independently with another
 model family (backlash play or Bouc–Wen hysteresis, two-time-constant creep, tanh saturation,
 pure delay or second-order lag, exponential warm-up or sinusoidal drift), so the tests do not

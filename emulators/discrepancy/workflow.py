@@ -553,7 +553,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         spec, base = cand.spec, cand
         refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
                  (("lag", _lag_of(cand.spec) != lag_before),
-                  ("drift", kind != "drift" and cand.spec.drift_degree != drift_before))
+                  ("drift", cand.spec.drift_degree != drift_before))
                  if changed}
         steps.append({"effect": kind, "gap": round(cand.gap, 6),
                       "params": effect_params(kind, cand, inputs, trial),
