@@ -297,18 +297,30 @@ def test_play_delay_and_low_pass():
     assert step[2] == 0.0 and abs(step[3 + 100] - (1 - np.exp(-1))) < 0.01
 
 
-def test_stops_bend_hard_and_soft():
-    x = np.linspace(-10.0, 10.0, 2001)
+@pytest.mark.parametrize("shape", ["tanh", "exp"])
+def test_stops_bend_hard_and_soft(shape):
+    x = np.linspace(-10.0, 10.0, 20001)  # fine: the exp bend curves from the knee on
     hard = Stops(lo=-2.0, hi=3.0)
     np.testing.assert_array_equal(hard.apply(x), np.clip(x, -2.0, 3.0))
-    soft = Stops(lo=-2.0, hi=3.0, soft_lo=1.0, soft_hi=2.0)
+    soft = Stops(lo=-2.0, hi=3.0, soft_lo=1.0, soft_hi=2.0, shape_lo=shape, shape_hi=shape)
     out = soft.apply(x)
     assert out.min() > -3.0 and out.max() < 5.0  # asymptotes lo − soft_lo, hi + soft_hi
     assert out.min() < -2.99 and out.max() > 4.9
     inside = (x > -2.0) & (x < 3.0)
     np.testing.assert_array_equal(out[inside], x[inside])
     np.testing.assert_allclose(soft.slope(x)[1:-1], np.gradient(out, x)[1:-1], atol=2e-3)
+    assert soft.slope(np.array([3.0 + 1e-9]))[0] == pytest.approx(1.0)  # no corner at a knee
     assert np.isnan(soft.apply(np.array([np.nan]))[0])
+
+
+def test_the_knee_shapes_differ_where_they_start_to_bend():
+    one_softness_past = np.array([4.0])  # hi + soft_hi
+    bent = {shape: Stops(hi=3.0, soft_hi=1.0, shape_hi=shape).apply(one_softness_past)[0]
+            for shape in ("tanh", "exp")}
+    assert bent["tanh"] == pytest.approx(3.0 + np.tanh(1.0))
+    assert bent["exp"] == pytest.approx(3.0 + 1.0 - np.exp(-1.0))
+    with pytest.raises(ValueError, match="knee shape 'cubic'"):
+        Stops(hi=3.0, soft_hi=1.0, shape_hi="cubic")
 
 
 def test_the_effect_ridge_shrinks_only_what_the_column_adds_beyond_the_static_map():
@@ -349,21 +361,22 @@ def test_a_creep_of_another_memory_is_named_and_explained():
 
 def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
     """Readings that stop rising at the top of their range, approaching an asymptote
-    exponentially beyond the 85 % quantile (not the tanh the workflow models)."""
+    exponentially beyond the 85 % quantile (hidden.py's ``other`` family): the upper knees
+    must take the exponential bend, which starts at the knee, not the tanh, which keeps
+    its slope past it."""
     outcome = run(make_recording(Case("saturation", "other", 1, seed=102)), "soft stop")
     s = outcome.summary
     assert s["effects"][:1] == ["saturation"], s["effects"]
-    softness = s["steps"][0]["params"]["softness"]
-    assert any(hi > 0 for _, hi in softness), softness  # knees at the upper end, soft
-    # most of the systematic error (above the noise floor) is explained
+    params = s["steps"][0]["params"]
+    upper = [shape for (_, hi), (_, shape) in zip(params["softness"], params["shape"],
+                                                  strict=True) if hi > 0]
+    assert upper and set(upper) == {"exp"}, params  # soft knees at the upper end, exp
+    # explained as the other forms are (≥ 95 % of the systematic error above the noise
+    # floor); with tanh knees alone 7 % was left
     floor = s["noise_floor"]
-    assert s["gap_after"] ** 2 - floor**2 < 0.25 * (s["gap_before"] ** 2 - floor**2), s
-    from exohil.emulators.discrepancy.profile import write_calibrated_profile
-
-    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "soft"))
-    loaded = load_calibrated_profile(tmp_path / "p.toml")
-    sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
-    np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
+    assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
+    _assert_the_profile_reproduces(outcome, tmp_path, ('"exp"', '"cubic"'),
+                                   "knee shape 'cubic'")
 
 
 def test_soft_knees_at_both_ends_are_both_found():

@@ -25,14 +25,16 @@ held fixed as the *input* of the history-dependent terms) the model is
   5 s of recording, chosen on held-out blocks).
 * Stops (``saturation``): at an end of its range the sensor stops following the pose: a hard
   stop (it sits on a plateau while the joint moves; the map is fitted off the plateau and
-  clipped at its level) or a soft knee (the reading bends toward an asymptote, a tanh; the map
-  is fitted through the knee by Gauss–Newton). Which, and where, is chosen on held-out blocks.
+  clipped at its level) or a soft knee (the reading bends toward an asymptote, a tanh or an
+  exponential approach; the map is fitted through the knee by Gauss–Newton). Which, and
+  where, is chosen on held-out blocks.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -50,8 +52,17 @@ PLATEAU_SHARE = 0.02
 #: Knee candidates of a soft stop: the share of a sensor's valid frames beyond the knee.
 KNEE_SHARES = (0.03, 0.07, 0.12, 0.2, 0.3)
 #: Softness candidates of a knee, as multiples of the distance from the knee to the sensor's
-#: extreme reading (the tanh bend's asymptote lies that far beyond the knee).
+#: extreme reading (the bend's asymptote lies that far beyond the knee).
 KNEE_SOFTNESS = (1.0, 1.5, 2.5)
+#: Knee shapes b(u) and their slopes b′(u), u ≥ 0 the depth beyond the knee in units of the
+#: softness: both start with slope 1 and approach 1. ``tanh`` (u − u³/3) keeps its slope
+#: for a while past the knee; ``exp`` (1 − e^−u, u − u²/2) starts bending at once. Which one
+#: a knee takes is chosen on held-out blocks with its level and softness.
+Bend = Callable[[np.ndarray], np.ndarray]
+KNEE_BENDS: dict[str, tuple[Bend, Bend]] = {
+    "tanh": (np.tanh, lambda u: 1.0 - np.tanh(u) ** 2),
+    "exp": (lambda u: -np.expm1(-u), lambda u: np.exp(-u)),
+}
 #: Gauss–Newton iterations of a fit through soft stops: linearised at the all-block fit, then
 #: at each fold's own (:func:`fit_through_stops`).
 SHARED_ITERATIONS = 2
@@ -78,14 +89,22 @@ class Stops:
     """A sensor's stops: the levels where its reading stops following the pose.
 
     Below ``lo`` the reading bends with slope 1 at the knee toward the asymptote
-    ``lo − soft_lo`` (``lo − soft_lo·tanh((lo − x)/soft_lo)``); ``soft_lo = 0`` is a hard
-    stop (clipped at ``lo``). Likewise above ``hi``. ±inf: no stop on that side.
+    ``lo − soft_lo``: ``lo − soft_lo·b((lo − x)/soft_lo)`` with the knee shape b of
+    ``shape_lo`` (:data:`KNEE_BENDS`); ``soft_lo = 0`` is a hard stop (clipped at ``lo``).
+    Likewise above ``hi``. ±inf: no stop on that side.
     """
 
     lo: float = -math.inf
     hi: float = math.inf
     soft_lo: float = 0.0
     soft_hi: float = 0.0
+    shape_lo: str = "tanh"
+    shape_hi: str = "tanh"
+
+    def __post_init__(self) -> None:
+        for shape in (self.shape_lo, self.shape_hi):
+            if shape not in KNEE_BENDS:
+                raise ValueError(f"knee shape {shape!r} is not one of {', '.join(KNEE_BENDS)}")
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """x (N,) through the stops (NaN stays NaN)."""
@@ -93,11 +112,13 @@ class Stops:
         with np.errstate(invalid="ignore"):
             below, above = out < self.lo, out > self.hi
         if self.soft_lo > 0:
-            out[below] = self.lo - self.soft_lo * np.tanh((self.lo - out[below]) / self.soft_lo)
+            bend = KNEE_BENDS[self.shape_lo][0]
+            out[below] = self.lo - self.soft_lo * bend((self.lo - out[below]) / self.soft_lo)
         else:
             out[below] = self.lo
         if self.soft_hi > 0:
-            out[above] = self.hi + self.soft_hi * np.tanh((out[above] - self.hi) / self.soft_hi)
+            bend = KNEE_BENDS[self.shape_hi][0]
+            out[above] = self.hi + self.soft_hi * bend((out[above] - self.hi) / self.soft_hi)
         else:
             out[above] = self.hi
         return out
@@ -107,9 +128,9 @@ class Stops:
         out = np.ones_like(x)
         with np.errstate(invalid="ignore"):
             below, above = x < self.lo, x > self.hi
-        out[below] = (1.0 - np.tanh((self.lo - x[below]) / self.soft_lo) ** 2
+        out[below] = (KNEE_BENDS[self.shape_lo][1]((self.lo - x[below]) / self.soft_lo)
                       if self.soft_lo > 0 else 0.0)
-        out[above] = (1.0 - np.tanh((x[above] - self.hi) / self.soft_hi) ** 2
+        out[above] = (KNEE_BENDS[self.shape_hi][1]((x[above] - self.hi) / self.soft_hi)
                       if self.soft_hi > 0 else 0.0)
         return out
 
@@ -778,12 +799,14 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
 
     Each end's stop is one of: none, the plateau the sensor sits on while the joint moves (a
     hard stop, :func:`plateaus`), or a soft knee at one of the ``KNEE_SHARES`` quantiles of
-    the reading (then halfway to the best one's neighbours) with one of the
-    ``KNEE_SOFTNESS`` softnesses. A compressive end of range without a plateau is thus told
-    from a hard stop by the data, not assumed. Hard stops are scored with the map fitted off
-    them, soft knees with the map fitted through them from ``plain`` (the fold fits without
-    stops, :func:`fold_coefs`). Each end's knee is searched with the other end as found
-    without knees; the better end is kept and the other end's knee searched again given it.
+    the reading with one of the ``KNEE_SOFTNESS`` softnesses: a tanh knee, then at the best
+    quantile and its neighbours the other ``KNEE_BENDS`` shapes, then halfway from the best
+    of them to its neighbours with its shape. A compressive end of range without a plateau
+    is thus told from a hard stop by the data, not assumed. Hard stops are scored with the
+    map fitted off them, soft knees with the map fitted through them from ``plain`` (the
+    fold fits without stops, :func:`fold_coefs`). Each end's knee is searched with the other
+    end as found without knees; the better end is kept and the other end's knee searched
+    again given it.
     """
     sigma = float(trial.noise[j])
     seen = y[trial.valid]
@@ -820,27 +843,39 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
 
     def side(end: int, other: Stops) -> None:
         """Knees at the lower (0) or upper (1) end, the other end as in ``other``: the
-        ``KNEE_SHARES`` grid, then, if a knee beat ``other``, the shares halfway
-        (geometrically) to the best one's neighbours."""
+        ``KNEE_SHARES`` grid with the first of the ``KNEE_BENDS``; then, if a knee beat
+        ``other``, the other shapes at the best share and its neighbours, and the shares
+        halfway (geometrically) from the best to its neighbours with the best shape."""
 
-        def at(share: float) -> float:
+        def at(share: float, shapes: Iterable[str]) -> float:
             level = float(np.quantile(seen, share if end == 0 else 1.0 - share))
             reach = abs(level - extremes[end])
             if reach <= 3.0 * sigma:
                 return math.inf
-            softs = [f * reach for f in KNEE_SOFTNESS]
-            # only this end changes: the other keeps its level and softness as found
-            return consider([replace(other, lo=level, soft_lo=soft) if end == 0
-                             else replace(other, hi=level, soft_hi=soft) for soft in softs])
+            knees = [(f * reach, shape) for shape in shapes for f in KNEE_SOFTNESS]
+            # only this end changes: the other keeps its level, softness and shape as found
+            return consider([replace(other, lo=level, soft_lo=soft, shape_lo=shape)
+                             if end == 0 else
+                             replace(other, hi=level, soft_hi=soft, shape_hi=shape)
+                             for soft, shape in knees])
 
         grid = list(KNEE_SHARES)
+        first, *others = KNEE_BENDS
         before = best[0] if best is not None else math.inf
-        scores = [at(share) for share in grid]
+        scores = [at(share, [first]) for share in grid]
         k = int(np.argmin(scores))
-        if scores[k] < before:  # a knee helps here: place it better
+        if scores[k] < before:  # a knee helps here: shape it, then place it better
+            # another shape may prefer a neighbouring level (an exponential bend starts
+            # at once, so its knee sits nearer the extreme than a tanh's)
+            near = [n for n in (k - 1, k, k + 1) if 0 <= n < len(grid)]
+            for n in near:
+                scores[n] = min(scores[n], at(grid[n], others))
+            k = min(near, key=lambda n: scores[n])
+            assert best is not None
+            shape = best[1].shape_lo if end == 0 else best[1].shape_hi
             for n in (k - 1, k + 1):
                 if 0 <= n < len(grid):
-                    at(math.sqrt(grid[k] * grid[n]))
+                    at(math.sqrt(grid[k] * grid[n]), [shape])
 
     consider([NO_STOPS])
     consider([Stops(*plateaus(trial, inputs, j))])

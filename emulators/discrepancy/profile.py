@@ -145,6 +145,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
              "play_thresholds": suit.inputs.thresholds[j].tolist(),
              "stops": [suit.stops[j].lo, suit.stops[j].hi],
              "stop_softness": [suit.stops[j].soft_lo, suit.stops[j].soft_hi],
+             "stop_shape": [suit.stops[j].shape_lo, suit.stops[j].shape_hi],
              "coef": suit.coef[j].tolist(),
              "noise_sigma": float(suit.noise[j])}
             for j, name in enumerate(suit.sensors)
@@ -159,12 +160,14 @@ def write_calibrated_profile(path: str | Path, suit: CalibratedSuit, description
 
 
 def _stops(sensor: dict) -> Stops:
-    """A sensor table's stops; ``stop_softness`` is optional (hard stops, the first form)."""
+    """A sensor table's stops; ``stop_softness`` is optional (hard stops, the first form), and
+    so is ``stop_shape`` (tanh knees, the second form)."""
     lo, hi = (float(v) for v in sensor["stops"])
     soft_lo, soft_hi = (float(v) for v in sensor.get("stop_softness", (0.0, 0.0)))
+    shape_lo, shape_hi = (str(v) for v in sensor.get("stop_shape", ("tanh", "tanh")))
     if soft_lo < 0 or soft_hi < 0 or lo > hi:
         raise ValueError(f"stops {[lo, hi]} with softness {[soft_lo, soft_hi]}")
-    return Stops(lo, hi, soft_lo, soft_hi)
+    return Stops(lo, hi, soft_lo, soft_hi, shape_lo, shape_hi)
 
 
 def _lag_kind(name: object) -> str:

@@ -345,7 +345,7 @@ def _refine_creep(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
 
 
 def _keep_stops(current: Fit) -> Fit:
-    """Keep the stops (levels and softness per sensor) chosen in ``current`` from here on:
+    """Keep the stops (levels, softness and shape per sensor) chosen in ``current`` from here on:
     later candidates refit the map through them instead of choosing them again in every fit.
     Without the saturation term, ``current`` as it is."""
     if not current.spec.saturation or current.spec.stops:
@@ -415,6 +415,8 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
         return {"stops": [[level(st.lo), level(st.hi)] for st in result.stops],
                 "softness": [[round(st.soft_lo, 5), round(st.soft_hi, 5)]
                              for st in result.stops],
+                "shape": [[st.shape_lo if st.soft_lo > 0 else None,
+                           st.shape_hi if st.soft_hi > 0 else None] for st in result.stops],
                 "lower": np.round(pred.min(axis=0), 5).tolist(),
                 "upper": np.round(pred.max(axis=0), 5).tolist()}
     raise ValueError(kind)
