@@ -267,6 +267,43 @@ def test_noise_floor_recovers_white_noise_under_motion():
     np.testing.assert_allclose(floor, 0.15, rtol=0.08)
 
 
+def test_isolated_spikes_are_left_out_and_steps_and_noisier_stretches_are_not(tmp_path):
+    """Single- and two-frame glitches are invalid frames, counted per sensor: a clean suit
+    with them is still called clean and its gap stays that of the suit without them (in
+    it, 30 mm glitches on 20 frames would be 0.9 mm of RMS). A tendon that slips (a step),
+    a sensor three times noisier in half its range and the arm's own moves are not
+    glitches."""
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    values = rec.sensors.values.copy()
+    n = len(values)
+    other = values.copy()
+    other[n // 2:, 1] += 3.0  # slip: a lasting step of 20 sigma
+    high = other[:, 2] > np.median(other[:, 2])
+    other[high, 2] += np.random.default_rng(1).normal(0.0, 0.45, high.sum())  # 0.15 → 0.47
+    assert prepare_trial(_with_values(rec, other)).spikes.tolist() == [0] * 5
+    rng = np.random.default_rng(2)
+    at = rng.choice(np.arange(100, n - 100, 50), 16, replace=False)
+    values[at[:12], at[:12] % 5] += rng.choice([-30.0, 30.0], 12)
+    for i in at[12:]:  # two frames each, on sensor 0
+        values[i:i + 2, 0] -= 30.0
+    path, out = tmp_path / "spiky.mcap", tmp_path / "out"
+    write_recording(path, _with_values(rec, values))
+    trial = prepare_trial(read_recording(path))
+    expected = np.bincount(at[:12] % 5, minlength=5)
+    expected[0] += 8
+    assert trial.spikes.tolist() == expected.tolist()
+    glitched = np.unique(np.r_[at, at[12:] + 1])
+    assert not trial.valid[glitched].any()
+    assert (~trial.valid).sum() == (~prepare_trial(rec).valid).sum() + len(glitched)
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "isolated spikes, not fitted or scored: " in result.stderr
+    summary = json.loads((out / "discrepancy.json").read_text())
+    assert summary["spikes"] == expected.tolist() and summary["effects"] == []
+    assert summary["gap_before"] == pytest.approx(run(rec).summary["gap_before"], rel=0.02)
+    assert "holding an isolated spike: " in (out / "report.md").read_text()
+
+
 def _quantised(rec: Recording, step: float) -> Recording:
     return _with_values(rec, np.round(rec.sensors.values / step) * step)
 

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
@@ -31,6 +32,14 @@ MAX_GRID_PER_FRAME = 10
 FRAME_COUNTER = "frame counter"
 #: A sensor with readings on fewer frames than this share is left out of the analysis.
 MIN_SENSOR_COVERAGE = 0.5
+#: An isolated spike is a reading further than ``SPIKE_SIGMAS`` noise standard deviations
+#: from the median of the ``SPIKE_WINDOW`` frames centred on it (a run of at most two
+#: frames: a step, a loop or a fast move keeps its median) ...
+SPIKE_WINDOW = 5
+SPIKE_SIGMAS = 10.0
+#: ... the noise measured over the ``SPIKE_NOISE_WINDOW`` frames around it where that is
+#: larger than the sensor's floor (a resistive sensor is noisier at high strain).
+SPIKE_NOISE_WINDOW = 51
 
 
 class DiscrepancyError(InputError, ValueError):
@@ -58,6 +67,8 @@ class Trial:
             :func:`exohil.emulators.discrepancy.model.restrict_to_coverage`).
         ignored: sensors of the recording left out of the analysis, each with the reason
             (:func:`unusable_sensors`); ``sensor_names`` lists only the analysed ones.
+        spikes: (S,) int, frames per sensor holding an isolated spike (:func:`spikes`),
+            which are invalid.
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
         cache: what the fits derive from this trial (its fit rows, from ``valid`` and
             ``blocks``; the average of the last shared design block). Not an argument: a
@@ -77,6 +88,7 @@ class Trial:
     scored: np.ndarray
     noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ignored: tuple[tuple[str, str], ...] = ()
+    spikes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     placed_by: str = FRAME_COUNTER
     cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
@@ -155,6 +167,8 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} never moves")
     angles = np.column_stack([np.interp(t, t_mocap, raw[:, k]) for k in moving])
     valid = present & inside & np.all(np.isfinite(y), axis=1)
+    spiked = spikes(y, valid, sensor_noise(y, valid))
+    valid &= ~spiked.any(axis=1)
     span = np.diff(t[[0, -1]])[0] if n > 1 else 0.0
     rate = (n - 1) / span if span > 0 else 0.0
     covered = float(valid.sum()) / rate if rate > 0 else 0.0
@@ -174,7 +188,8 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
                   angle_names=tuple(stream.names[k] for k in moving), joint=joint,
                   sensor_names=tuple(rec.sensor_names[j] for j in keep),
                   units=rec.sensor_units, rate_hz=rate, blocks=blocks.astype(np.int64),
-                  scored=valid.copy(), ignored=ignored, placed_by=placed_by)
+                  scored=valid.copy(), ignored=ignored, spikes=spiked.sum(axis=0),
+                  placed_by=placed_by)
     trial.noise = noise_floor(trial)
     return trial
 
@@ -246,6 +261,42 @@ def unusable_sensors(values: np.ndarray, names: Sequence[str],
     return tuple(out)
 
 
+def spikes(y: np.ndarray, valid: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """(N, S) bool: valid frames whose reading is an isolated spike (a glitch on the link, a
+    contact that opens for a sample), which no model of the suit should chase and which
+    would otherwise dominate a root-mean-square gap.
+
+    A reading is a spike when it lies more than ``SPIKE_SIGMAS`` noise standard deviations
+    from the median of the ``SPIKE_WINDOW`` frames centred on it. That median follows a
+    step, a reversal or the fastest arm move at these rates, so only runs of one or two
+    frames that leave and come back are flagged. The noise is the larger of the sensor's
+    floor and the same white-noise estimate over the ``SPIKE_NOISE_WINDOW`` frames
+    around the reading, so a sensor that is noisier in part of its range keeps that noise.
+
+    Args:
+        y: (N, S) readings on the grid (NaN or inf where none was received).
+        valid: (N,) frames to examine.
+        floor: (S,) the sensors' noise floors (:func:`sensor_noise`).
+    """
+    finite = np.isfinite(y)
+    grid = np.arange(y.shape[0])
+    filled = np.column_stack([np.interp(grid, grid[finite[:, j]], y[finite[:, j], j])
+                              if finite[:, j].any() else np.zeros(y.shape[0])
+                              for j in range(y.shape[1])])
+    centre = median_filter(filled, size=(SPIKE_WINDOW, 1), mode="nearest")
+    d2 = np.abs(np.diff(filled, 2, axis=0, prepend=filled[:1], append=filled[-1:]))
+    local = 1.4826 * median_filter(d2, size=(SPIKE_NOISE_WINDOW, 1), mode="nearest") / np.sqrt(6.0)
+    scale = np.maximum(floor, local)
+    return valid[:, None] & finite & (np.abs(filled - centre) > SPIKE_SIGMAS * scale)
+
+
+def spike_counts(sensors: Sequence[str], counts: Sequence[int]) -> str:
+    """Isolated spikes per sensor as a phrase, e.g. "F 2, R 1" (sensors without any left
+    out), or "none"."""
+    named = [f"{sensor} {n}" for sensor, n in zip(sensors, counts, strict=True) if n]
+    return ", ".join(named) if named else "none"
+
+
 def noise_floor(trial: Trial) -> np.ndarray:
     """Per-sensor white-noise standard deviation, in sensor units.
 
@@ -260,12 +311,16 @@ def noise_floor(trial: Trial) -> np.ndarray:
     below the rounding error, whose standard deviation is ``q/√12`` for a step ``q``
     (:func:`quantisation_step`). The floor is the larger of the two.
     """
-    ok = trial.valid[2:] & trial.valid[1:-1] & trial.valid[:-2]
-    y = np.where(trial.valid[:, None], trial.y, 0.0)  # invalid frames may hold NaN or inf
-    d2 = y[2:] - 2.0 * y[1:-1] + y[:-2]
-    d2 = d2[ok]
+    return sensor_noise(trial.y, trial.valid)
+
+
+def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(S,) the noise floor (:func:`noise_floor`) of readings y (N, S) over the valid frames."""
+    ok = valid[2:] & valid[1:-1] & valid[:-2]
+    y0 = np.where(valid[:, None], y, 0.0)  # invalid frames may hold NaN or inf
+    d2 = (y0[2:] - 2.0 * y0[1:-1] + y0[:-2])[ok]
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
-    step = np.array([quantisation_step(trial.y[trial.valid, j]) for j in range(trial.y.shape[1])])
+    step = np.array([quantisation_step(y[valid, j]) for j in range(y.shape[1])])
     return np.maximum(1.4826 * mad / np.sqrt(6.0), step / np.sqrt(12.0))
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from exohil.emulators.discrepancy.data import spike_counts
 from exohil.emulators.discrepancy.localise import motion
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
 from exohil.emulators.discrepancy.workflow import Outcome
@@ -86,8 +87,9 @@ def markdown(summary: dict) -> str:
     lines = [f"# Discrepancy report: {summary['recording']}", "",
              f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
              f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
-             f"at {summary['rate_hz']} Hz, {summary['invalid_frames']} invalid (dropped or "
-             "outside motion capture or in its dropouts)." + "".join(
+             f"at {summary['rate_hz']} Hz, {summary['invalid_frames']} invalid (dropped, "
+             "outside motion capture or in its dropouts, or holding an isolated spike: "
+             f"{spike_counts(summary['sensors'], summary['spikes'])})." + "".join(
                  f" Left out: {item['sensor']} {item['reason']}."
                  for item in summary["sensors_ignored"]), "",
              f"**{summary['conclusion']}.** Held-out gap (sensor-space RMSE on "

@@ -26,7 +26,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from exohil.emulators.discrepancy.data import BLOCK_S, FRAME_COUNTER, Trial, prepare_trial
+from exohil.emulators.discrepancy.data import (
+    BLOCK_S,
+    FRAME_COUNTER,
+    SPIKE_SIGMAS,
+    SPIKE_WINDOW,
+    Trial,
+    prepare_trial,
+    spike_counts,
+)
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
     STATIC_RIDGES,
@@ -491,6 +499,10 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
              f"{floor:.4g} {trial.units}")
     for sensor, reason in trial.ignored:
         progress(f"    left out sensor {sensor}: it {reason}")
+    if trial.spikes.any():
+        progress(f"    isolated spikes, not fitted or scored: "
+                 f"{spike_counts(trial.sensor_names, trial.spikes.tolist())} (readings over "
+                 f"{SPIKE_SIGMAS:g} σ from the median of their {SPIKE_WINDOW} frames)")
     fits: list[Fit] = []
     u = make_inputs(trial, 1, fit_static=False).u
     n_inputs = u.shape[1]
@@ -585,6 +597,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "frames": trial.n,
         "frames_placed_by": trial.placed_by,
         "invalid_frames": int((~trial.valid).sum()),
+        "spikes": trial.spikes.tolist(),
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
         "static_map": {"kind": "legendre_polynomial", "degree": spec.degree,
