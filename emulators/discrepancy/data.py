@@ -40,6 +40,9 @@ SPIKE_SIGMAS = 10.0
 #: ... the noise measured over the ``SPIKE_NOISE_WINDOW`` frames around it where that is
 #: larger than the sensor's floor (a resistive sensor is noisier at high strain).
 SPIKE_NOISE_WINDOW = 51
+#: White-noise σ from the robust spread of second differences: var Δ²y = 6σ² for white
+#: noise, and 1.4826 × MAD is σ for a normal distribution.
+D2_MAD_TO_SIGMA = 1.4826 / math.sqrt(6.0)
 
 
 class DiscrepancyError(InputError, ValueError):
@@ -285,7 +288,7 @@ def spikes(y: np.ndarray, valid: np.ndarray, floor: np.ndarray) -> np.ndarray:
                               for j in range(y.shape[1])])
     centre = median_filter(filled, size=(SPIKE_WINDOW, 1), mode="nearest")
     d2 = np.abs(np.diff(filled, 2, axis=0, prepend=filled[:1], append=filled[-1:]))
-    local = 1.4826 * median_filter(d2, size=(SPIKE_NOISE_WINDOW, 1), mode="nearest") / np.sqrt(6.0)
+    local = D2_MAD_TO_SIGMA * median_filter(d2, size=(SPIKE_NOISE_WINDOW, 1), mode="nearest")
     scale = np.maximum(floor, local)
     return valid[:, None] & finite & (np.abs(filled - centre) > SPIKE_SIGMAS * scale)
 
@@ -321,7 +324,7 @@ def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
     d2 = (y0[2:] - 2.0 * y0[1:-1] + y0[:-2])[ok]
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
     step = np.array([quantisation_step(y[valid, j]) for j in range(y.shape[1])])
-    return np.maximum(1.4826 * mad / np.sqrt(6.0), step / np.sqrt(12.0))
+    return np.maximum(D2_MAD_TO_SIGMA * mad, step / np.sqrt(12.0))
 
 
 def quantisation_step(values: np.ndarray) -> float:
