@@ -396,6 +396,29 @@ def test_a_creep_of_another_memory_is_named_and_explained():
     assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
 
 
+def test_a_creep_whose_load_stiffens_with_the_stretch_takes_a_quadratic_driver(tmp_path):
+    """Each sensor creeps toward the square of its stretch (a fabric whose tension rises
+    faster than the stretch) with a 6 s memory: low-passes of the stretch itself left 6 % of
+    the error above the creep-free suit's; the quadratic driver must take it."""
+    rec = make_recording(Case("clean", "lib", 1, seed=101))
+    clean = run(rec, "without creep").summary["gap_before"]
+    y = rec.sensors.values.copy()
+    for j in range(y.shape[1]):
+        lo, hi = np.quantile(y[:, j], [0.01, 0.99])
+        load = ((y[:, j] - lo) / (hi - lo)) ** 2
+        y[:, j] += 1.5 * low_pass(load[:, None], 6.0, 250.0)[:, 0]
+    sensors = SensorStream(seq=rec.sensors.seq, t=rec.sensors.t, values=y)
+    outcome = run(replace(rec, sensors=sensors), "stiffening creep")
+    s = outcome.summary
+    assert s["effects"][:1] == ["creep"], s["effects"]
+    assert outcome.after.spec.creep_quadratic, outcome.after.spec
+    params = s["steps"][0]["params"]
+    assert len(params["quadratic_gain_per_unit"]) == len(params["centre"]) == len(s["sensors"])
+    assert s["gap_after"] ** 2 - clean**2 < 0.03 * (s["gap_before"] ** 2 - clean**2), s
+    _assert_the_profile_reproduces(outcome, tmp_path, ("static_centre", "static_middle"),
+                                   "static_centre")
+
+
 def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
     """Readings that stop rising at the top of their range, approaching an asymptote
     exponentially beyond the 85 % quantile (hidden.py's ``other`` family): the upper knees

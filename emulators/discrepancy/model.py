@@ -151,6 +151,8 @@ class Spec:
         degree: total degree of the static polynomial.
         hysteresis: play-operator term on.
         creep_tau_s: time constants of the creep low-passes, s (empty = none).
+        creep_quadratic: each low-pass also of (ŝ − centre)², a driver that is not
+            proportional to the stretch (a fabric whose load stiffens, or eases, with it).
         creep_asym_s: (build, recover) time constants of an asymmetric creep state, s
             (empty = none): builds while the stretch grows, recovers more slowly.
         lag_kind: "" (none), "first_order", "delay", "first_order_delay" (a low-pass
@@ -168,6 +170,7 @@ class Spec:
     degree: int = 3
     hysteresis: bool = False
     creep_tau_s: tuple[float, ...] = ()
+    creep_quadratic: bool = False
     creep_asym_s: tuple[float, ...] = ()
     lag_kind: str = ""
     lag_s: float = 0.0
@@ -314,6 +317,8 @@ class Inputs:
         thresholds: (S, K) play thresholds, sensor units.
         t_norm: (N,) time scaled to [−1, 1] over the recording.
         t_span: (t₀, t₁) s, the scaling range of time.
+        centre: (S,) the middle of ŝ's range (p1–p99), sensor units: where the quadratic
+            creep driver (ŝ − centre)² is centred, so that it is not nearly ŝ itself.
     """
 
     u: np.ndarray
@@ -326,6 +331,7 @@ class Inputs:
     thresholds: np.ndarray
     t_norm: np.ndarray
     t_span: tuple[float, float]
+    centre: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cache: dict = field(default_factory=dict)
 
 
@@ -377,6 +383,15 @@ def creep_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.ndarray:
     key = ("C", tau_s)
     if key not in inputs.cache:
         inputs.cache[key] = low_pass(inputs.static, tau_s, rate_hz)
+    return inputs.cache[key]
+
+
+def creep_quadratic_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.ndarray:
+    """(N, S) (ŝ − centre)² low-passed with ``tau_s``, sensor units squared: with
+    :func:`creep_columns`, a creep whose driver is any quadratic in the stretch."""
+    key = ("CQ", tau_s)
+    if key not in inputs.cache:
+        inputs.cache[key] = low_pass((inputs.static - inputs.centre) ** 2, tau_s, rate_hz)
     return inputs.cache[key]
 
 
@@ -466,6 +481,9 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
         pose.append(hysteresis_columns(inputs)[:, j, :])
     for tau in spec.creep_tau_s:
         pose.append(creep_columns(inputs, tau, rate_hz)[:, j:j + 1])
+    if spec.creep_quadratic:
+        for tau in spec.creep_tau_s:
+            pose.append(creep_quadratic_columns(inputs, tau, rate_hz)[:, j:j + 1])
     if spec.creep_asym_s:
         build_s, recover_s = spec.creep_asym_s
         pose.append(creep_asym_columns(inputs, build_s, recover_s, rate_hz)[:, j:j + 1])
@@ -987,8 +1005,8 @@ def make_inputs(trial: Trial, static_degree: int, ridge: float = RIDGE,
                             for j in range(trial.n_sensors)])
     inputs.static_coef = coef
     inputs.static = basis @ coef
-    spread = np.quantile(inputs.static[trial.valid], 0.99, axis=0) - np.quantile(
-        inputs.static[trial.valid], 0.01, axis=0)
-    spread = np.where(spread > 0, spread, 1.0)
+    p1, p99 = np.quantile(inputs.static[trial.valid], [0.01, 0.99], axis=0)
+    inputs.centre = (p1 + p99) / 2.0
+    spread = np.where(p99 > p1, p99 - p1, 1.0)
     inputs.thresholds = spread[:, None] * np.asarray(PLAY_FRACTIONS)[None, :]
     return inputs

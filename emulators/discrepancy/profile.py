@@ -131,6 +131,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
         "terms": {
             "hysteresis": spec.hysteresis,
             "creep_tau_s": list(spec.creep_tau_s),
+            "creep_quadratic": spec.creep_quadratic,
             "creep_build_recover_s": list(spec.creep_asym_s),
             "lag_kind": spec.lag_kind or "none",
             "lag_s": spec.lag_s,
@@ -143,6 +144,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             {"name": name,
              "input_coef": suit.inputs.static_coef[:, j].tolist(),
              "play_thresholds": suit.inputs.thresholds[j].tolist(),
+             "static_centre": float(suit.inputs.centre[j]),
              "stops": [suit.stops[j].lo, suit.stops[j].hi],
              "stop_softness": [suit.stops[j].soft_lo, suit.stops[j].soft_hi],
              "stop_shape": [suit.stops[j].shape_lo, suit.stops[j].shape_hi],
@@ -188,6 +190,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
         sm, terms, sensors = data["static_map"], data["terms"], data["sensor"]
         spec = Spec(degree=int(sm["degree"]), hysteresis=bool(terms["hysteresis"]),
                     creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
+                    creep_quadratic=bool(terms.get("creep_quadratic", False)),
                     creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
                     lag_kind=_lag_kind(terms["lag_kind"]), lag_s=float(terms["lag_s"]),
                     lag_delay_s=float(terms.get("lag_delay_s", 0.0)),
@@ -206,7 +209,10 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                         static_degree=int(sm["input_degree"]),
                         thresholds=np.asarray([s["play_thresholds"] for s in sensors]),
                         t_norm=np.empty(0),
-                        t_span=(float(sm["time_span_s"][0]), float(sm["time_span_s"][1])))
+                        t_span=(float(sm["time_span_s"][0]), float(sm["time_span_s"][1])),
+                        centre=np.asarray([float(s["static_centre"] if spec.creep_quadratic
+                                                 else s.get("static_centre", 0.0))
+                                           for s in sensors]))
         return CalibratedSuit(
             name=str(data["name"]), sensors=tuple(s["name"] for s in sensors),
             units=str(data["units"]), joint=str(data["joint"]),
@@ -230,7 +236,8 @@ def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndar
                     static_coef=suit.inputs.static_coef,
                     static_degree=suit.inputs.static_degree,
                     thresholds=suit.inputs.thresholds,
-                    t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1))
+                    t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1),
+                    centre=suit.inputs.centre)
     inputs.static = legendre_products(u, inputs.static_degree)[0] @ inputs.static_coef
     out = np.empty((t.shape[0], len(suit.sensors)))
     for j in range(len(suit.sensors)):

@@ -289,7 +289,9 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     Creep: a Nelder–Mead search on the log time constants minimising the held-out error, from
     the best grid point of each family (one or two low-passes; the build/recover pair of the
     asymmetric state): the family that wins on the grid need not win refined (a symmetric
-    pair 0.199 mm on the grid, 0.194 refined; the asymmetric state 0.222 and 0.157). Saturation:
+    pair 0.199 mm on the grid, 0.194 refined; the asymmetric state 0.222 and 0.157), and the
+    refined low-passes once more with a quadratic driver (``Spec.creep_quadratic``: a load
+    that is not proportional to the stretch). Saturation:
     the stops chosen in its candidate fit are kept from here on (:func:`_keep_stops`). Lag: each
     single model is already refined on its grid (:func:`_refine_lag`), then the low-pass and
     the delay together (:func:`_refine_lag_delay`); a rate limit was searched in full by
@@ -306,8 +308,12 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     if kind != "creep":
         return current
     bare = replace(current.spec, creep_tau_s=(), creep_asym_s=())
-    return min((_refine_creep(trial, inputs, start)
-                for start in _creep_families(trial, inputs, bare)), key=lambda f: f.gap)
+    lows, asym = (_refine_creep(trial, inputs, start)
+                  for start in _creep_families(trial, inputs, bare))
+    # the low-passes again with a driver that is not proportional to the stretch
+    quadratic = _refine_creep(trial, inputs, fit(trial, inputs, replace(
+        lows.spec, creep_quadratic=True)))
+    return min((lows, asym, quadratic), key=lambda f: f.gap)
 
 
 def _refine_drift(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
@@ -374,7 +380,8 @@ def _column_slices(spec: Spec, n_static: int, n_play: int) -> dict[str, slice]:
     """Where each term's coefficients sit in a sensor's coefficient vector."""
     out, at = {}, n_static
     for kind, width in (("hysteresis", n_play if spec.hysteresis else 0),
-                        ("creep", len(spec.creep_tau_s) + (1 if spec.creep_asym_s else 0)),
+                        ("creep", len(spec.creep_tau_s) * (2 if spec.creep_quadratic else 1)
+                         + (1 if spec.creep_asym_s else 0)),
                         ("lag", 1 if spec.lag_kind == "rate_limit" else 0),
                         ("drift", spec.drift_degree)):
         out[kind] = slice(at, at + width)
@@ -397,9 +404,16 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
         return {"loop_width": [round(w, 5) for w in width],
                 "play_thresholds": np.round(inputs.thresholds, 5).tolist(),
                 "weights": [np.round(w, 5).tolist() for w in weights]}
-    if kind == "creep":
+    if kind == "creep":  # columns: a low-pass of ŝ per τ, of (ŝ − centre)² per τ, asymmetric
+        n = len(spec.creep_tau_s)
+        quadratic = slice(n, 2 * n) if spec.creep_quadratic else slice(0, 0)
+        linear = [np.delete(c[cols], np.arange(c[cols].size)[quadratic]) for c in result.coef]
         return {"tau_s": list(spec.creep_tau_s), "build_recover_s": list(spec.creep_asym_s),
-                "gain": [np.round(c[cols], 5).tolist() for c in result.coef]}
+                "gain": [np.round(g, 5).tolist() for g in linear],
+                "quadratic_gain_per_unit": ([np.round(c[cols][quadratic], 8).tolist()
+                                             for c in result.coef]
+                                            if spec.creep_quadratic else None),
+                "centre": np.round(inputs.centre, 5).tolist() if spec.creep_quadratic else None}
     if kind == "lag":
         if spec.lag_kind == "first_order_delay":
             return {"model": spec.lag_kind, "tau_s": spec.lag_s, "delay_s": spec.lag_delay_s}
@@ -450,8 +464,9 @@ def _evidence(base: Fit, cand: Fit, floor: float) -> dict:
 
 def _config(spec: Spec) -> dict:
     return {"degree": spec.degree, "hysteresis": spec.hysteresis,
-            "creep_tau_s": list(spec.creep_tau_s), "creep_asym_s": list(spec.creep_asym_s),
-            "lag": spec.lag_kind, "lag_s": spec.lag_s, "lag_delay_s": spec.lag_delay_s,
+            "creep_tau_s": list(spec.creep_tau_s), "creep_quadratic": spec.creep_quadratic,
+            "creep_asym_s": list(spec.creep_asym_s), "lag": spec.lag_kind,
+            "lag_s": spec.lag_s, "lag_delay_s": spec.lag_delay_s,
             "lag_rates": _rates(spec),
             "drift_degree": spec.drift_degree, "saturation": spec.saturation,
             "ridge": spec.ridge}
