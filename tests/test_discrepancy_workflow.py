@@ -45,6 +45,7 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated_recording,
     write_calibrated_profile,
 )
+from exohil.emulators.discrepancy.report import markdown
 from exohil.emulators.discrepancy.workflow import _evidence, _rate_limit
 from exohil.emulators.effects import Signal
 from exohil.emulators.suit_profile import ProfileError
@@ -437,6 +438,34 @@ def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
     assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
     _assert_the_profile_reproduces(outcome, tmp_path, ('"exp"', '"cubic"'),
                                    "knee shape 'cubic'")
+
+
+def test_a_stop_on_one_sensor_of_twelve_is_judged_on_that_sensor():
+    """A clamp on 10 % of one sensor's frames removes about 5 σ² from that sensor, under one
+    σ² pooled over twelve: named on the sensor it holds (rule 1 on the sensors at a hard
+    stop), while the same suit without the clamp gets nothing."""
+    rec = make_recording(Case("clean", "lib", 1, seed=101))
+    y = rec.sensors.values
+    copies = np.arange(12 - y.shape[1]) % y.shape[1]  # more sensors along the same paths
+    y = np.hstack([y, y[:, copies] + np.random.default_rng(5).normal(0, 0.15, (len(y),
+                                                                                 len(copies)))])
+    names = rec.sensor_names + tuple(f"C{k}" for k in range(len(copies)))
+
+    def suit(values: np.ndarray) -> Recording:
+        return replace(rec, sensor_names=names,
+                       sensors=SensorStream(seq=rec.sensors.seq, t=rec.sensors.t, values=values))
+
+    assert run(suit(y), "twelve sensors").summary["effects"] == []
+    clamped = y.copy()
+    clamped[:, 0] = np.minimum(y[:, 0], np.quantile(y[:, 0], 0.90))
+    s = run(suit(clamped), "one clamped").summary
+    assert s["effects"][:1] == ["saturation"], s["effects"]
+    evidence = s["steps"][0]["evidence"]
+    assert evidence["delta_mse"] < evidence["noise_floor"] ** 2  # not by the pooled rule
+    held = evidence["held_at_stops"]
+    assert held["sensors"] == [names[0]] and held["significant"], held
+    assert held["delta_mse"] > held["noise_floor"] ** 2
+    assert f"holds at hard stops ({names[0]}) alone" in markdown(s)
 
 
 def test_soft_knees_at_both_ends_are_both_found():

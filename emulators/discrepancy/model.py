@@ -949,14 +949,20 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
         stops.append(stop)
         residual[:, j], prediction[:, j] = r, p
         coefs.append(c)
-    block_mse = np.full(N_BLOCKS, np.nan)  # NaN: a block with no scored frame
+    return Fit(spec=spec, residual=residual, block_mse=block_mse(trial, residual), coef=coefs,
+               prediction=prediction, stops=stops)
+
+
+def block_mse(trial: Trial, residual: np.ndarray) -> np.ndarray:
+    """(N_BLOCKS,) mean squared held-out ``residual`` (N, any sensors) per block over its
+    scored frames (NaN where it is not); NaN for a block with no scored frame."""
+    out = np.full(N_BLOCKS, np.nan)
     for b in range(N_BLOCKS):
         r = residual[trial.blocks == b]
         r = r[np.isfinite(r)]
         if r.size:
-            block_mse[b] = np.mean(r**2)
-    return Fit(spec=spec, residual=residual, block_mse=block_mse, coef=coefs,
-               prediction=prediction, stops=stops)
+            out[b] = np.mean(r**2)
+    return out
 
 
 def restrict_to_coverage(trial: Trial, u: np.ndarray) -> float:

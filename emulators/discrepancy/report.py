@@ -106,6 +106,13 @@ def markdown(summary: dict) -> str:
                              if k not in ("play_thresholds", "weights")})
         lines.append(f"| {i} | {step['effect']} | {step['gap']:.4g} | {ev['removed_rms']:.4g} "
                      f"| {ev['blocks_improved']}/{summary['heldout_blocks']} | `{params}` |")
+    for i, step in enumerate(summary["steps"], start=1):
+        held = step["evidence"].get("held_at_stops")
+        if held and held["significant"]:
+            lines += ["", f"Step {i} ({step['effect']}) on the sensors it holds at hard stops "
+                      f"({', '.join(held['sensors'])}) alone: removed RMS "
+                      f"{held['removed_rms']:.4g} {u} against their noise floor "
+                      f"{held['noise_floor']:.4g} {u}."]
     lines += ["", "## Signatures in the residual at each step", ""]
     for i, step in enumerate(summary["steps"], start=1):
         sig = step["evidence"]["signature"]

@@ -12,6 +12,12 @@ the others), it
 2. does not rest on one block: ΔMSE stays positive when the block with the largest
    improvement is left out (evidence from at least two independent stretches of time).
 
+A stop is a local effect: a clamp on one sensor of five can remove more than that sensor's
+noise and still less than the noise of all five. So a saturation candidate that holds some
+sensors at a hard stop (each sits on a plateau while the joint moves, its physical
+signature, see :func:`~exohil.emulators.discrepancy.model.plateaus`) is also significant
+when rules 1 and 2 hold on those sensors alone, against their own noise.
+
 Held-out error already charges a candidate for its extra parameters (fitting noise makes
 held-out error worse, not better), so no parameter-count penalty is added. Among significant
 candidates the largest ΔMSE is named; the workflow stops when none is significant.
@@ -41,6 +47,7 @@ from exohil.emulators.discrepancy.model import (
     Fit,
     Inputs,
     Spec,
+    block_mse,
     drift_columns,
     fit,
     legendre_products,
@@ -444,11 +451,44 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     raise ValueError(kind)
 
 
-def _evidence(base: Fit, cand: Fit, floor: float) -> dict:
-    delta = base.block_mse - cand.block_mse
-    delta = delta[np.isfinite(delta)]  # blocks with scored frames
+def _rules(base_mse: np.ndarray, cand_mse: np.ndarray) -> tuple[float, float]:
+    """ΔMSE over the blocks with scored frames (rule 1), and without the best block (rule 2)."""
+    delta = base_mse - cand_mse
+    delta = delta[np.isfinite(delta)]
     dmse = float(np.mean(delta)) if delta.size else 0.0
     robust = float(np.mean(np.sort(delta)[:-1])) if delta.size > 1 else 0.0
+    return dmse, robust
+
+
+def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
+    """Rules 1 and 2 on the sensors ``cand`` holds at a hard stop, against their own noise
+    (see the module's docstring); None unless ``cand`` adds the stops and holds a sensor."""
+    if base.spec.saturation or not cand.spec.saturation:
+        return None
+    held = [j for j, st in enumerate(cand.stops)
+            if (math.isfinite(st.lo) and st.soft_lo == 0)
+            or (math.isfinite(st.hi) and st.soft_hi == 0)]
+    if not held:
+        return None
+    dmse, robust = _rules(block_mse(trial, base.residual[:, held]),
+                          block_mse(trial, cand.residual[:, held]))
+    floor = float(np.sqrt(np.mean(trial.noise[held] ** 2)))
+    return {"sensors": [trial.sensor_names[j] for j in held],
+            "delta_mse": round(dmse, 8),
+            "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
+            "noise_floor": round(floor, 6),
+            "delta_mse_without_best_block": round(robust, 8),
+            "significant": bool(dmse > floor**2 and robust > 0)}
+
+
+def _evidence(base: Fit, cand: Fit, floor: float, trial: Trial | None = None) -> dict:
+    """Rules 1 and 2 (the module's docstring) for ``cand`` over ``base``; with ``trial``, a
+    candidate with hard stops is also judged on the sensors it holds at them."""
+    dmse, robust = _rules(base.block_mse, cand.block_mse)
+    delta = base.block_mse - cand.block_mse
+    delta = delta[np.isfinite(delta)]
+    held = _held_at_stops(trial, base, cand) if trial is not None else None
+    local = {} if held is None else {"held_at_stops": held}
     return {
         "heldout_gap": round(cand.gap, 6),
         "gap_reduction": round((base.gap - cand.gap) / base.gap, 4) if base.gap > 0 else 0.0,
@@ -457,8 +497,10 @@ def _evidence(base: Fit, cand: Fit, floor: float) -> dict:
         "noise_floor": round(floor, 6),
         "blocks_improved": int(np.sum(delta > 0)),
         "delta_mse_without_best_block": round(robust, 8),
-        "significant": bool(dmse > floor**2 and robust > 0),
+        "significant": bool(dmse > floor**2 and robust > 0)
+        or bool(held is not None and held["significant"]),
         "config": _config(cand.spec),
+        **local,
     }
 
 
@@ -554,7 +596,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         scored = []
         for kind in missing:
             cand = _best(trial, inputs, kind, spec)
-            scored.append((kind, cand, _evidence(base, cand, floor)))
+            scored.append((kind, cand, _evidence(base, cand, floor, trial)))
         scored.sort(key=lambda item: -item[2]["delta_mse"])
         table = ", ".join(f"{k} {e['heldout_gap']:.4g}" for k, _, e in scored)
         winners = [item for item in scored if item[2]["significant"]]
@@ -578,7 +620,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
             # still missing was fitted against it: refit it once, with the next effect added
             cand = _refine_lag_delay(trial, inputs, cand)
         previous = kind
-        evidence = _evidence(base, cand, floor)
+        evidence = _evidence(base, cand, floor, trial)
         spec, base = cand.spec, cand
         refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
                  (("lag", _lag_of(cand.spec) != lag_before),
