@@ -224,7 +224,7 @@ def test_what_no_frame_measures_is_null_not_nan():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         base, cand = fit(trial, inputs, Spec(degree=2)), fit(trial, inputs, Spec(degree=3))
-        evidence = _evidence(base, cand, 0.1)
+        evidence = _evidence(trial, base, cand, 0.1)
     assert np.isnan(base.block_mse[0]) and np.isfinite(base.block_mse[1:]).all()
     json.dumps(evidence, allow_nan=False)
     assert evidence["blocks_improved"] <= N_BLOCKS - 1

@@ -139,6 +139,12 @@ class Stops:
         """A soft knee on either side."""
         return self.soft_lo > 0 or self.soft_hi > 0
 
+    @property
+    def hard(self) -> bool:
+        """A hard stop (a plateau the reading is clipped at) on either side."""
+        return ((math.isfinite(self.lo) and self.soft_lo == 0)
+                or (math.isfinite(self.hi) and self.soft_hi == 0))
+
 
 NO_STOPS = Stops()
 

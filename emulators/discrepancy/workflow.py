@@ -413,10 +413,10 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
                 "weights": [np.round(w, 5).tolist() for w in weights]}
     if kind == "creep":  # columns: a low-pass of ŝ per τ, of (ŝ − centre)² per τ, asymmetric
         n = len(spec.creep_tau_s)
-        quadratic = slice(n, 2 * n) if spec.creep_quadratic else slice(0, 0)
-        linear = [np.delete(c[cols], np.arange(c[cols].size)[quadratic]) for c in result.coef]
+        quadratic = slice(n, 2 * n if spec.creep_quadratic else n)
         return {"tau_s": list(spec.creep_tau_s), "build_recover_s": list(spec.creep_asym_s),
-                "gain": [np.round(g, 5).tolist() for g in linear],
+                "gain": [np.round(np.r_[c[cols][:n], c[cols][quadratic.stop:]], 5).tolist()
+                         for c in result.coef],
                 "quadratic_gain_per_unit": ([np.round(c[cols][quadratic], 8).tolist()
                                              for c in result.coef]
                                             if spec.creep_quadratic else None),
@@ -451,13 +451,21 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     raise ValueError(kind)
 
 
-def _rules(base_mse: np.ndarray, cand_mse: np.ndarray) -> tuple[float, float]:
-    """ΔMSE over the blocks with scored frames (rule 1), and without the best block (rule 2)."""
+def _rules(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float) -> dict:
+    """Rules 1 and 2 (the module's docstring) from held-out MSE per block, over the blocks
+    with scored frames, against white noise of RMS ``floor``."""
     delta = base_mse - cand_mse
     delta = delta[np.isfinite(delta)]
     dmse = float(np.mean(delta)) if delta.size else 0.0
     robust = float(np.mean(np.sort(delta)[:-1])) if delta.size > 1 else 0.0
-    return dmse, robust
+    return {
+        "delta_mse": round(dmse, 8),
+        "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
+        "noise_floor": round(floor, 6),
+        "blocks_improved": int(np.sum(delta > 0)),
+        "delta_mse_without_best_block": round(robust, 8),
+        "significant": bool(dmse > floor**2 and robust > 0),
+    }
 
 
 def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
@@ -465,42 +473,28 @@ def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
     (see the module's docstring); None unless ``cand`` adds the stops and holds a sensor."""
     if base.spec.saturation or not cand.spec.saturation:
         return None
-    held = [j for j, st in enumerate(cand.stops)
-            if (math.isfinite(st.lo) and st.soft_lo == 0)
-            or (math.isfinite(st.hi) and st.soft_hi == 0)]
+    held = [j for j, st in enumerate(cand.stops) if st.hard]
     if not held:
         return None
-    dmse, robust = _rules(block_mse(trial, base.residual[:, held]),
-                          block_mse(trial, cand.residual[:, held]))
-    floor = float(np.sqrt(np.mean(trial.noise[held] ** 2)))
     return {"sensors": [trial.sensor_names[j] for j in held],
-            "delta_mse": round(dmse, 8),
-            "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
-            "noise_floor": round(floor, 6),
-            "delta_mse_without_best_block": round(robust, 8),
-            "significant": bool(dmse > floor**2 and robust > 0)}
+            **_rules(block_mse(trial, base.residual[:, held]),
+                     block_mse(trial, cand.residual[:, held]),
+                     float(np.sqrt(np.mean(trial.noise[held] ** 2))))}
 
 
-def _evidence(base: Fit, cand: Fit, floor: float, trial: Trial | None = None) -> dict:
-    """Rules 1 and 2 (the module's docstring) for ``cand`` over ``base``; with ``trial``, a
-    candidate with hard stops is also judged on the sensors it holds at them."""
-    dmse, robust = _rules(base.block_mse, cand.block_mse)
-    delta = base.block_mse - cand.block_mse
-    delta = delta[np.isfinite(delta)]
-    held = _held_at_stops(trial, base, cand) if trial is not None else None
-    local = {} if held is None else {"held_at_stops": held}
+def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
+    """Rules 1 and 2 for ``cand`` over ``base``, pooled over the sensors; a candidate that
+    adds hard stops is also judged on the sensors it holds at them."""
+    rules = _rules(base.block_mse, cand.block_mse, floor)
+    held = _held_at_stops(trial, base, cand)
+    if held is not None:
+        rules["significant"] = rules["significant"] or held["significant"]
     return {
         "heldout_gap": round(cand.gap, 6),
         "gap_reduction": round((base.gap - cand.gap) / base.gap, 4) if base.gap > 0 else 0.0,
-        "delta_mse": round(dmse, 8),
-        "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
-        "noise_floor": round(floor, 6),
-        "blocks_improved": int(np.sum(delta > 0)),
-        "delta_mse_without_best_block": round(robust, 8),
-        "significant": bool(dmse > floor**2 and robust > 0)
-        or bool(held is not None and held["significant"]),
+        **rules,
         "config": _config(cand.spec),
-        **local,
+        **({} if held is None else {"held_at_stops": held}),
     }
 
 
@@ -596,7 +590,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         scored = []
         for kind in missing:
             cand = _best(trial, inputs, kind, spec)
-            scored.append((kind, cand, _evidence(base, cand, floor, trial)))
+            scored.append((kind, cand, _evidence(trial, base, cand, floor)))
         scored.sort(key=lambda item: -item[2]["delta_mse"])
         table = ", ".join(f"{k} {e['heldout_gap']:.4g}" for k, _, e in scored)
         winners = [item for item in scored if item[2]["significant"]]
@@ -620,7 +614,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
             # still missing was fitted against it: refit it once, with the next effect added
             cand = _refine_lag_delay(trial, inputs, cand)
         previous = kind
-        evidence = _evidence(base, cand, floor, trial)
+        evidence = _evidence(trial, base, cand, floor)
         spec, base = cand.spec, cand
         refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
                  (("lag", _lag_of(cand.spec) != lag_before),
