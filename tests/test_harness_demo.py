@@ -2,6 +2,7 @@
 and its report folder; `exohil run --out` against a separately started `exohil emulate`."""
 
 import json
+import os
 import subprocess
 import sys
 from collections import Counter
@@ -128,18 +129,26 @@ def test_demo_rejects_a_missing_model_with_one_line(tmp_path):
 
 def test_run_against_a_separately_started_emulator_records_and_reports(tmp_path):
     fixture = FIXTURES_DIR / "paper_protocol_heldout.mcap"
+    emulator_tmp = tmp_path / "emulator-tmp"  # where the emulator makes its device link
+    emulator_tmp.mkdir()
     proc = subprocess.Popen([str(Path(sys.executable).parent / "exohil"), "emulate",
                              str(fixture), "--duration", "30"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "TMPDIR": str(emulator_tmp)})
     try:
         port = proc.stdout.readline().strip()
         assert port, proc.stderr.read()
         out = tmp_path / "report"
         result = CliRunner().invoke(main, ["run", port, "--duration", "2", "--reference",
                                            str(fixture), "--sink", "mujoco", "--out", str(out)])
+        proc.terminate()  # SIGTERM, as a service manager stops it
+        assert proc.wait(timeout=30) == 0, proc.stderr.read()
     finally:
-        proc.kill()
-        proc.wait()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert Path(port).parent.parent == emulator_tmp
+    assert list(emulator_tmp.iterdir()) == []  # the device link and its folder are removed
     assert result.exit_code == 0, result.output
     s = check_report(out, result.output, json.loads((out / "summary.json").read_text())
                      ["frames"]["received"])

@@ -82,7 +82,9 @@ def test_sigkill_during_a_recorded_demo_leaves_a_readable_recording(tmp_path):
     exohil = Path(sys.executable).with_name("exohil")
     proc = subprocess.Popen([str(exohil), "demo", "--seconds", "60", "--no-faults",
                              "--record", str(target)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            # a killed emulator cannot remove its device link: keep it here
+                            env={**os.environ, "TMPDIR": str(tmp_path)})
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and (not partial.exists()
