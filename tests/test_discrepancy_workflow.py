@@ -316,6 +316,14 @@ def test_quantisation_step_is_the_readings_resolution():
     assert quantisation_step(np.full(10, 3.0)) == 0.0
 
 
+def test_the_floor_of_readings_in_coarse_steps_counts_noise_and_rounding():
+    # 0.25 mm steps against 0.15 mm of noise, as an ADC count: the MAD of the quantised
+    # second differences moves in half-steps and gave 0.151 mm here (9 % low)
+    rec = _quantised(make_recording(Case("clean", "lib", 1, seed=5, duration_s=30.0)), 0.25)
+    floor = noise_floor(prepare_trial(rec))
+    np.testing.assert_allclose(floor, np.hypot(0.15, 0.25 / np.sqrt(12.0)), rtol=0.04)
+
+
 def test_coarse_quantisation_raises_the_floor_and_names_nothing_on_a_clean_suit():
     # 1 mm steps against 0.15 mm of noise: most second differences are exactly 0, so the
     # MAD alone would put the floor near 0 and any model error would look significant.

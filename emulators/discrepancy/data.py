@@ -43,6 +43,16 @@ SPIKE_NOISE_WINDOW = 51
 #: White-noise σ from the robust spread of second differences: var Δ²y = 6σ² for white
 #: noise, and 1.4826 × MAD is σ for a normal distribution.
 D2_MAD_TO_SIGMA = 1.4826 / math.sqrt(6.0)
+#: Readings whose step is coarser than this share of their noise are measured by a clipped
+#: standard deviation instead: a median of quantised differences moves in half-steps (an
+#: ADC count read with 0.86 counts of noise gave a MAD floor of 0.61 counts).
+QUANTISED_SHARE = 0.1
+#: Second differences further than this many standard deviations from their median are left
+#: out of the clipped estimate (movement onsets, glitches); ``D2_CLIP_VARIANCE`` is the share
+#: of a normal variable's variance kept inside ±``D2_CLIP_SIGMAS``, divided out.
+D2_CLIP_SIGMAS = 4.0
+D2_CLIP_VARIANCE = 1.0 - 2.0 * D2_CLIP_SIGMAS * math.exp(-D2_CLIP_SIGMAS ** 2 / 2.0) / (
+    math.sqrt(2.0 * math.pi) * math.erf(D2_CLIP_SIGMAS / math.sqrt(2.0)))
 
 
 class DiscrepancyError(InputError, ValueError):
@@ -313,6 +323,12 @@ def noise_floor(trial: Trial) -> np.ndarray:
     second differences exactly zero and the MAD collapse towards 0, yet no model can get
     below the rounding error, whose standard deviation is ``q/√12`` for a step ``q``
     (:func:`quantisation_step`). The floor is the larger of the two.
+
+    The MAD of quantised readings is itself quantised (it moves in half-steps), so for
+    readings whose step is coarser than ``QUANTISED_SHARE`` of that estimate the spread
+    is the standard deviation of the second differences within ±``D2_CLIP_SIGMAS`` of
+    their median instead. It counts the rounding error with the noise, as the residual of
+    any model does (σ² + q²/12 while σ ≳ q/2).
     """
     return sensor_noise(trial.y, trial.valid)
 
@@ -322,9 +338,25 @@ def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
     ok = valid[2:] & valid[1:-1] & valid[:-2]
     y0 = np.where(valid[:, None], y, 0.0)  # invalid frames may hold NaN or inf
     d2 = (y0[2:] - 2.0 * y0[1:-1] + y0[:-2])[ok]
-    mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+    centred = d2 - np.median(d2, axis=0)
+    sigma = D2_MAD_TO_SIGMA * np.median(np.abs(centred), axis=0)
     step = np.array([quantisation_step(y[valid, j]) for j in range(y.shape[1])])
-    return np.maximum(D2_MAD_TO_SIGMA * mad, step / np.sqrt(12.0))
+    for j in np.flatnonzero(step > QUANTISED_SHARE * sigma):
+        sigma[j] = _clipped_sd(centred[:, j], max(sigma[j], step[j] / np.sqrt(12.0)))
+    return np.maximum(sigma, step / np.sqrt(12.0))
+
+
+def _clipped_sd(centred: np.ndarray, sigma: float, iterations: int = 5) -> float:
+    """White-noise σ from second differences ``centred`` on their median: their standard
+    deviation within ±``D2_CLIP_SIGMAS`` of it, the clip re-placed from the σ before
+    (starting at ``sigma``), corrected for the variance the clip removes."""
+    scale = math.sqrt(6.0) * sigma
+    for _ in range(iterations):
+        kept = centred[np.abs(centred) <= D2_CLIP_SIGMAS * scale]
+        if kept.size == 0:
+            break
+        scale = math.sqrt(float(np.mean(kept ** 2)) / D2_CLIP_VARIANCE)
+    return scale / math.sqrt(6.0)
 
 
 def quantisation_step(values: np.ndarray) -> float:
