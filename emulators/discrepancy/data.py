@@ -44,9 +44,11 @@ SPIKE_NOISE_WINDOW = 51
 #: noise, and 1.4826 × MAD is σ for a normal distribution.
 D2_MAD_TO_SIGMA = 1.4826 / math.sqrt(6.0)
 #: Readings whose step is coarser than this share of their noise are measured by a clipped
-#: standard deviation instead: a median of quantised differences moves in half-steps (an
-#: ADC count read with 0.86 counts of noise gave a MAD floor of 0.61 counts).
-QUANTISED_SHARE = 0.1
+#: standard deviation instead: a median of quantised differences moves in half-steps, up to
+#: about 0.3·q/σ of it, 10 % at this share (an ADC count read with 0.86 counts of noise
+#: gave a MAD floor of 0.61 counts). Finer steps keep the MAD, which ignores the movement's
+#: share of the differences better.
+QUANTISED_SHARE = 0.3
 #: Second differences further than this many standard deviations from their median are left
 #: out of the clipped estimate (movement onsets, glitches); ``D2_CLIP_VARIANCE`` is the share
 #: of a normal variable's variance kept inside ±``D2_CLIP_SIGMAS``, divided out.
