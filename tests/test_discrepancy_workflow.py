@@ -645,6 +645,43 @@ def test_calibrated_profile_round_trip_reproduces_the_model(hysteresis_outcome, 
     assert np.isfinite(rec.sensors.values).all()
 
 
+@pytest.fixture(scope="module")
+def axial_outcome():
+    """A clean suit moved with the axial rotation turning within ±35°."""
+    trajectory = random_trajectory(4, 60.0, axial_deg=35.0)
+    geometry, gains, offsets = random_geometry(4)
+    signal = suit_lengths(trajectory, geometry, gains, offsets)
+    y = signal.values + np.random.default_rng(4).normal(0.0, 0.15, signal.values.shape)
+    rec = suit_recording(trajectory, geometry, Signal.from_values(signal.t, y),
+                         {"case": "axial rotation"})
+    return run(rec, "axial")
+
+
+def test_a_suit_turned_about_the_humerus_is_calibrated_on_both_arm_axes(axial_outcome,
+                                                                         tmp_path):
+    s = axial_outcome.summary
+    trial = axial_outcome.trial
+    assert np.ptp(trial.angles[:, 2]) > 50.0
+    # turning ψ leaves θ and φ as the suite's recordings have them
+    np.testing.assert_array_equal(random_trajectory(4, 60.0, axial_deg=35.0).knot_deg[:, :2],
+                                  random_trajectory(4, 60.0).knot_deg[:, :2])
+    assert axial_outcome.inputs.input_kind == "arm_axes"
+    assert axial_outcome.inputs.u.shape[1] == 6
+    assert s["effects"] == []
+    suit = calibrated_suit(axial_outcome, "axial")
+    write_calibrated_profile(tmp_path / "p.toml", suit)
+    loaded = load_calibrated_profile(tmp_path / "p.toml")
+    np.testing.assert_allclose(simulate_calibrated(loaded, trial.t, trial.angles),
+                               axial_outcome.after.prediction, atol=1e-6)
+    # a profile whose coefficients do not fit its basis is refused when it is read
+    text = (tmp_path / "p.toml").read_text()
+    short = re.sub(r"input_coef = \[[^,\]]+, ", "input_coef = [", text)
+    assert short != text
+    (tmp_path / "short.toml").write_text(short)
+    with pytest.raises(ProfileError, match="input_coef has"):
+        load_calibrated_profile(tmp_path / "short.toml")
+
+
 def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_path):
     rec, _ = hysteresis_outcome
     path = tmp_path / "measured.mcap"

@@ -41,9 +41,11 @@ FAMILIES = ("lib", "alt", "other")
 T = TypeVar("T")
 
 
-def random_trajectory(seed: int, duration_s: float) -> Trajectory:
+def random_trajectory(seed: int, duration_s: float, axial_deg: float = 0.0) -> Trajectory:
     """Random reaching: targets in −40 ≤ θ ≤ 90°, 0 ≤ φ ≤ 95°, speeds 20–120 °/s, holds
-    0.3–5 s, one in three elevations with a partial reversal on the way."""
+    0.3–5 s, one in three elevations with a partial reversal on the way. With ``axial_deg``
+    each move also turns the axial rotation ψ to a random value within ±``axial_deg``
+    (drawn from a second stream, so θ and φ are those of ``axial_deg`` = 0)."""
     rng = np.random.default_rng(seed)
     t, poses = [0.0], [(0.0, 5.0)]
     while t[-1] < duration_s:
@@ -62,7 +64,12 @@ def random_trajectory(seed: int, duration_s: float) -> Trajectory:
         poses.append((theta, phi))
         t.append(t[-1] + rng.uniform(0.3, 5.0))
         poses.append((theta, phi))
-    knots = np.column_stack([np.asarray(poses), np.zeros(len(poses))])
+    psi = np.zeros(len(poses))
+    if axial_deg:
+        turns = np.random.default_rng([seed, 1]).uniform(-axial_deg, axial_deg, len(poses))
+        for i in range(1, len(poses)):  # a hold keeps the rotation it arrived with
+            psi[i] = psi[i - 1] if poses[i] == poses[i - 1] else turns[i]
+    knots = np.column_stack([np.asarray(poses), psi])
     return Trajectory(knot_t=np.asarray(t), knot_deg=knots, interpolation="minimum_jerk",
                       duration_s=float(duration_s), source=f"hidden random seed={seed}")
 

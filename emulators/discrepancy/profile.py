@@ -213,6 +213,13 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                         centre=np.asarray([float(s["static_centre"] if spec.creep_quadratic
                                                  else s.get("static_centre", 0.0))
                                            for s in sensors]))
+        angles = tuple(str(a) for a in data["angles"])
+        u, _ = map_inputs(np.zeros((1, len(angles))), angles, inputs.angle_lo, inputs.angle_hi)
+        n_cols = len(legendre_products(u, inputs.static_degree)[1])
+        if inputs.static_coef.shape[0] != n_cols:
+            raise ValueError(f"input_coef has {inputs.static_coef.shape[0]} terms per sensor; "
+                             f"the degree-{inputs.static_degree} basis of {', '.join(angles)} "
+                             f"has {n_cols}")
         return CalibratedSuit(
             name=str(data["name"]), sensors=tuple(s["name"] for s in sensors),
             units=str(data["units"]), joint=str(data["joint"]),
