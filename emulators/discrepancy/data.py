@@ -343,9 +343,10 @@ def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
     centred = d2 - np.median(d2, axis=0)
     sigma = D2_MAD_TO_SIGMA * np.median(np.abs(centred), axis=0)
     step = np.array([quantisation_step(y[valid, j]) for j in range(y.shape[1])])
+    rounding = step / np.sqrt(12.0)
     for j in np.flatnonzero(step > QUANTISED_SHARE * sigma):
-        sigma[j] = _clipped_sd(centred[:, j], max(sigma[j], step[j] / np.sqrt(12.0)))
-    return np.maximum(sigma, step / np.sqrt(12.0))
+        sigma[j] = _clipped_sd(centred[:, j], max(sigma[j], rounding[j]))
+    return np.maximum(sigma, rounding)
 
 
 def _clipped_sd(centred: np.ndarray, sigma: float, iterations: int = 5) -> float:

@@ -223,7 +223,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
         return CalibratedSuit(
             name=str(data["name"]), sensors=tuple(s["name"] for s in sensors),
             units=str(data["units"]), joint=str(data["joint"]),
-            angles=tuple(data["angles"]), rate_hz=float(data["rate_hz"]),
+            angles=angles, rate_hz=float(data["rate_hz"]),
             effects=tuple(data["effects"]), spec=spec, inputs=inputs,
             coef=np.asarray([s["coef"] for s in sensors], dtype=np.float64),
             stops=tuple(_stops(s) for s in sensors),
