@@ -680,6 +680,18 @@ def test_a_suit_turned_about_the_humerus_is_calibrated_on_both_arm_axes(axial_ou
     (tmp_path / "short.toml").write_text(short)
     with pytest.raises(ProfileError, match="input_coef has"):
         load_calibrated_profile(tmp_path / "short.toml")
+    # so is one with a coefficient too many for its model on every sensor (the extra one
+    # was ignored when simulated), or on one sensor
+    def one_more(count: int) -> Path:
+        path = tmp_path / f"more{count}.toml"
+        path.write_text(re.sub(r"^coef = \[", "coef = [0.0, ", text, count=count, flags=re.M))
+        return path
+
+    extra = f"sensor {suit.sensors[0]} has {suit.coef.shape[1] + 1} coef; its model"
+    with pytest.raises(ProfileError, match=extra):
+        load_calibrated_profile(one_more(0))  # count 0: every sensor
+    with pytest.raises(ProfileError, match="different numbers of coef"):
+        load_calibrated_profile(one_more(1))
 
 
 def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_path):

@@ -220,7 +220,10 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
             raise ValueError(f"input_coef has {inputs.static_coef.shape[0]} terms per sensor; "
                              f"the degree-{inputs.static_degree} basis of {', '.join(angles)} "
                              f"has {n_cols}")
-        return CalibratedSuit(
+        counts = {s["name"]: len(s["coef"]) for s in sensors}
+        if len(set(counts.values())) > 1:
+            raise ValueError(f"sensors have different numbers of coef: {counts}")
+        suit = CalibratedSuit(
             name=str(data["name"]), sensors=tuple(s["name"] for s in sensors),
             units=str(data["units"]), joint=str(data["joint"]),
             angles=angles, rate_hz=float(data["rate_hz"]),
@@ -228,14 +231,14 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
             coef=np.asarray([s["coef"] for s in sensors], dtype=np.float64),
             stops=tuple(_stops(s) for s in sensors),
             noise=np.asarray([s["noise_sigma"] for s in sensors], dtype=np.float64))
+        _check_coef_counts(suit)
+        return suit
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise ProfileError(f"{path}: malformed calibrated suit profile ({exc!r})") from exc
 
 
-def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray,
-                        ) -> np.ndarray:
-    """Noise-free sensor values (N, S) in ``suit.units`` for angles (N, A) in degrees (in
-    ``suit.angles`` order) sampled uniformly at ``suit.rate_hz`` at times ``t`` (s)."""
+def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inputs:
+    """The model's inputs for angles (N, A) in degrees (``suit.angles`` order) at times t."""
     u, _ = map_inputs(angles_deg, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
     t0, t1 = suit.inputs.t_span
     inputs = Inputs(u=u, input_kind=suit.inputs.input_kind, angle_lo=suit.inputs.angle_lo,
@@ -246,6 +249,27 @@ def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndar
                     t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1),
                     centre=suit.inputs.centre)
     inputs.static = legendre_products(u, inputs.static_degree)[0] @ inputs.static_coef
+    return inputs
+
+
+def _check_coef_counts(suit: CalibratedSuit) -> None:
+    """ValueError unless each sensor has one coefficient per column of its model (a design
+    of two frames at the neutral pose gives the count)."""
+    t = np.arange(2) / suit.rate_hz
+    inputs = _inputs(suit, t, np.zeros((2, len(suit.angles))))
+    for j, name in enumerate(suit.sensors):
+        x = design(suit.rate_hz, inputs, suit.spec, j)
+        width = x.shared.shape[1] + x.own.shape[1]
+        if suit.coef[j].shape != (width,):
+            raise ValueError(f"sensor {name} has {suit.coef[j].size} coef; its model "
+                             f"({', '.join(suit.effects) or 'static map only'}) has {width}")
+
+
+def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray,
+                        ) -> np.ndarray:
+    """Noise-free sensor values (N, S) in ``suit.units`` for angles (N, A) in degrees (in
+    ``suit.angles`` order) sampled uniformly at ``suit.rate_hz`` at times ``t`` (s)."""
+    inputs = _inputs(suit, t, angles_deg)
     out = np.empty((t.shape[0], len(suit.sensors)))
     for j in range(len(suit.sensors)):
         out[:, j] = suit.stops[j].apply(design(suit.rate_hz, inputs, suit.spec, j)
