@@ -476,6 +476,28 @@ def test_a_stop_on_one_sensor_of_twelve_is_judged_on_that_sensor():
     assert f"holds at hard stops ({names[0]}) alone" in markdown(s)
 
 
+def test_a_stop_the_map_absorbs_is_judged_on_the_frames_it_holds():
+    """A rail under one sensor's lowest 8 % (the reading held exactly there, as an ADC holds
+    a channel at 0): a cubic map bends toward it and leaves under one σ² on that sensor's
+    frames, pooled or alone, but where the stop holds the reading it removes more than σ²
+    per frame, in more than one block."""
+    rec = make_recording(Case("clean", "lib", 1, seed=101))
+    y = rec.sensors.values.copy()
+    y[:, 0] = np.maximum(y[:, 0], np.quantile(y[:, 0], 0.08))
+    sensors = SensorStream(seq=rec.sensors.seq, t=rec.sensors.t, values=y)
+    s = run(replace(rec, sensors=sensors), "railed").summary
+    assert s["effects"][:1] == ["saturation"], s["effects"]
+    evidence = s["steps"][0]["evidence"]
+    held = evidence["held_at_stops"]
+    assert held["sensors"] == [rec.sensor_names[0]], held
+    assert evidence["delta_mse"] < evidence["noise_floor"] ** 2  # not by the pooled rule
+    assert held["delta_mse"] < held["noise_floor"] ** 2  # nor on the sensor's frames
+    frames = held["frames_held"]
+    assert frames["significant"] and frames["delta_mse"] > held["noise_floor"] ** 2, frames
+    assert 0 < frames["share"] < 0.15 and frames["delta_mse_without_best_block"] > 0, frames
+    assert f"on the {frames['share']:.1%} of their frames it holds" in markdown(s)
+
+
 def test_soft_knees_at_both_ends_are_both_found():
     """Every sensor bends softly above its 60 % and below its 30 % quantile. The upper knee
     is found first; the lower one must then be searched with the upper kept soft (it used to

@@ -109,10 +109,12 @@ def markdown(summary: dict) -> str:
     for i, step in enumerate(summary["steps"], start=1):
         held = step["evidence"].get("held_at_stops")
         if held and held["significant"]:
+            frames = held["frames_held"]
             lines += ["", f"Step {i} ({step['effect']}) on the sensors it holds at hard stops "
                       f"({', '.join(held['sensors'])}) alone: removed RMS "
                       f"{held['removed_rms']:.4g} {u} against their noise floor "
-                      f"{held['noise_floor']:.4g} {u}."]
+                      f"{held['noise_floor']:.4g} {u}; on the {frames['share']:.1%} of their "
+                      f"frames it holds at the stops, {frames['removed_rms']:.4g} {u}."]
     lines += ["", "## Signatures in the residual at each step", ""]
     for i, step in enumerate(summary["steps"], start=1):
         sig = step["evidence"]["signature"]

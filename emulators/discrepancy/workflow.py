@@ -16,7 +16,11 @@ A stop is a local effect: a clamp on one sensor of five can remove more than tha
 noise and still less than the noise of all five. So a saturation candidate that holds some
 sensors at a hard stop (each sits on a plateau while the joint moves, its physical
 signature, see :func:`~exohil.emulators.discrepancy.model.plateaus`) is also significant
-when rules 1 and 2 hold on those sensors alone, against their own noise.
+when rules 1 and 2 hold on those sensors alone, against their own noise, or on the frames
+it holds there alone: a stop reached on 5 % of the frames changes only those, and a map
+fitted through it spreads what it cannot bend over the rest. Those frames must be as many
+as a plateau spans (the share of the signature): a map that passes the stop on a handful
+of frames shows no plateau there.
 
 Held-out error already charges a candidate for its extra parameters (fitting noise makes
 held-out error worse, not better), so no parameter-count penalty is added. Among significant
@@ -43,6 +47,7 @@ from exohil.emulators.discrepancy.data import (
 )
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
+    PLATEAU_SHARE,
     STATIC_RIDGES,
     Fit,
     Inputs,
@@ -469,17 +474,28 @@ def _rules(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float) -> dict:
 
 
 def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
-    """Rules 1 and 2 on the sensors ``cand`` holds at a hard stop, against their own noise
-    (see the module's docstring); None unless ``cand`` adds the stops and holds a sensor."""
+    """Rules 1 and 2 on the sensors ``cand`` holds at a hard stop, against their own noise,
+    over all their frames and over the frames it holds (see the module's docstring); None
+    unless ``cand`` adds the stops and holds a sensor."""
     if base.spec.saturation or not cand.spec.saturation:
         return None
     held = [j for j, st in enumerate(cand.stops) if st.hard]
     if not held:
         return None
-    return {"sensors": [trial.sensor_names[j] for j in held],
-            **_rules(block_mse(trial, base.residual[:, held]),
-                     block_mse(trial, cand.residual[:, held]),
-                     float(np.sqrt(np.mean(trial.noise[held] ** 2))))}
+    noise = float(np.sqrt(np.mean(trial.noise[held] ** 2)))
+    sensors = _rules(block_mse(trial, base.residual[:, held]),
+                     block_mse(trial, cand.residual[:, held]), noise)
+    at_stop = np.zeros((trial.n, len(held)), dtype=bool)
+    for k, j in enumerate(held):  # frames the fitted map takes beyond a hard stop
+        st, p = cand.stops[j], cand.prediction[:, j]
+        at_stop[:, k] = ((st.soft_lo == 0) & (p == st.lo)) | ((st.soft_hi == 0) & (p == st.hi))
+    # a stop the map reaches on fewer frames than a plateau spans holds no plateau there
+    at_stop &= at_stop[trial.scored].mean(axis=0) >= PLATEAU_SHARE
+    frames = _rules(block_mse(trial, np.where(at_stop, base.residual[:, held], np.nan)),
+                    block_mse(trial, np.where(at_stop, cand.residual[:, held], np.nan)), noise)
+    return {"sensors": [trial.sensor_names[j] for j in held], **sensors,
+            "significant": sensors["significant"] or frames["significant"],
+            "frames_held": {"share": round(float(at_stop[trial.scored].mean()), 4), **frames}}
 
 
 def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
