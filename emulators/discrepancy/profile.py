@@ -213,20 +213,13 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                         centre=np.asarray([float(s["static_centre"] if spec.creep_quadratic
                                                  else s.get("static_centre", 0.0))
                                            for s in sensors]))
-        angles = tuple(str(a) for a in data["angles"])
-        u, _ = map_inputs(np.zeros((1, len(angles))), angles, inputs.angle_lo, inputs.angle_hi)
-        n_cols = len(legendre_products(u, inputs.static_degree)[1])
-        if inputs.static_coef.shape[0] != n_cols:
-            raise ValueError(f"input_coef has {inputs.static_coef.shape[0]} terms per sensor; "
-                             f"the degree-{inputs.static_degree} basis of {', '.join(angles)} "
-                             f"has {n_cols}")
         counts = {s["name"]: len(s["coef"]) for s in sensors}
         if len(set(counts.values())) > 1:
             raise ValueError(f"sensors have different numbers of coef: {counts}")
         suit = CalibratedSuit(
             name=str(data["name"]), sensors=tuple(s["name"] for s in sensors),
             units=str(data["units"]), joint=str(data["joint"]),
-            angles=angles, rate_hz=float(data["rate_hz"]),
+            angles=tuple(str(a) for a in data["angles"]), rate_hz=float(data["rate_hz"]),
             effects=tuple(data["effects"]), spec=spec, inputs=inputs,
             coef=np.asarray([s["coef"] for s in sensors], dtype=np.float64),
             stops=tuple(_stops(s) for s in sensors),
@@ -253,10 +246,17 @@ def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inpu
 
 
 def _check_coef_counts(suit: CalibratedSuit) -> None:
-    """ValueError unless each sensor has one coefficient per column of its model (a design
-    of two frames at the neutral pose gives the count)."""
-    t = np.arange(2) / suit.rate_hz
-    inputs = _inputs(suit, t, np.zeros((2, len(suit.angles))))
+    """ValueError unless ``input_coef`` has one term per column of the static input's basis
+    and each sensor one coefficient per column of its model (a design of two frames at the
+    neutral pose gives the counts)."""
+    neutral = np.zeros((2, len(suit.angles)))
+    u, _ = map_inputs(neutral, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
+    n_terms = len(legendre_products(u, suit.inputs.static_degree)[1])
+    if suit.inputs.static_coef.shape[0] != n_terms:
+        raise ValueError(f"input_coef has {suit.inputs.static_coef.shape[0]} terms per "
+                         f"sensor; the degree-{suit.inputs.static_degree} basis of "
+                         f"{', '.join(suit.angles)} has {n_terms}")
+    inputs = _inputs(suit, np.arange(2) / suit.rate_hz, neutral)
     for j, name in enumerate(suit.sensors):
         x = design(suit.rate_hz, inputs, suit.spec, j)
         width = x.shared.shape[1] + x.own.shape[1]
