@@ -46,7 +46,13 @@ from exohil.emulators.discrepancy.profile import (
     write_calibrated_profile,
 )
 from exohil.emulators.discrepancy.report import markdown
-from exohil.emulators.discrepancy.workflow import _evidence, _rate_limit
+from exohil.emulators.discrepancy.workflow import (
+    DRIFT_DEGREES,
+    DRIFT_REFINE_DEGREES,
+    DRIFT_SPAN_S,
+    _evidence,
+    _rate_limit,
+)
 from exohil.emulators.effects import Signal
 from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
@@ -405,12 +411,19 @@ def test_a_creep_of_another_memory_is_named_and_explained():
     assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
 
 
-def test_a_creep_whose_load_stiffens_with_the_stretch_takes_a_quadratic_driver(tmp_path):
+@pytest.fixture(scope="module")
+def clean_101():
+    """A clean recording of the suite (lib suit, seed 101) and its held-out gap before any
+    effect: what the same suit and movement leave when an effect is hidden in it."""
+    rec = make_recording(Case("clean", "lib", 1, seed=101))
+    return rec, run(rec, "clean").summary["gap_before"]
+
+
+def test_a_creep_whose_load_stiffens_with_the_stretch_takes_a_quadratic_driver(clean_101, tmp_path):
     """Each sensor creeps toward the square of its stretch (a fabric whose tension rises
     faster than the stretch) with a 6 s memory: low-passes of the stretch itself left 6 % of
     the error above the creep-free suit's; the quadratic driver must take it."""
-    rec = make_recording(Case("clean", "lib", 1, seed=101))
-    clean = run(rec, "without creep").summary["gap_before"]
+    rec, clean = clean_101
     y = rec.sensors.values.copy()
     for j in range(y.shape[1]):
         lo, hi = np.quantile(y[:, j], [0.01, 0.99])
@@ -498,12 +511,11 @@ def test_a_stop_the_map_absorbs_is_judged_on_the_frames_it_holds():
     assert f"on the {frames['share']:.1%} of their frames it holds" in markdown(s)
 
 
-def test_soft_knees_at_both_ends_are_both_found():
+def test_soft_knees_at_both_ends_are_both_found(clean_101):
     """Every sensor bends softly above its 60 % and below its 30 % quantile. The upper knee
     is found first; the lower one must then be searched with the upper kept soft (it used to
     be turned into a hard stop at the knee, which no lower knee could beat)."""
-    rec = make_recording(Case("clean", "lib", 1, seed=101))
-    clean = run(rec, "without knees").summary["gap_before"]
+    rec, clean = clean_101
     y = rec.sensors.values.copy()
     for j in range(y.shape[1]):
         c = y[:, j]
@@ -519,12 +531,11 @@ def test_soft_knees_at_both_ends_are_both_found():
     assert s["gap_after"] ** 2 - clean**2 < 0.25 * (s["gap_before"] ** 2 - clean**2), s
 
 
-def test_an_offset_that_wanders_is_named_drift_and_followed(tmp_path):
+def test_an_offset_that_wanders_is_named_drift_and_followed(clean_101, tmp_path):
     """Each sensor's offset is piecewise linear in time, a new slope every 5–10 s (a knot
     moves by up to ±1 mm): no polynomial of degree 1–3 follows it (the best leaves 26 % of
     the error above the drift-free suit's), a named drift must take a higher degree."""
-    rec = make_recording(Case("clean", "lib", 1, seed=101))
-    clean = run(rec, "without the drift").summary["gap_before"]
+    rec, clean = clean_101
     rng = np.random.default_rng(7)
     t = rec.sensors.t - rec.sensors.t[0]
     y = rec.sensors.values.copy()
@@ -788,3 +799,36 @@ def test_a_profile_with_a_gain_effect_offers_only_vocabulary_effects():
     assert "gain" not in VOCABULARY  # the pots' gain and zero are not a discrepancy term
     name, in_model = _in_model(PROFILES_DIR / "donning-b.toml")
     assert name == "donning-b" and in_model == VOCABULARY
+
+
+def test_a_slip_step_is_followed_by_a_piecewise_linear_drift(clean_101, tmp_path):
+    """One sensor's offset steps by 2 mm in 50 ms at 60 % of the recording (a connector that
+    slips). A polynomial of time rings around the step over the whole recording; knots every
+    few seconds follow it where it happens: the named drift must take them (on 2026-11-26 it
+    left 56 % of the excess over the step-free suit that the best polynomial leaves: a 5 s
+    ramp in place of the step, the held-out blocks allowing no finer knots)."""
+    rec, clean = clean_101
+    t = rec.sensors.t - rec.sensors.t[0]
+    y = rec.sensors.values.copy()
+    y[:, 1] += 2.0 * np.clip((t - 0.6 * t[-1]) / 0.05, 0.0, 1.0)
+    sensors = SensorStream(seq=rec.sensors.seq, t=rec.sensors.t, values=y)
+    outcome = run(replace(rec, sensors=sensors), "slipped")
+    s = outcome.summary
+    assert s["effects"][:1] == ["drift"], s["effects"]
+    spec = outcome.after.spec
+    assert spec.drift_piecewise, spec
+    span = outcome.inputs.t_span[1] - outcome.inputs.t_span[0]
+    polynomial = min(fit(outcome.trial, outcome.inputs,
+                         replace(spec, drift_degree=d, drift_piecewise=False)).gap
+                     for d in DRIFT_DEGREES + DRIFT_REFINE_DEGREES if d * DRIFT_SPAN_S <= span)
+    assert clean < s["gap_after"] < polynomial, (s, polynomial)
+    drift = [s["steps"][0]["params"]] + [step["evidence"]["refitted"]["drift"]
+                                         for step in s["steps"]
+                                         if "drift" in step["evidence"]["refitted"]]
+    assert drift[-1]["basis"] == "piecewise_linear", drift  # the last fit of it, as reported
+    assert drift[-1]["intervals"] == spec.drift_degree, drift
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "slipped"))
+    loaded = load_calibrated_profile(tmp_path / "p.toml")
+    assert loaded.spec.drift_piecewise
+    sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
+    np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)

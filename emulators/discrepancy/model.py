@@ -167,7 +167,11 @@ class Spec:
         lag_delay_s: the delay after the low-pass of ``first_order_delay``, s.
         lag_rates: per sensor, the most a ``rate_limit`` reading changes per second, sensor
             units/s.
-        drift_degree: degree of the time polynomial (0 = no drift).
+        drift_degree: how many functions of time the drift has (0 = no drift): the degree
+            of a Legendre polynomial of time or, with ``drift_piecewise``, the intervals of a
+            piecewise-linear function of time (evenly spaced knots).
+        drift_piecewise: the drift is piecewise linear (it follows a step or a wandering
+            offset locally, where a polynomial spreads its error over the whole recording).
         saturation: stops at the ends of the sensors' ranges (hard or soft, :class:`Stops`).
         stops: the stops per sensor, once chosen (empty: choose them in every fit).
         ridge: relative ridge of the static map's columns.
@@ -183,6 +187,7 @@ class Spec:
     lag_delay_s: float = 0.0
     lag_rates: tuple[float, ...] = ()
     drift_degree: int = 0
+    drift_piecewise: bool = False
     saturation: bool = False
     stops: tuple[Stops, ...] = ()
     ridge: float = RIDGE
@@ -433,9 +438,16 @@ def rate_limit_column(inputs: Inputs, j: int, rate: float, rate_hz: float) -> np
     return inputs.cache[key]
 
 
-def drift_columns(t_norm: np.ndarray, degree: int) -> np.ndarray:
-    """(N, degree) Legendre polynomials P₁…P_degree of time scaled to [−1, 1]."""
-    return legendre_products(t_norm[:, None], degree)[0][:, 1:]
+def drift_columns(t_norm: np.ndarray, degree: int, piecewise: bool = False) -> np.ndarray:
+    """(N, degree) functions of time scaled to [−1, 1]: the Legendre polynomials
+    P₁…P_degree or, ``piecewise``, the linear B-splines ("hats") on ``degree`` even intervals,
+    less the first (with the static map's constant they span every piecewise-linear
+    function on those knots)."""
+    if not piecewise:
+        return legendre_products(t_norm[:, None], degree)[0][:, 1:]
+    knots = np.linspace(-1.0, 1.0, degree + 1)[1:]
+    width = 2.0 / degree
+    return np.clip(1.0 - np.abs(t_norm[:, None] - knots[None, :]) / width, 0.0, None)
 
 
 def lagged_static_basis(inputs: Inputs, spec: Spec, rate_hz: float) -> np.ndarray:
@@ -502,7 +514,7 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
     if spec.lag_kind == "rate_limit":
         own.append(rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz))
     if spec.drift_degree:
-        own.append(drift_columns(inputs.t_norm, spec.drift_degree))
+        own.append(drift_columns(inputs.t_norm, spec.drift_degree, spec.drift_piecewise))
     return Design(shared=shared, own=np.hstack(own) if own else shared[:, :0])
 
 

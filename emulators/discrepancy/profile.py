@@ -138,6 +138,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             "lag_delay_s": spec.lag_delay_s,
             "lag_rates_per_s": list(spec.lag_rates),
             "drift_degree": spec.drift_degree,
+            "drift_piecewise": spec.drift_piecewise,
             "saturation": spec.saturation,
         },
         "sensor": [
@@ -196,6 +197,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                     lag_delay_s=float(terms.get("lag_delay_s", 0.0)),
                     lag_rates=tuple(float(v) for v in terms.get("lag_rates_per_s", ())),
                     drift_degree=int(terms["drift_degree"]),
+                    drift_piecewise=bool(terms.get("drift_piecewise", False)),
                     saturation=bool(terms["saturation"]))
         if spec.lag_kind == "rate_limit" and (
                 len(spec.lag_rates) != len(sensors) or not all(r > 0 for r in spec.lag_rates)):

@@ -329,20 +329,27 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
 
 
 def _refine_drift(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
-    """A named drift refined over higher degrees of its time polynomial, the best held out.
+    """A named drift refined over more functions of time, the best held out.
 
     Degrees 1–3 only rank the candidates: a more flexible function of time would also explain
     a slow pose-driven relaxation (degrees up to 34 named 4 of 20 creeps drift). Once drift is
-    named it may follow an offset that wanders (a random walk, a piecewise ramp) as finely as
-    the held-out blocks allow: at most one degree per ``DRIFT_SPAN_S`` seconds. The degree is
-    chosen again, from 1 up, after each effect added later (see :func:`run`): one chosen
-    before another effect was in place may have stood in for part of it.
+    named it may follow an offset that wanders (a random walk, a piecewise ramp, a slip step)
+    as finely as the held-out blocks allow: at most one function per ``DRIFT_SPAN_S`` seconds,
+    as a Legendre polynomial (a smooth warm-up or cycle) or as a piecewise-linear function
+    on even knots (a step or a walk, followed locally where a polynomial rings over the
+    whole recording). The choice is made again, from degree 1 up, after each effect added
+    later (see :func:`run`): one made before another effect was in place may have stood in
+    for part of it.
     """
     span = inputs.t_span[1] - inputs.t_span[0]
-    degrees = [d for d in DRIFT_DEGREES + DRIFT_REFINE_DEGREES if d * DRIFT_SPAN_S <= span
-               and d != current.spec.drift_degree]
-    return min([current] + [fit(trial, inputs, replace(current.spec, drift_degree=d))
-                            for d in degrees], key=lambda f: f.gap)
+    options = [(d, False) for d in DRIFT_DEGREES + DRIFT_REFINE_DEGREES]
+    options += [(d, True) for d in DRIFT_REFINE_DEGREES]
+    here = _drift_of(current.spec)
+    return min([current] + [fit(trial, inputs, replace(current.spec, drift_degree=d,
+                                                        drift_piecewise=piecewise))
+                            for d, piecewise in options
+                            if d * DRIFT_SPAN_S <= span and (d, piecewise) != here],
+               key=lambda f: f.gap)
 
 
 def _refine_creep(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
@@ -435,10 +442,14 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
         key = "tau_s" if spec.lag_kind == "first_order" else "delay_s"
         return {"model": spec.lag_kind, key: spec.lag_s}
     if kind == "drift":
-        ends = drift_columns(np.array([-1.0, 1.0]), spec.drift_degree)
+        ends = drift_columns(np.array([-1.0, 1.0]), spec.drift_degree, spec.drift_piecewise)
         change = [float((ends[1] - ends[0]) @ c[cols]) for c in result.coef]
         span = inputs.t_span[1] - inputs.t_span[0]
-        return {"degree": spec.drift_degree, "change": [round(c, 5) for c in change],
+        shape = ({"basis": "piecewise_linear", "intervals": spec.drift_degree,
+                  "knots_every_s": round(span / spec.drift_degree, 3)}
+                 if spec.drift_piecewise else
+                 {"basis": "legendre_polynomial", "degree": spec.drift_degree})
+        return {**shape, "change": [round(c, 5) for c in change],
                 "mean_rate_per_s": [round(c / span, 7) for c in change]}
     if kind == "saturation":
         pred = result.prediction[trial.valid]
@@ -520,13 +531,17 @@ def _config(spec: Spec) -> dict:
             "creep_asym_s": list(spec.creep_asym_s), "lag": spec.lag_kind,
             "lag_s": spec.lag_s, "lag_delay_s": spec.lag_delay_s,
             "lag_rates": _rates(spec),
-            "drift_degree": spec.drift_degree, "saturation": spec.saturation,
-            "ridge": spec.ridge}
+            "drift_degree": spec.drift_degree, "drift_piecewise": spec.drift_piecewise,
+            "saturation": spec.saturation, "ridge": spec.ridge}
 
 
 def _rates(spec: Spec) -> list[float | None]:
     """The rate limits per sensor for JSON: null where a sensor has none (+inf)."""
     return [r if math.isfinite(r) else None for r in spec.lag_rates]
+
+
+def _drift_of(spec: Spec) -> tuple[int, bool]:
+    return spec.drift_degree, spec.drift_piecewise
 
 
 def _lag_of(spec: Spec) -> tuple:
@@ -622,8 +637,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         if kind == "lag" and cand.spec != refined.spec:  # a lag refined on the map chosen
             # without it is biased toward that map: refine it again on the map now chosen
             cand = _refine_lag_delay(trial, inputs, cand)
-        drift_before = cand.spec.drift_degree
-        if kind != "drift" and drift_before:
+        drift_before = _drift_of(cand.spec)
+        if kind != "drift" and cand.spec.drift_degree:
             cand = _refine_drift(trial, inputs, cand)
         lag_before = _lag_of(cand.spec)
         if previous == "lag":  # a lag named while a larger effect was
@@ -634,7 +649,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         spec, base = cand.spec, cand
         refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
                  (("lag", _lag_of(cand.spec) != lag_before),
-                  ("drift", cand.spec.drift_degree != drift_before))
+                  ("drift", _drift_of(cand.spec) != drift_before))
                  if changed}
         steps.append({"effect": kind, "gap": round(cand.gap, 6),
                       "params": effect_params(kind, cand, inputs, trial),
