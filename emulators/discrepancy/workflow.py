@@ -637,6 +637,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         if kind == "lag" and cand.spec != refined.spec:  # a lag refined on the map chosen
             # without it is biased toward that map: refine it again on the map now chosen
             cand = _refine_lag_delay(trial, inputs, cand)
+        if kind == "drift" and cand.spec != refined.spec:  # so is a drift's basis and count
+            cand = _refine_drift(trial, inputs, cand)
         drift_before = _drift_of(cand.spec)
         if kind != "drift" and cand.spec.drift_degree:
             cand = _refine_drift(trial, inputs, cand)
