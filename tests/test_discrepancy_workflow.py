@@ -46,13 +46,7 @@ from exohil.emulators.discrepancy.profile import (
     write_calibrated_profile,
 )
 from exohil.emulators.discrepancy.report import markdown
-from exohil.emulators.discrepancy.workflow import (
-    DRIFT_DEGREES,
-    DRIFT_REFINE_DEGREES,
-    DRIFT_SPAN_S,
-    _evidence,
-    _rate_limit,
-)
+from exohil.emulators.discrepancy.workflow import _evidence, _rate_limit, drift_options
 from exohil.emulators.effects import Signal
 from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
@@ -820,7 +814,7 @@ def test_a_slip_step_is_followed_by_a_piecewise_linear_drift(clean_101, tmp_path
     span = outcome.inputs.t_span[1] - outcome.inputs.t_span[0]
     polynomial = min(fit(outcome.trial, outcome.inputs,
                          replace(spec, drift_degree=d, drift_piecewise=False)).gap
-                     for d in DRIFT_DEGREES + DRIFT_REFINE_DEGREES if d * DRIFT_SPAN_S <= span)
+                     for d, piecewise in drift_options(span) if not piecewise)
     assert clean < s["gap_after"] < polynomial, (s, polynomial)
     drift = [s["steps"][0]["params"]] + [step["evidence"]["refitted"]["drift"]
                                          for step in s["steps"]

@@ -341,15 +341,21 @@ def _refine_drift(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     later (see :func:`run`): one made before another effect was in place may have stood in
     for part of it.
     """
-    span = inputs.t_span[1] - inputs.t_span[0]
-    options = [(d, False) for d in DRIFT_DEGREES + DRIFT_REFINE_DEGREES]
-    options += [(d, True) for d in DRIFT_REFINE_DEGREES]
     here = _drift_of(current.spec)
     return min([current] + [fit(trial, inputs, replace(current.spec, drift_degree=d,
                                                         drift_piecewise=piecewise))
-                            for d, piecewise in options
-                            if d * DRIFT_SPAN_S <= span and (d, piecewise) != here],
+                            for d, piecewise in drift_options(inputs.t_span[1] - inputs.t_span[0])
+                            if (d, piecewise) != here],
                key=lambda f: f.gap)
+
+
+def drift_options(span_s: float) -> list[tuple[int, bool]]:
+    """(count, piecewise) of every drift a named drift is refined over on ``span_s`` seconds
+    of recording: Legendre degrees and piecewise-linear intervals, at most one function per
+    ``DRIFT_SPAN_S``."""
+    options = [(d, False) for d in DRIFT_DEGREES + DRIFT_REFINE_DEGREES]
+    options += [(d, True) for d in DRIFT_REFINE_DEGREES]
+    return [(d, piecewise) for d, piecewise in options if d * DRIFT_SPAN_S <= span_s]
 
 
 def _refine_creep(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
@@ -541,6 +547,7 @@ def _rates(spec: Spec) -> list[float | None]:
 
 
 def _drift_of(spec: Spec) -> tuple[int, bool]:
+    """The drift term's count and basis (to tell whether a refit changed it)."""
     return spec.drift_degree, spec.drift_piecewise
 
 
