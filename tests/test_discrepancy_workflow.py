@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from exohil.emulators.discrepancy import DiscrepancyError, noise_floor, prepare_trial, run
+from exohil.emulators.discrepancy import DiscrepancyError, model, noise_floor, prepare_trial, run
 from exohil.emulators.discrepancy.data import N_BLOCKS, in_mocap_gap, quantisation_step
 from exohil.emulators.discrepancy.hidden import (
     Case,
@@ -31,6 +31,7 @@ from exohil.emulators.discrepancy.model import (
     Stops,
     delay,
     fit,
+    fit_segments,
     fold_coefs,
     low_pass,
     make_inputs,
@@ -53,6 +54,7 @@ from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
+from exohil.kinematics import ms_to_matrix
 
 FOREIGN = Path(__file__).resolve().parents[2] / "shared" / "samples" / "foreign-recording-v1.mcap"
 
@@ -719,6 +721,42 @@ def test_a_suit_turned_about_the_humerus_is_calibrated_on_both_arm_axes(axial_ou
         load_calibrated_profile(one_more(0))  # count 0: every sensor
     with pytest.raises(ProfileError, match="different numbers of coef"):
         load_calibrated_profile(one_more(1))
+
+
+def test_a_straight_run_under_the_arm_is_followed_by_the_static_map(tmp_path, monkeypatch):
+    """One tendon's last run goes straight from a point under the armpit to the humerus,
+    10 mm long with the arm hanging and 160 mm raised (reading 20 mm + 0.9·length, noise
+    0.15 mm); the axial rotation moves. Its length is the root of a quadratic of the arm
+    axes: with that root as a column the map follows the sensor to its noise and nothing is
+    named; a cubic of the axes alone leaves over twice the noise there."""
+    trajectory = random_trajectory(5, 60.0, axial_deg=35.0)
+    geometry, gains, offsets = random_geometry(5)
+    signal = suit_lengths(trajectory, geometry, gains, offsets)
+    ang = np.deg2rad(trajectory.sample(signal.t))
+    humerus = ms_to_matrix(ang[:, 0], ang[:, 1], ang[:, 2])
+    thorax_point, humerus_point = np.array([8.0, -104.0, 48.0]), np.array([0.0, -110.0, 45.0])
+    length = np.linalg.norm(thorax_point - humerus @ humerus_point, axis=1)
+    assert length.min() < 12.0 and length.max() > 150.0
+    y = signal.values.copy()
+    y[:, 0] = 20.0 + 0.9 * length
+    y += np.random.default_rng(5).normal(0.0, 0.15, y.shape)
+    rec = suit_recording(trajectory, geometry, Signal.from_values(signal.t, y),
+                         {"case": "straight run"})
+    outcome = run(rec, "straight run")
+    s = outcome.summary
+    assert geometry.sensor_names[0] in s["static_map"]["straight_runs"]
+    assert s["effects"] == []
+    assert s["sensor_gap_before"][0] < 1.1 * s["noise_floor_per_sensor"][0], s
+    trial = outcome.trial
+    found, sensors = fit_segments(trial, outcome.inputs.u, outcome.inputs.input_kind)
+    assert 0 in sensors and found.shape == (28, len(sensors))
+    monkeypatch.setattr(model, "fit_segments", lambda *_: (found[:, :0], ()))
+    spec = Spec(degree=3, ridge=outcome.before.spec.ridge)
+    with_runs = fit(trial, outcome.inputs, spec).sensor_gap()[0]
+    cubic = fit(prepare_trial(rec), make_inputs(prepare_trial(rec), 3, spec.ridge), spec)
+    assert with_runs < 1.1 * s["noise_floor_per_sensor"][0] < 0.55 * cubic.sensor_gap()[0]
+    _assert_the_profile_reproduces(outcome, tmp_path, ("segments = [[", "segments = [[0.5, "),
+                                   "segments need 28 coefficients")
 
 
 def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_path):

@@ -330,6 +330,10 @@ class Inputs:
         t_span: (t₀, t₁) s, the scaling range of time.
         centre: (S,) the middle of ŝ's range (p1–p99), sensor units: where the quadratic
             creep driver (ŝ − centre)² is centred, so that it is not nearly ŝ itself.
+        segments: (P₂, K) the quadratics Q of the straight runs found (see
+            :func:`fit_segments`), on the degree-2 products of ``u``; the static basis ends
+            with their lengths √Q. (P₂, 0) or empty: none.
+        segment_sensors: the sensor (column) each run was found on.
     """
 
     u: np.ndarray
@@ -343,6 +347,8 @@ class Inputs:
     t_norm: np.ndarray
     t_span: tuple[float, float]
     centre: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    segment_sensors: tuple[int, ...] = ()
     cache: dict = field(default_factory=dict)
 
 
@@ -375,11 +381,103 @@ def map_inputs(angles: np.ndarray, angle_names: tuple[str, ...], lo: np.ndarray,
     return scale_angles(angles, lo, hi), "angles"
 
 
+def segment_lengths(u: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """(N, K) the lengths √Q(u) of the straight runs ``segments`` (P₂, K) describes, up to
+    each run's scale (a Q below zero, outside the poses it was fitted on, reads 0)."""
+    if segments.size == 0:
+        return np.zeros((u.shape[0], 0))
+    return np.sqrt(np.maximum(legendre_products(u, 2)[0] @ segments, 0.0))
+
+
+def static_terms(u: np.ndarray, degree: int, segments: np.ndarray) -> np.ndarray:
+    """(N, P) the static map's basis: Legendre products of ``u`` up to ``degree``, then the
+    lengths of the straight runs ``segments`` (:func:`fit_segments`)."""
+    return np.hstack([legendre_products(u, degree)[0], segment_lengths(u, segments)])
+
+
 def static_basis(inputs: Inputs, degree: int) -> np.ndarray:
     key = ("B", degree)
     if key not in inputs.cache:
-        inputs.cache[key] = legendre_products(inputs.u, degree)[0]
+        inputs.cache[key] = static_terms(inputs.u, degree, inputs.segments)
     return inputs.cache[key]
+
+
+def fit_segments(trial: Trial, u: np.ndarray, input_kind: str,
+                 ) -> tuple[np.ndarray, tuple[int, ...]]:
+    """The straight tendon runs across the shoulder that the readings show, as (P₂, K)
+    quadratics Q on the degree-2 Legendre products of the arm axes ``u``, and the sensor
+    each was found on.
+
+    A run from a point a fixed on the thorax to a point b fixed on the humerus (the GH
+    centre c may move with the elevation) is |a − c − R·b| long; its square is linear in the
+    humerus axes, in their products and in cos φ, so a quadratic Q(u) of the map's inputs.
+    A reading y = offset ± gain·L therefore has (y − offset)² = gain²·Q(u): for a given
+    offset, Q is one linear least-squares fit, and (y − offset)² = y² − 2·offset·y +
+    offset² makes it three fits for every offset. The offset lies beyond the readings' range
+    (a length is positive); the one whose offset ± √Q follows y best is kept
+    (:func:`_segment_offset`). A polynomial of the axes follows √Q badly where the run is
+    short (under the arm); the column √Q follows it exactly.
+
+    A sensor's run is kept only if Q is positive on every valid frame: a length is; a Q that
+    is not is no straight run (a path wrapped over the shoulder, a clamp), and √max(Q, 0)
+    would be flat there: a ready-made stop that would take a saturation into the static
+    map. Fitted once, on every valid frame (the static map itself is refitted per fold:
+    what Q sees of a held-out block lowers the held-out gap by under 1 % where measured,
+    docs/discrepancy.md).
+
+    Only with the axial rotation recorded (``arm_axes``): without it a point off the
+    humerus axis moves with a rotation the inputs do not hold, so its run's square is no
+    quadratic of the humerus axis alone, and a curve bent to a soft stop instead took the
+    stop's place (docs/discrepancy.md); other joints' angles give no such quadratic.
+    """
+    p2 = legendre_products(u[:1], 2)[0].shape[1]
+    if input_kind != "arm_axes":
+        return np.zeros((p2, 0)), ()
+    step = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
+    rows = np.flatnonzero(trial.valid)[::step]
+    quad = legendre_products(u[rows], 2)[0]
+    every = legendre_products(u[trial.valid], 2)[0]
+    kept: list[np.ndarray] = []
+    found: list[int] = []
+    for j in range(trial.n_sensors):
+        y = trial.y[rows, j]
+        spread = float(np.std(y))
+        if spread == 0.0:
+            continue
+        z = (y - float(np.mean(y))) / spread
+        # Q(offset) = A − 2·offset·B + offset²·C, from three fits on the same design
+        abc = np.linalg.lstsq(quad, np.column_stack([z**2, z, np.ones_like(z)]),
+                              rcond=None)[0]
+        q = _segment_offset(z, quad, abc)
+        if q is not None and np.min(every @ q) > 0.0:
+            kept.append(q)
+            found.append(j)
+    return (np.column_stack(kept) if kept else np.zeros((p2, 0))), tuple(found)
+
+
+def _segment_offset(z: np.ndarray, quad: np.ndarray, abc: np.ndarray) -> np.ndarray | None:
+    """The Q of the offset (beyond either end of the standardised readings z, 10⁻³ to 10³
+    of their spread away, on a log grid refined once) whose offset ± √Q follows z with the
+    smallest RMS; None if no offset gives a Q positive anywhere."""
+    def q_of(offset: float) -> np.ndarray:
+        return abc[:, 0] - 2.0 * offset * abc[:, 1] + offset**2 * abc[:, 2]
+
+    def misfit(offset: float, sign: float) -> float:
+        root = np.sqrt(np.maximum(quad @ q_of(offset), 0.0))
+        return float(np.mean((z - offset - sign * root) ** 2))
+
+    best: tuple[float, float] | None = None  # (misfit, offset)
+    for sign, edge in ((1.0, float(np.min(z))), (-1.0, float(np.max(z)))):
+        away = np.geomspace(1e-3, 1e3, 61)
+        for _ in range(2):  # the grid, then a finer one around its best
+            errs = [misfit(edge - sign * d, sign) for d in away]
+            k = int(np.argmin(errs))
+            if best is None or errs[k] < best[0]:
+                best = (errs[k], edge - sign * float(away[k]))
+            away = np.geomspace(away[max(k - 1, 0)], away[min(k + 1, away.size - 1)], 21)
+    if best is None or not np.any(quad @ q_of(best[1]) > 0.0):
+        return None
+    return q_of(best[1])
 
 
 def hysteresis_columns(inputs: Inputs) -> np.ndarray:
@@ -1021,6 +1119,9 @@ def make_inputs(trial: Trial, static_degree: int, ridge: float = RIDGE,
                     static=np.empty(0), static_coef=np.empty(0), static_degree=static_degree,
                     thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
                     t_span=(t0, t1))
+    if "segments" not in trial.cache:
+        trial.cache["segments"] = fit_segments(trial, u, kind)
+    inputs.segments, inputs.segment_sensors = trial.cache["segments"]
     if not fit_static:
         return inputs
     basis = static_basis(inputs, static_degree)

@@ -23,8 +23,8 @@ from exohil.emulators.discrepancy.model import (
     Spec,
     Stops,
     design,
-    legendre_products,
     map_inputs,
+    static_terms,
 )
 from exohil.emulators.discrepancy.workflow import Outcome
 from exohil.emulators.effects import Noise, Signal
@@ -127,6 +127,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             "input_degree": inputs.static_degree,
             "degree": spec.degree,
             "time_span_s": list(inputs.t_span),
+            "segments": inputs.segments.T.tolist(),
         },
         "terms": {
             "hysteresis": spec.hysteresis,
@@ -180,6 +181,22 @@ def _lag_kind(name: object) -> str:
     return "" if name == "none" else str(name)
 
 
+def _segments(rows: list, input_kind: str) -> np.ndarray:
+    """The static map's straight runs (P₂, K) from their rows in the profile (one list of
+    P₂ coefficients per run; none in profiles written before runs were fitted)."""
+    n_inputs = 6 if input_kind == "arm_axes" else 0
+    p2 = (n_inputs + 1) * (n_inputs + 2) // 2
+    if not rows:
+        return np.zeros((p2, 0))
+    if n_inputs == 0:
+        raise ValueError(f"{input_kind!r} inputs have no straight runs (segments)")
+    widths = sorted({len(row) for row in rows})
+    if widths != [p2]:
+        raise ValueError(f"segments need {p2} coefficients each for {input_kind!r} inputs, "
+                         f"not {', '.join(map(str, widths))}")
+    return np.asarray(rows, dtype=np.float64).T
+
+
 def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
     """Read a calibrated suit profile; one :class:`ProfileError` line on any problem."""
     path = Path(path)
@@ -214,7 +231,8 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                         t_span=(float(sm["time_span_s"][0]), float(sm["time_span_s"][1])),
                         centre=np.asarray([float(s["static_centre"] if spec.creep_quadratic
                                                  else s.get("static_centre", 0.0))
-                                           for s in sensors]))
+                                           for s in sensors]),
+                        segments=_segments(sm.get("segments", []), str(sm["inputs"])))
         counts = {s["name"]: len(s["coef"]) for s in sensors}
         if len(set(counts.values())) > 1:
             raise ValueError(f"sensors have different numbers of coef: {counts}")
@@ -242,8 +260,8 @@ def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inpu
                     static_degree=suit.inputs.static_degree,
                     thresholds=suit.inputs.thresholds,
                     t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1),
-                    centre=suit.inputs.centre)
-    inputs.static = legendre_products(u, inputs.static_degree)[0] @ inputs.static_coef
+                    centre=suit.inputs.centre, segments=suit.inputs.segments)
+    inputs.static = static_terms(u, inputs.static_degree, inputs.segments) @ inputs.static_coef
     return inputs
 
 
@@ -253,10 +271,12 @@ def _check_coef_counts(suit: CalibratedSuit) -> None:
     neutral pose gives the counts)."""
     neutral = np.zeros((2, len(suit.angles)))
     u, _ = map_inputs(neutral, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
-    n_terms = len(legendre_products(u, suit.inputs.static_degree)[1])
+    n_terms = static_terms(u, suit.inputs.static_degree, suit.inputs.segments).shape[1]
     if suit.inputs.static_coef.shape[0] != n_terms:
+        runs = suit.inputs.segments.shape[1]
         raise ValueError(f"input_coef has {suit.inputs.static_coef.shape[0]} terms per "
-                         f"sensor; the degree-{suit.inputs.static_degree} basis of "
+                         f"sensor; the degree-{suit.inputs.static_degree} basis "
+                         f"{f'with {runs} straight runs ' if runs else ''}of "
                          f"{', '.join(suit.angles)} has {n_terms}")
     inputs = _inputs(suit, np.arange(2) / suit.rate_hz, neutral)
     for j, name in enumerate(suit.sensors):

@@ -81,6 +81,11 @@ def _plots(outcome: Outcome) -> dict[str, bytes]:
     return out
 
 
+def _runs(sensors: list[str]) -> str:
+    """The static map's straight runs, as its table row says them."""
+    return f"; straight runs on {', '.join(sensors)}" if sensors else ""
+
+
 def markdown(summary: dict) -> str:
     """The human-readable report."""
     u = summary["units"]
@@ -98,7 +103,8 @@ def markdown(summary: dict) -> str:
              f"noise floor {summary['noise_floor']:.4g} {u}.", "",
              "| step | effect | held-out gap | removed RMS | blocks improved | parameters |",
              "|---|---|---|---|---|---|",
-             f"| 0 | calibrated static map (degree {summary['static_map']['degree']}) | "
+             f"| 0 | calibrated static map (degree {summary['static_map']['degree']}"
+             f"{_runs(summary['static_map'].get('straight_runs', []))}) | "
              f"{summary['gap_before']:.4g} | | | |"]
     for i, step in enumerate(summary["steps"], start=1):
         ev = step["evidence"]

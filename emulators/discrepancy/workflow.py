@@ -55,7 +55,6 @@ from exohil.emulators.discrepancy.model import (
     block_mse,
     drift_columns,
     fit,
-    legendre_products,
     make_inputs,
     restrict_to_coverage,
     static_basis,
@@ -418,7 +417,7 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     """The fitted parameters of one effect term, per sensor where they differ (sensor units
     unless the name says otherwise)."""
     spec = result.spec
-    n_static = len(legendre_products(inputs.u[:1], spec.degree)[1])
+    n_static = static_basis(inputs, spec.degree).shape[1]
     cols = _column_slices(spec, n_static, inputs.thresholds.shape[1]).get(kind, slice(0, 0))
     if kind == "hysteresis":
         weights = [c[cols] for c in result.coef]
@@ -608,7 +607,9 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         spec = _refine(trial, inputs, kind, _best(trial, inputs, kind, spec)).spec
     base = fit(trial, inputs, spec) if in_model else static_fit
     before = base
+    runs = [trial.sensor_names[j] for j in inputs.segment_sensors]
     progress(f"[2] simulated with the calibrated model (degree {spec.degree}"
+             f"{', straight runs on ' + ', '.join(runs) if runs else ''}"
              f"{', with ' + ', '.join(in_model) if in_model else ''}): held-out gap "
              f"{base.gap:.4g} {trial.units}")
     mot = motion(trial, inputs.static)
@@ -692,7 +693,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
         "static_map": {"kind": "legendre_polynomial", "degree": spec.degree,
-                       "ridge": spec.ridge},
+                       "ridge": spec.ridge,
+                       "straight_runs": runs},
         "heldout_blocks": int(trial.blocks.max()) + 1,
         "localisation_before": local_before,
         "localisation_after": localise(trial, after.residual, mot),
