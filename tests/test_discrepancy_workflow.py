@@ -31,7 +31,6 @@ from exohil.emulators.discrepancy.model import (
     Stops,
     delay,
     fit,
-    fit_segments,
     fold_coefs,
     low_pass,
     make_inputs,
@@ -747,13 +746,13 @@ def test_a_straight_run_under_the_arm_is_followed_by_the_static_map(tmp_path, mo
     assert geometry.sensor_names[0] in s["static_map"]["straight_runs"]
     assert s["effects"] == []
     assert s["sensor_gap_before"][0] < 1.1 * s["noise_floor_per_sensor"][0], s
-    trial = outcome.trial
-    found, sensors = fit_segments(trial, outcome.inputs.u, outcome.inputs.input_kind)
+    found, sensors = outcome.inputs.segments, outcome.inputs.segment_sensors
     assert 0 in sensors and found.shape == (28, len(sensors))
     monkeypatch.setattr(model, "fit_segments", lambda *_: (found[:, :0], ()))
     spec = Spec(degree=3, ridge=outcome.before.spec.ridge)
-    with_runs = fit(trial, outcome.inputs, spec).sensor_gap()[0]
-    cubic = fit(prepare_trial(rec), make_inputs(prepare_trial(rec), 3, spec.ridge), spec)
+    with_runs = fit(outcome.trial, outcome.inputs, spec).sensor_gap()[0]
+    plain = prepare_trial(rec)  # a new trial: its cache holds no runs
+    cubic = fit(plain, make_inputs(plain, 3, spec.ridge), spec)
     assert with_runs < 1.1 * s["noise_floor_per_sensor"][0] < 0.55 * cubic.sensor_gap()[0]
     _assert_the_profile_reproduces(outcome, tmp_path, ("segments = [[", "segments = [[0.5, "),
                                    "segments need 28 coefficients")

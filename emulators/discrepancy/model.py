@@ -449,16 +449,16 @@ def fit_segments(trial: Trial, u: np.ndarray, input_kind: str,
         abc = np.linalg.lstsq(quad, np.column_stack([z**2, z, np.ones_like(z)]),
                               rcond=None)[0]
         q = _segment_offset(z, quad, abc)
-        if q is not None and np.min(every @ q) > 0.0:
+        if np.min(every @ q) > 0.0:
             kept.append(q)
             found.append(j)
     return (np.column_stack(kept) if kept else np.zeros((p2, 0))), tuple(found)
 
 
-def _segment_offset(z: np.ndarray, quad: np.ndarray, abc: np.ndarray) -> np.ndarray | None:
+def _segment_offset(z: np.ndarray, quad: np.ndarray, abc: np.ndarray) -> np.ndarray:
     """The Q of the offset (beyond either end of the standardised readings z, 10⁻³ to 10³
     of their spread away, on a log grid refined once) whose offset ± √Q follows z with the
-    smallest RMS; None if no offset gives a Q positive anywhere."""
+    smallest RMS (whether that Q is a length, positive everywhere, the caller checks)."""
     def q_of(offset: float) -> np.ndarray:
         return abc[:, 0] - 2.0 * offset * abc[:, 1] + offset**2 * abc[:, 2]
 
@@ -466,17 +466,15 @@ def _segment_offset(z: np.ndarray, quad: np.ndarray, abc: np.ndarray) -> np.ndar
         root = np.sqrt(np.maximum(quad @ q_of(offset), 0.0))
         return float(np.mean((z - offset - sign * root) ** 2))
 
-    best: tuple[float, float] | None = None  # (misfit, offset)
+    best = (np.inf, 0.0)  # (misfit, offset)
     for sign, edge in ((1.0, float(np.min(z))), (-1.0, float(np.max(z)))):
         away = np.geomspace(1e-3, 1e3, 61)
         for _ in range(2):  # the grid, then a finer one around its best
             errs = [misfit(edge - sign * d, sign) for d in away]
             k = int(np.argmin(errs))
-            if best is None or errs[k] < best[0]:
+            if errs[k] < best[0]:
                 best = (errs[k], edge - sign * float(away[k]))
             away = np.geomspace(away[max(k - 1, 0)], away[min(k + 1, away.size - 1)], 21)
-    if best is None or not np.any(quad @ q_of(best[1]) > 0.0):
-        return None
     return q_of(best[1])
 
 
