@@ -53,27 +53,37 @@ def sweep(seeds: range, duration_s: float, families: tuple[str, ...], workers: i
         results.append((case, named, shrink))
         print(f"  {case.label:<30} -> {named:<11} gap {summary['gap_before']:.3f} -> "
               f"{summary['gap_after']:.3f} ({shrink:.0%})", flush=True)
-    columns = list(KINDS)
     for family in families + ("all",) if len(families) > 1 else families:
-        rows = [r for r in results if family == "all" or r[0].family == family]
-        print(f"\nconfusion matrix ({family}; rows hidden, columns first named, "
-              f"'clean' = nothing named), {len(rows)} cases")
-        print(f"{'hidden':<12}" + "".join(f"{c:>11}" for c in columns))
-        for kind in KINDS:
-            counts = Counter(named for case, named, _ in rows if case.kind == kind)
-            print(f"{kind:<12}" + "".join(f"{counts.get(c, 0):>11}" for c in columns))
-    effect_rows = [r for r in results if r[0].kind != "clean"]
-    right = sum(named == case.kind for case, named, _ in effect_rows)
-    named_rows = [r for r in results if r[1] != "clean"]
+        rows = [(case.kind, named, shrink) for case, named, shrink in results
+                if family == "all" or case.family == family]
+        print_confusion(f"{family}; ", rows)
+    print_rates([(case.kind, named, shrink) for case, named, shrink in results])
+
+
+def print_confusion(title: str, rows: list[tuple[str, str, float]]) -> None:
+    """The confusion matrix of ``(hidden, first named, gap shrink)`` rows."""
+    print(f"\nconfusion matrix ({title}rows hidden, columns first named, "
+          f"'clean' = nothing named), {len(rows)} cases")
+    print(f"{'hidden':<12}" + "".join(f"{c:>11}" for c in KINDS))
+    for kind in KINDS:
+        counts = Counter(named for hidden, named, _ in rows if hidden == kind)
+        print(f"{kind:<12}" + "".join(f"{counts.get(c, 0):>11}" for c in KINDS))
+
+
+def print_rates(rows: list[tuple[str, str, float]]) -> None:
+    """The issue's three rates over ``(hidden, first named, gap shrink)`` rows."""
+    effect_rows = [r for r in rows if r[0] != "clean"]
+    right = sum(named == hidden for hidden, named, _ in effect_rows)
+    named_rows = [r for r in rows if r[1] != "clean"]
     shrunk = sum(shrink >= 0.5 for _, _, shrink in named_rows)
-    clean_rows = [r for r in results if r[0].kind == "clean"]
+    clean_rows = [r for r in rows if r[0] == "clean"]
     quiet = sum(named == "clean" for _, named, _ in clean_rows)
     print(f"\nfirst named effect right: {right}/{len(effect_rows)} "
-          f"({right / len(effect_rows):.1%}; required ≥ 90 %)")
+          f"({right / max(len(effect_rows), 1):.1%}; required ≥ 90 %)")
     print(f"gap shrank ≥ 50 % when named: {shrunk}/{len(named_rows)} "
           f"({shrunk / max(len(named_rows), 1):.1%}; required: all)")
-    print(f"clean → nothing: {quiet}/{len(clean_rows)} ({quiet / len(clean_rows):.1%}; "
-          "required ≥ 90 %)")
+    print(f"clean → nothing: {quiet}/{len(clean_rows)} "
+          f"({quiet / max(len(clean_rows), 1):.1%}; required ≥ 90 %)")
 
 
 def timing(repeats: int) -> None:
