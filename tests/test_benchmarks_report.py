@@ -100,3 +100,19 @@ def test_a_sphere_control_differs_from_its_recording_by_the_effect_alone(monkeyp
         "shoulder"].angles.tolist()  # the same movement, seen the same way
     difference = with_effect.sensors.values - control.sensors.values
     assert abs(np.sqrt(np.mean(difference**2)) - 0.6) < 1e-9  # the effect, at its RMS
+
+
+@pytest.mark.parametrize("entry, error", [
+    ({"file": "rec_00.mcap", "effect": "stiction"}, "bad entry 'rec_00.mcap'"),
+    ({"file": "missing.mcap", "effect": "lag"}, "bad entry 'missing.mcap'"),
+])
+def test_the_blind_scorer_refuses_an_answer_key_it_cannot_score(tmp_path, entry, error):
+    """An answer key naming an effect outside the vocabulary or a file that is not there is
+    refused with one line before any recording is run; so is a folder without one."""
+    (tmp_path / "rec_00.mcap").write_bytes(b"")
+    out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path))
+    assert out.returncode != 0 and "truth.json not found" in out.stderr, out.stderr
+    (tmp_path / "truth.json").write_text(json.dumps([entry]))
+    out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path))
+    assert out.returncode != 0 and error in out.stderr and "Traceback" not in out.stderr, (
+        out.stderr)
