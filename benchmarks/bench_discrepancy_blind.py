@@ -40,7 +40,12 @@ def load_truth(folder: Path) -> list[dict]:
     key = folder / "truth.json"
     if not key.is_file():
         raise SystemExit(f"error: {key} not found (the answer key this benchmark scores against)")
-    truth = json.loads(key.read_text())
+    try:
+        truth = json.loads(key.read_text())
+    except json.JSONDecodeError as exc:
+        raise SystemExit(f"error: {key}: not JSON ({exc})") from None
+    if not isinstance(truth, list) or not all(isinstance(e, dict) for e in truth):
+        raise SystemExit(f"error: {key}: must be a list of objects, one per recording")
     for entry in truth:
         if entry.get("effect") not in KINDS or not (folder / str(entry.get("file"))).is_file():
             raise SystemExit(f"error: {key}: bad entry {entry.get('file')!r} "
@@ -57,6 +62,8 @@ def main() -> None:
     args = parser.parse_args()
     truth = load_truth(args.folder)
     print(f"machine: {machine()}")
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     paths = [args.folder / entry["file"] for entry in truth]
     for (path, summary), entry in zip(parallel_map(run_file, paths, args.workers), truth,
@@ -70,7 +77,6 @@ def main() -> None:
               f"{summary['gap_after']:.4g} {summary['units']} (floor "
               f"{summary['noise_floor']:.4g}) {summary['seconds']} s", flush=True)
         if args.out:
-            args.out.mkdir(parents=True, exist_ok=True)
             write_text(args.out / f"{path.stem}.json", json.dumps(summary, indent=1))
     print_confusion("", rows)
     print_rates(rows)

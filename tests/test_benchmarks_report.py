@@ -116,3 +116,14 @@ def test_the_blind_scorer_refuses_an_answer_key_it_cannot_score(tmp_path, entry,
     out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path))
     assert out.returncode != 0 and error in out.stderr and "Traceback" not in out.stderr, (
         out.stderr)
+
+
+@pytest.mark.parametrize("text, error", [
+    ("[{", "not JSON"),
+    ('{"file": "rec_00.mcap", "effect": "lag"}', "must be a list of objects"),
+])
+def test_the_blind_scorer_refuses_an_answer_key_that_is_not_a_list(tmp_path, text, error):
+    (tmp_path / "truth.json").write_text(text)
+    out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path))
+    assert out.returncode != 0 and error in out.stderr and "Traceback" not in out.stderr, (
+        out.stderr)
