@@ -10,7 +10,9 @@ held fixed as the *input* of the history-dependent terms) the model is
     yⱼ = stops( Lag( B(angles)·β + H(ŝⱼ)·w + C(ŝⱼ)·c ) + D(t)·d , lowerⱼ, upperⱼ )
 
 * B: Legendre-product polynomial of the normalised angles (total degree chosen by held-out
-  error): geometry, routing, gains, offsets and units in one calibrated map.
+  error): geometry, routing, gains, offsets and units in one calibrated map; for an arm
+  direction it may instead be a cubic plus compact functions on the sphere (``local``),
+  and with axial rotation it ends with the lengths of straight tendon runs.
 * H (``hysteresis``): Prandtl–Ishlinskii basis, ŝ − play_r(ŝ) for play operators of thresholds
   r spread over the sensor's range; any weighted sum is a rate-independent loop.
 * C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
@@ -619,8 +621,8 @@ def drift_columns(t_norm: np.ndarray, degree: int, piecewise: bool = False) -> n
 
 def lagged_static_basis(inputs: Inputs, spec: Spec, rate_hz: float) -> np.ndarray:
     """The static basis with ``spec``'s lag applied: the same for every sensor, so it is
-    computed once per (static basis, lag) and kept until another one is asked for (a single entry:
-    the lag refinement visits many lags, each on a full-rate (N, P) array)."""
+    computed once per (static basis, lag) and kept until another one is asked for (a single
+    entry: the lag refinement visits many lags, each on a full-rate (N, P) array)."""
     basis = static_basis(inputs, spec.degree, spec.local)
     if spec.lag_kind in ("", "rate_limit"):
         return basis
