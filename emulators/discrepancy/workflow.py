@@ -429,12 +429,15 @@ def _keep_stops(current: Fit) -> Fit:
 
 
 def _best_degree(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
-    """Re-choose the static map's degree and ridge with the effect terms in place: an
-    unexplained effect makes the static-only fit prefer a stiffer map than the suit needs."""
+    """Re-choose the static map's degree and ridges with the effect terms in place: an
+    unexplained effect makes the static-only fit prefer a stiffer map than the suit needs.
+    The map keeps its kind (a polynomial, or local functions) chosen at calibration: trying
+    the local functions under every effect, each with its lag, cost minutes per recording."""
     spec = current.spec
     others = [fit(trial, inputs, replace(spec, degree=m.degree, local=m.local,
                                          local_ridge=m.local_ridge, ridge=m.ridge))
-              for m in _static_maps(inputs) if _map_of(m) != _map_of(spec)]
+              for m in _static_maps(inputs)
+              if m.local == spec.local and _map_of(m) != _map_of(spec)]
     return min([current] + others, key=lambda f: f.gap)
 
 
