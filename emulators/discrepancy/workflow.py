@@ -136,17 +136,20 @@ def _static_maps(inputs: Inputs) -> list[Spec]:
 
 def _static_map(trial: Trial, inputs: Inputs) -> Fit:
     """The static map with the lowest held-out gap, except that a map with the local basis
-    must also beat the best polynomial bent at stops (saturation). A stop is a static bend
+    must also beat the best polynomial bent at stops (saturation) by more than the noise,
+    by rules 1 and 2 (the bar an effect must clear to be named). A stop is a static bend
     of the reading that local functions can follow too, taking it in as the pose's doing;
-    of the two explanations the workflow keeps the physical one unless the local functions
-    predict the held-out blocks better than it does."""
+    so can a loop where the arm goes out and back on different paths. Of a flexible map and
+    a physical explanation, the workflow keeps the second unless the local functions predict
+    the held-out blocks better by more than it would take to name an effect."""
     fits = [fit(trial, inputs, static_map) for static_map in _static_maps(inputs)]
     best = min(fits, key=lambda f: f.gap)
     if not best.spec.local:
         return best
     polynomial = min((f for f in fits if not f.spec.local), key=lambda f: f.gap)
     bent = _best(trial, inputs, "saturation", polynomial.spec)
-    return best if best.gap < bent.gap else polynomial
+    floor = float(np.sqrt(np.mean(trial.noise**2)))
+    return best if _rules(bent.block_mse, best.block_mse, floor)["significant"] else polynomial
 
 
 def _map_of(spec: Spec) -> tuple:
