@@ -204,7 +204,7 @@ def test_what_no_frame_measures_is_null_not_nan():
     no scored frame, a recording without holds: each statistic says "not measured" (JSON
     null) or leaves the empty part out, so discrepancy.json stays JSON (NaN is not)."""
     trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
-    inputs = make_inputs(trial, 3)
+    inputs = make_inputs(trial, Spec(degree=3))
     mot = {**motion(trial, inputs.static), "still": np.zeros(trial.n, dtype=bool)}
     residual = np.random.default_rng(0).normal(0.0, 0.1, trial.y.shape)
     y0 = trial.y[:, 0]
@@ -570,7 +570,8 @@ def _assert_the_profile_reproduces(outcome, tmp_path: Path, corrupt: tuple[str, 
     prediction; with ``corrupt`` (old, new) replaced in its text it is refused with ``error``."""
     write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "calibrated"))
     loaded = load_calibrated_profile(tmp_path / "p.toml")  # stops are kept per sensor
-    assert replace(loaded.spec, ridge=outcome.after.spec.ridge,
+    assert replace(loaded.spec, ridge=outcome.after.spec.ridge,  # ridges are not kept
+                   local_ridge=outcome.after.spec.local_ridge,
                    stops=outcome.after.spec.stops) == outcome.after.spec
     sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
@@ -588,7 +589,7 @@ def test_rate_limit_follows_at_most_its_rate():
     np.testing.assert_allclose(y[50:60], 1.0 - np.arange(1, 11) / 10, atol=1e-12)
     np.testing.assert_allclose(rate_limit(x, 1e6, 250.0), x)  # fast enough: no effect
     trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
-    inputs = make_inputs(trial, 3)
+    inputs = make_inputs(trial, Spec(degree=3))
     never = fit(trial, inputs, Spec(lag_kind="rate_limit", lag_rates=(1e9,) * trial.n_sensors))
     assert all(c[-1] == 0.0 for c in never.coef)  # a column no move reaches: no singular solve
     np.testing.assert_allclose(never.residual, fit(trial, inputs, Spec()).residual, atol=1e-9)
@@ -612,7 +613,7 @@ def _slew_limited_recording(seed: int, duration_s: float, sign: float = 1.0) -> 
 
 def test_a_reading_that_runs_ahead_gets_no_rate_limit():
     trial = prepare_trial(_slew_limited_recording(seed=7, duration_s=30.0, sign=-1.0))
-    found = _rate_limit(trial, make_inputs(trial, 3), Spec(degree=3))
+    found = _rate_limit(trial, make_inputs(trial, Spec(degree=3)), Spec(degree=3))
     assert found.spec.lag_rates == (math.inf,) * trial.n_sensors
     assert all(c[-1] == 0.0 for c in found.coef)
 
@@ -621,7 +622,7 @@ def test_the_rate_limit_search_ignores_frames_held_still():
     """The limits tried are quantiles of the speed while the prediction moves: with the
     prediction still on most frames, quantiles over all frames are 0 units/s (log −inf)."""
     trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
-    inputs = make_inputs(trial, 3)
+    inputs = make_inputs(trial, Spec(degree=3))
     inputs.static[: int(0.8 * trial.n)] = inputs.static[0]  # held still for 80 % of frames
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -752,10 +753,72 @@ def test_a_straight_run_under_the_arm_is_followed_by_the_static_map(tmp_path, mo
     spec = Spec(degree=3, ridge=outcome.before.spec.ridge)
     with_runs = fit(outcome.trial, outcome.inputs, spec).sensor_gap()[0]
     plain = prepare_trial(rec)  # a new trial: its cache holds no runs
-    cubic = fit(plain, make_inputs(plain, 3, spec.ridge), spec)
+    cubic = fit(plain, make_inputs(plain, spec), spec)
     assert with_runs < 1.1 * s["noise_floor_per_sensor"][0] < 0.55 * cubic.sensor_gap()[0]
     _assert_the_profile_reproduces(outcome, tmp_path, ("segments = [[", "segments = [[0.5, "),
                                    "segments need 28 coefficients")
+
+
+def test_local_functions_are_compact_and_kept_only_near_the_poses():
+    """A Wendland function is 1 at its centre, falls smoothly and is 0 beyond its reach;
+    centres are kept only near the arm directions recorded (a cap here)."""
+    spacing = math.sqrt(4 * math.pi / model.LOCAL_CENTRES)
+    centre = np.array([[0.0, 0.0, 1.0]])
+    angle = np.linspace(0.0, 1.0, 200)  # rad from the centre
+    u = np.column_stack([np.sin(angle), np.zeros_like(angle), np.cos(angle)])
+    values = model.local_terms(u, centre)[:, 0]
+    chord = 2 * np.sin(angle / 2)
+    assert values[0] == pytest.approx(1.0) and np.all(np.diff(values) <= 0)
+    assert np.all(values[chord >= model.LOCAL_REACH * spacing] == 0)
+    assert np.all(values[chord < 0.99 * model.LOCAL_REACH * spacing] > 0)
+    rng = np.random.default_rng(0)
+    cap = rng.normal(size=(5000, 3)) * [0.3, 0.3, 0.0] + [0.0, 0.0, 1.0]
+    cap /= np.linalg.norm(cap, axis=1, keepdims=True)
+    kept = model.local_centres(cap)
+    nearest = np.min(np.linalg.norm(kept[:, None] - cap[None], axis=2), axis=1)
+    assert 0 < len(kept) < model.LOCAL_CENTRES / 2
+    assert np.all(nearest < model.LOCAL_KEEP * spacing)
+    assert np.all(np.linalg.norm(kept, axis=1) == pytest.approx(1.0))
+
+
+def _bump_recording(noise_mm: float) -> Recording:
+    """One tendon rides over a prominence: its reading rises by up to 5 mm where the arm
+    points within about 15° of one direction (θ 30°, φ 60°); white noise of ``noise_mm``."""
+    trajectory = random_trajectory(5, 60.0)
+    geometry, gains, offsets = random_geometry(5)
+    signal = suit_lengths(trajectory, geometry, gains, offsets)
+    ang = np.deg2rad(trajectory.sample(signal.t))
+    axis = ms_to_matrix(ang[:, 0], ang[:, 1], ang[:, 2])[:, :, 1]
+    peak = ms_to_matrix(np.deg2rad([30.0]), np.deg2rad([60.0]), np.zeros(1))[0, :, 1]
+    y = signal.values.copy()
+    y[:, 0] += 5.0 * np.exp(-((np.linalg.norm(axis - peak, axis=1) / 0.25) ** 2))
+    y += np.random.default_rng(5).normal(0.0, noise_mm, y.shape)
+    return suit_recording(trajectory, geometry, Signal.from_values(signal.t, y), {"case": "bump"})
+
+
+def test_a_bump_no_polynomial_follows_is_taken_by_the_local_functions_above_the_noise(
+        tmp_path):
+    """The local functions are kept only where they beat the polynomial bent at stops by
+    the bar an effect must clear. With 0.05 mm of noise the bump clears it: polynomials of
+    the arm direction up to degree 5 leave over 3 times the noise on that sensor (4.9 when
+    written), the local functions under 2 times (1.67), and nothing is named. With 0.15 mm
+    the same bump does not (an upper knee on the quintic follows most of it): the
+    polynomial is kept and nothing is named."""
+    rec = _bump_recording(0.05)
+    outcome = run(rec, "bump")
+    s = outcome.summary
+    floor = s["noise_floor_per_sensor"][0]
+    assert s["static_map"]["local_functions"] > 0 and s["effects"] == [], s
+    assert s["sensor_gap_before"][0] < 2.0 * floor, s
+    plain = prepare_trial(rec)  # a new trial: nothing cached
+    polynomials = [fit(plain, make_inputs(plain), Spec(degree=d, ridge=r)).sensor_gap()[0]
+                   for d in (3, 4, 5) for r in model.STATIC_RIDGES]
+    assert min(polynomials) > 3.0 * floor
+    _assert_the_profile_reproduces(outcome, tmp_path,
+                                   ("local_centres = [[", "local_centres = [[2.0, "),
+                                   "local_centres must be rows of three numbers")
+    noisier = run(_bump_recording(0.15), "bump").summary
+    assert noisier["static_map"]["local_functions"] == 0 and noisier["effects"] == [], noisier
 
 
 def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_path):

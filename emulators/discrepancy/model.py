@@ -10,7 +10,9 @@ held fixed as the *input* of the history-dependent terms) the model is
     yⱼ = stops( Lag( B(angles)·β + H(ŝⱼ)·w + C(ŝⱼ)·c ) + D(t)·d , lowerⱼ, upperⱼ )
 
 * B: Legendre-product polynomial of the normalised angles (total degree chosen by held-out
-  error): geometry, routing, gains, offsets and units in one calibrated map.
+  error): geometry, routing, gains, offsets and units in one calibrated map; for an arm
+  direction it may instead be a cubic plus compact functions on the sphere (``local``),
+  and with axial rotation it ends with the lengths of straight tendon runs.
 * H (``hysteresis``): Prandtl–Ishlinskii basis, ŝ − play_r(ŝ) for play operators of thresholds
   r spread over the sensor's range; any weighted sum is a rate-independent loop.
 * C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
@@ -71,6 +73,24 @@ OWN_ITERATIONS = 1
 COVER_RADIUS = 0.1
 #: Play-operator thresholds as fractions of the sensor's range (p1–p99).
 PLAY_FRACTIONS = (0.005, 0.015, 0.04, 0.1, 0.25)
+#: The static map's local basis (offered beside the polynomials for an arm direction): a
+#: Fibonacci lattice of this many centres on the unit sphere, of which those within
+#: ``LOCAL_KEEP`` spacings of some recorded direction are kept, each the centre of a compact
+#: Wendland function reaching ``LOCAL_REACH`` spacings (chord distance), beside a
+#: polynomial of degree ``LOCAL_DEGREE``. A polynomial on the sphere follows slow,
+#: direction-wide structure; where a tendon starts or stops wrapping, its length bends over
+#: a few tens of degrees, which a local function follows without an oscillating high degree.
+LOCAL_CENTRES = 400
+LOCAL_KEEP = 2.5
+LOCAL_REACH = 3.75
+LOCAL_DEGREE = 3
+#: Ridges of the local functions tried (chosen on the held-out blocks), each relative to the
+#: functions' mean energy in the fold and the same for all of them: a function that only a
+#: few fitted frames reach is held near zero instead of given whatever coefficient those
+#: frames ask for, which a ridge relative to its own energy would allow.
+LOCAL_RIDGES = (1e-5, 1e-4, 1e-3)
+#: Relative ridges of the polynomial beside the local functions.
+LOCAL_STATIC_RIDGES = (1e-10,)
 #: Relative ridge of the static map's columns (columns are scaled to unit norm) when none is
 #: chosen: the largest of ``STATIC_RIDGES``.
 RIDGE = 1e-7
@@ -155,6 +175,8 @@ class Spec:
 
     Attributes:
         degree: total degree of the static polynomial.
+        local: the static map also has the local basis (:func:`local_terms`).
+        local_ridge: the local functions' ridge (:class:`Ridge`).
         hysteresis: play-operator term on.
         creep_tau_s: time constants of the creep low-passes, s (empty = none).
         creep_quadratic: each low-pass also of (ŝ − centre)², a driver that is not
@@ -178,6 +200,8 @@ class Spec:
     """
 
     degree: int = 3
+    local: bool = False
+    local_ridge: float = LOCAL_RIDGES[0]
     hysteresis: bool = False
     creep_tau_s: tuple[float, ...] = ()
     creep_quadratic: bool = False
@@ -325,6 +349,9 @@ class Inputs:
         static: (N, S) static prediction ŝ (input of the hysteresis and creep terms).
         static_coef: (P, S) its coefficients on the degree-``static_degree`` basis.
         static_degree: degree of that basis.
+        static_local: that basis has the local functions.
+        centres: (K, 3) centres of the local basis's functions (unit vectors; (0, 3): the
+            map's inputs are not an arm direction, and no local basis is offered).
         thresholds: (S, K) play thresholds, sensor units.
         t_norm: (N,) time scaled to [−1, 1] over the recording.
         t_span: (t₀, t₁) s, the scaling range of time.
@@ -349,6 +376,8 @@ class Inputs:
     centre: np.ndarray = field(default_factory=lambda: np.zeros(0))
     segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     segment_sensors: tuple[int, ...] = ()
+    static_local: bool = False
+    centres: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     cache: dict = field(default_factory=dict)
 
 
@@ -389,16 +418,60 @@ def segment_lengths(u: np.ndarray, segments: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(legendre_products(u, 2)[0] @ segments, 0.0))
 
 
-def static_terms(u: np.ndarray, degree: int, segments: np.ndarray) -> np.ndarray:
-    """(N, P) the static map's basis: Legendre products of ``u`` up to ``degree``, then the
-    lengths of the straight runs ``segments`` (:func:`fit_segments`)."""
-    return np.hstack([legendre_products(u, degree)[0], segment_lengths(u, segments)])
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """(n, 3) unit vectors spread evenly over the sphere (a Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    polar = np.arccos(1.0 - 2.0 * i / n)
+    azimuth = np.pi * (1.0 + 5.0**0.5) * i
+    return np.column_stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar),
+                            np.cos(polar)])
 
 
-def static_basis(inputs: Inputs, degree: int) -> np.ndarray:
-    key = ("B", degree)
+def _chord(u: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """(N, K) chord distances between unit vectors u (N, 3) and ``centres`` (K, 3)."""
+    return np.sqrt(np.maximum(2.0 - 2.0 * (u @ centres.T), 0.0))
+
+
+def local_centres(u: np.ndarray) -> np.ndarray:
+    """(K, 3) the lattice points (``LOCAL_CENTRES`` on the sphere) within ``LOCAL_KEEP``
+    spacings of some arm direction in u (N, 3); a point far from every pose would only
+    carry a coefficient no frame pins down."""
+    lattice = fibonacci_sphere(LOCAL_CENTRES)
+    spacing = np.sqrt(4.0 * np.pi / LOCAL_CENTRES)
+    sample = u[:: max(1, u.shape[0] // 20000)]
+    near = np.zeros(LOCAL_CENTRES, dtype=bool)
+    for part in np.array_split(sample, max(1, sample.shape[0] // 2000)):
+        near |= (_chord(part, lattice) < LOCAL_KEEP * spacing).any(axis=0)
+    return lattice[near]
+
+
+def local_terms(u: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """(N, K) the local basis: the compact Wendland function (1 − r)⁴(4r + 1) of each
+    centre, r its chord distance from u (N, 3) in units of ``LOCAL_REACH`` lattice spacings
+    (zero beyond)."""
+    if centres.shape[0] == 0:
+        return np.zeros((u.shape[0], 0))
+    reach = LOCAL_REACH * np.sqrt(4.0 * np.pi / LOCAL_CENTRES)
+    r = np.minimum(_chord(u, centres) / reach, 1.0)
+    return (1.0 - r) ** 4 * (4.0 * r + 1.0)
+
+
+def static_terms(u: np.ndarray, degree: int, segments: np.ndarray,
+                 centres: np.ndarray | None = None) -> np.ndarray:
+    """(N, P) the static map's basis: Legendre products of ``u`` up to ``degree``, the local
+    functions of ``centres`` when given (:func:`local_terms`), then the lengths of the
+    straight runs ``segments`` (:func:`fit_segments`)."""
+    local = (local_terms(u, centres) if centres is not None and centres.size
+             else np.zeros((u.shape[0], 0)))
+    return np.hstack([legendre_products(u, degree)[0], local, segment_lengths(u, segments)])
+
+
+def static_basis(inputs: Inputs, degree: int, local: bool = False) -> np.ndarray:
+    """The static map's basis over the run's frames (cached per degree and local basis)."""
+    key = ("B", degree, local)
     if key not in inputs.cache:
-        inputs.cache[key] = static_terms(inputs.u, degree, inputs.segments)
+        inputs.cache[key] = static_terms(inputs.u, degree, inputs.segments,
+                                         inputs.centres if local else None)
     return inputs.cache[key]
 
 
@@ -548,12 +621,12 @@ def drift_columns(t_norm: np.ndarray, degree: int, piecewise: bool = False) -> n
 
 def lagged_static_basis(inputs: Inputs, spec: Spec, rate_hz: float) -> np.ndarray:
     """The static basis with ``spec``'s lag applied: the same for every sensor, so it is
-    computed once per (degree, lag) and kept until another one is asked for (a single entry:
-    the lag refinement visits many lags, each on a full-rate (N, P) array)."""
-    basis = static_basis(inputs, spec.degree)
+    computed once per (static basis, lag) and kept until another one is asked for (a single
+    entry: the lag refinement visits many lags, each on a full-rate (N, P) array)."""
+    basis = static_basis(inputs, spec.degree, spec.local)
     if spec.lag_kind in ("", "rate_limit"):
         return basis
-    key = (spec.degree, spec.lag_kind, spec.lag_s, spec.lag_delay_s)
+    key = (spec.degree, spec.local, spec.lag_kind, spec.lag_s, spec.lag_delay_s)
     kept = inputs.cache.get("BL")
     if kept is None or kept[0] != key:
         kept = (key, apply_lag(basis, spec.lag_kind, spec.lag_s, rate_hz, spec.lag_delay_s))
@@ -692,11 +765,33 @@ class Ridge:
     Relative to what the column adds, the ridge is the negligible bias it is meant to be, and
     a column that is nearly constant in a fold (a play operator that never reverses there)
     still cannot extrapolate with a huge coefficient.
+
+    The static map's local functions (columns ``local``, a [start, stop) pair) all get
+    ``local_ridge`` times their mean energy in the fold.
     """
 
     n_static: int
     static: float = RIDGE
     effect: float = EFFECT_RIDGE
+    local: tuple[int, int] = (0, 0)
+    local_ridge: float = 0.0
+
+    @classmethod
+    def of_map(cls, inputs: Inputs, spec: Spec) -> Ridge:
+        """The ridge of a design whose static map is ``spec``'s."""
+        n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
+        start = math.comb(spec.degree + inputs.u.shape[1], spec.degree)
+        count = inputs.centres.shape[0] if spec.local else 0
+        return cls(n_static=n_static, static=spec.ridge, local=(start, start + count),
+                   local_ridge=spec.local_ridge)
+
+    def static_loading(self, diag: np.ndarray) -> np.ndarray:
+        """(n_static,) diagonal loading of the static columns from their energies ``diag``."""
+        out = self.static * diag
+        start, stop = self.local
+        if stop > start:
+            out[start:stop] = self.local_ridge * diag[start:stop].mean()
+        return out
 
     def effect_loading(self, gram_all: np.ndarray) -> np.ndarray:
         """(P − n_static,) diagonal loading of the effect columns, from the design's Gram
@@ -705,7 +800,7 @@ class Ridge:
         if gram_all.shape[0] == n:
             return np.empty(0)
         diag_all = np.diag(gram_all)
-        g_ss = gram_all[:n, :n] + np.diag(self.static * diag_all[:n])
+        g_ss = gram_all[:n, :n] + np.diag(self.static_loading(diag_all[:n]))
         g_se = gram_all[:n, n:]
         added = diag_all[n:] - np.einsum("ij,ij->j", g_se, np.linalg.solve(g_ss, g_se))
         return self.effect * np.maximum(added, 1e-12 * diag_all[n:])
@@ -713,7 +808,8 @@ class Ridge:
     def loading(self, gram: np.ndarray, effect: np.ndarray) -> np.ndarray:
         """(P,) diagonal loading for a fold's ``gram``: the static columns' from the fold,
         the effect columns' ``effect`` (:meth:`effect_loading`)."""
-        out = self.static * np.diag(gram)
+        out = np.empty(gram.shape[0])
+        out[:self.n_static] = self.static_loading(np.diag(gram)[:self.n_static])
         out[self.n_static:] = effect
         return out
 
@@ -1050,7 +1146,7 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     for j in range(s):
         y = trial.y[:, j]
         x = design(trial.rate_hz, inputs, spec, j)
-        ridge = Ridge(n_static=static_basis(inputs, spec.degree).shape[1], static=spec.ridge)
+        ridge = Ridge.of_map(inputs, spec)
         if spec.saturation:
             red = reduce(trial, x, y)
             plain = fold_coefs(red, red.rows.usable(trial.valid), ridge)
@@ -1103,27 +1199,32 @@ def restrict_to_coverage(trial: Trial, u: np.ndarray) -> float:
     return 1.0 - scored.sum() / max(int(trial.valid.sum()), 1)
 
 
-def make_inputs(trial: Trial, static_degree: int, ridge: float = RIDGE,
-                fit_static: bool = True) -> Inputs:
-    """Scale angles and time, fit the static map of ``static_degree`` (relative ridge
-    ``ridge``) on all valid frames (its prediction ŝ is the input of the history terms) and
-    place the play thresholds. Without ``fit_static`` only the scaling is done (enough to fit
-    a model with no effect terms)."""
+def make_inputs(trial: Trial, static_map: Spec | None = None) -> Inputs:
+    """Scale angles and time, place the local basis's centres (an arm direction only) and,
+    given ``static_map``, fit its static map (degree, local basis and ridges; its effect
+    terms play no part) on all valid frames (the prediction ŝ is the input of the history
+    terms) and place the play thresholds. Without it only the scaling and placing are done
+    (enough to fit a model with no effect terms)."""
     lo = np.min(trial.angles[trial.valid], axis=0)
     hi = np.max(trial.angles[trial.valid], axis=0)
     t0, t1 = float(trial.t[0]), float(trial.t[-1])
     u, kind = map_inputs(trial.angles, trial.angle_names, lo, hi)
     inputs = Inputs(u=u, input_kind=kind, angle_lo=lo, angle_hi=hi,
-                    static=np.empty(0), static_coef=np.empty(0), static_degree=static_degree,
+                    static=np.empty(0), static_coef=np.empty(0), static_degree=1,
                     thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
                     t_span=(t0, t1))
     if "segments" not in trial.cache:
         trial.cache["segments"] = fit_segments(trial, u, kind)
     inputs.segments, inputs.segment_sensors = trial.cache["segments"]
-    if not fit_static:
+    if kind == "arm_direction":
+        if "centres" not in trial.cache:
+            trial.cache["centres"] = local_centres(u[trial.valid])
+        inputs.centres = trial.cache["centres"]
+    if static_map is None:
         return inputs
-    basis = static_basis(inputs, static_degree)
-    static_ridge = Ridge(n_static=basis.shape[1], static=ridge)
+    inputs.static_degree, inputs.static_local = static_map.degree, static_map.local
+    basis = static_basis(inputs, static_map.degree, static_map.local)
+    static_ridge = Ridge.of_map(inputs, static_map)
     coef = np.column_stack([fit_design(trial, Design.of(basis), trial.y[:, j], static_ridge)[1]
                             for j in range(trial.n_sensors)])
     inputs.static_coef = coef

@@ -125,7 +125,11 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             "angle_lo_deg": inputs.angle_lo.tolist(),
             "angle_hi_deg": inputs.angle_hi.tolist(),
             "input_degree": inputs.static_degree,
+            "input_local": inputs.static_local,
             "degree": spec.degree,
+            "local": spec.local,
+            "local_centres": (inputs.centres.tolist()
+                              if spec.local or inputs.static_local else []),
             "time_span_s": list(inputs.t_span),
             "segments": inputs.segments.T.tolist(),
         },
@@ -181,6 +185,19 @@ def _lag_kind(name: object) -> str:
     return "" if name == "none" else str(name)
 
 
+def _centres(rows: list) -> np.ndarray:
+    """The local basis's centres (K, 3) from their rows in the profile (unit vectors of the
+    arm direction; none in profiles written before the local basis, or without it)."""
+    if not rows:
+        return np.zeros((0, 3))
+    if any(not isinstance(row, list) or len(row) != 3 for row in rows):
+        raise ValueError("local_centres must be rows of three numbers, each a unit vector")
+    centres = np.asarray(rows, dtype=np.float64)
+    if not np.allclose(np.linalg.norm(centres, axis=1), 1.0, atol=1e-6):
+        raise ValueError("local_centres must be rows of three numbers, each a unit vector")
+    return centres
+
+
 def _segments(rows: list, input_kind: str) -> np.ndarray:
     """The static map's straight runs (P₂, K) from their rows in the profile (one list of
     P₂ coefficients per run; none in profiles written before runs were fitted)."""
@@ -206,7 +223,8 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                            f"{CALIBRATED_SCHEMA!r} version {CALIBRATED_VERSION})")
     try:
         sm, terms, sensors = data["static_map"], data["terms"], data["sensor"]
-        spec = Spec(degree=int(sm["degree"]), hysteresis=bool(terms["hysteresis"]),
+        spec = Spec(degree=int(sm["degree"]), local=bool(sm.get("local", False)),
+                    hysteresis=bool(terms["hysteresis"]),
                     creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
                     creep_quadratic=bool(terms.get("creep_quadratic", False)),
                     creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
@@ -226,6 +244,8 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                         static=np.empty(0),
                         static_coef=np.column_stack([s["input_coef"] for s in sensors]),
                         static_degree=int(sm["input_degree"]),
+                        static_local=bool(sm.get("input_local", False)),
+                        centres=_centres(sm.get("local_centres", [])),
                         thresholds=np.asarray([s["play_thresholds"] for s in sensors]),
                         t_norm=np.empty(0),
                         t_span=(float(sm["time_span_s"][0]), float(sm["time_span_s"][1])),
@@ -233,6 +253,10 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                                                  else s.get("static_centre", 0.0))
                                            for s in sensors]),
                         segments=_segments(sm.get("segments", []), str(sm["inputs"])))
+        if (spec.local or inputs.static_local) and (
+                inputs.input_kind != "arm_direction" or not inputs.centres.size):
+            raise ValueError("a static map with the local basis needs arm_direction inputs "
+                             "and local_centres")
         counts = {s["name"]: len(s["coef"]) for s in sensors}
         if len(set(counts.values())) > 1:
             raise ValueError(f"sensors have different numbers of coef: {counts}")
@@ -258,10 +282,13 @@ def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inpu
                     angle_hi=suit.inputs.angle_hi, static=np.empty(0),
                     static_coef=suit.inputs.static_coef,
                     static_degree=suit.inputs.static_degree,
+                    static_local=suit.inputs.static_local, centres=suit.inputs.centres,
                     thresholds=suit.inputs.thresholds,
                     t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1),
                     centre=suit.inputs.centre, segments=suit.inputs.segments)
-    inputs.static = static_terms(u, inputs.static_degree, inputs.segments) @ inputs.static_coef
+    inputs.static = static_terms(u, inputs.static_degree, inputs.segments,
+                                 inputs.centres if inputs.static_local else None
+                                 ) @ inputs.static_coef
     return inputs
 
 
@@ -271,7 +298,8 @@ def _check_coef_counts(suit: CalibratedSuit) -> None:
     neutral pose gives the counts)."""
     neutral = np.zeros((2, len(suit.angles)))
     u, _ = map_inputs(neutral, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
-    n_terms = static_terms(u, suit.inputs.static_degree, suit.inputs.segments).shape[1]
+    n_terms = static_terms(u, suit.inputs.static_degree, suit.inputs.segments,
+                           suit.inputs.centres if suit.inputs.static_local else None).shape[1]
     if suit.inputs.static_coef.shape[0] != n_terms:
         runs = suit.inputs.segments.shape[1]
         raise ValueError(f"input_coef has {suit.inputs.static_coef.shape[0]} terms per "

@@ -81,6 +81,10 @@ def _plots(outcome: Outcome) -> dict[str, bytes]:
     return out
 
 
+def _local(count: int) -> str:
+    return f" and {count} local functions" if count else ""
+
+
 def _runs(sensors: list[str]) -> str:
     """The static map's straight runs, as its table row says them."""
     return f"; straight runs on {', '.join(sensors)}" if sensors else ""
@@ -104,6 +108,7 @@ def markdown(summary: dict) -> str:
              "| step | effect | held-out gap | removed RMS | blocks improved | parameters |",
              "|---|---|---|---|---|---|",
              f"| 0 | calibrated static map (degree {summary['static_map']['degree']}"
+             f"{_local(summary['static_map'].get('local_functions', 0))}"
              f"{_runs(summary['static_map'].get('straight_runs', []))}) | "
              f"{summary['gap_before']:.4g} | | | |"]
     for i, step in enumerate(summary["steps"], start=1):

@@ -47,6 +47,9 @@ from exohil.emulators.discrepancy.data import (
 )
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
+    LOCAL_DEGREE,
+    LOCAL_RIDGES,
+    LOCAL_STATIC_RIDGES,
     PLATEAU_SHARE,
     STATIC_RIDGES,
     Fit,
@@ -118,9 +121,46 @@ class Outcome:
     summary: dict
 
 
-def _degrees(n_inputs: int) -> range:
-    """Static-map degrees tried: more for fewer inputs (the basis grows as degree^inputs)."""
-    return {1: range(1, 8), 2: range(2, 7), 3: range(2, 6)}.get(n_inputs, range(2, 4))
+def _static_maps(inputs: Inputs) -> list[Spec]:
+    """Static maps tried, each with every ridge: more polynomial degrees for fewer inputs
+    (the basis grows as degree^inputs), and for an arm direction also the local basis beside
+    a cubic (:func:`~.model.local_terms`) with each of its ridges."""
+    n_inputs = inputs.u.shape[1]
+    degrees = {1: range(1, 8), 2: range(2, 7), 3: range(2, 6)}.get(n_inputs, range(2, 4))
+    maps = [Spec(degree=d, ridge=r) for d in degrees for r in STATIC_RIDGES]
+    if inputs.centres.shape[0]:
+        maps += [Spec(degree=LOCAL_DEGREE, local=True, local_ridge=q, ridge=r)
+                 for q in LOCAL_RIDGES for r in LOCAL_STATIC_RIDGES]
+    return maps
+
+
+def _static_map(trial: Trial, inputs: Inputs) -> Fit:
+    """The static map with the lowest held-out gap, except that a map with the local basis
+    must also beat the best polynomial bent at stops (saturation) by more than the noise,
+    by rules 1 and 2 (the bar an effect must clear to be named). A stop is a static bend
+    of the reading that local functions can follow too, taking it in as the pose's doing;
+    so can a loop where the arm goes out and back on different paths. Of a flexible map and
+    a physical explanation, the workflow keeps the second unless the local functions predict
+    the held-out blocks better by more than it would take to name an effect."""
+    fits = [fit(trial, inputs, static_map) for static_map in _static_maps(inputs)]
+    best = min(fits, key=lambda f: f.gap)
+    if not best.spec.local:
+        return best
+    polynomial = min((f for f in fits if not f.spec.local), key=lambda f: f.gap)
+    bent = _best(trial, inputs, "saturation", polynomial.spec)
+    floor = float(np.sqrt(np.mean(trial.noise**2)))
+    return best if _rules(bent.block_mse, best.block_mse, floor)["significant"] else polynomial
+
+
+def _map_of(spec: Spec) -> tuple:
+    """What identifies ``spec``'s static map."""
+    return (spec.degree, spec.ridge) + ((spec.local_ridge,) if spec.local else ())
+
+
+def _map_words(spec: Spec, inputs: Inputs) -> str:
+    """The static map in words: "degree 4", or "degree 3 and 212 local functions"."""
+    return (f"degree {spec.degree}"
+            + (f" and {inputs.centres.shape[0]} local functions" if spec.local else ""))
 
 
 def _candidates(kind: str, spec: Spec) -> list[Spec]:
@@ -221,7 +261,7 @@ def _rate_limit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     grid = np.log(np.column_stack([np.quantile(v[v > 0] if (v > 0).any() else np.ones(1),
                                                RATE_LIMIT_QUANTILES) for v in speed.T]))
     sensors = np.arange(grid.shape[1])
-    n_static = static_basis(inputs, spec.degree).shape[1]
+    n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
 
     def at(log_rates: np.ndarray) -> tuple[Fit, np.ndarray]:
         """The fit with these limits and its held-out mean squared error per sensor (+inf
@@ -392,11 +432,15 @@ def _keep_stops(current: Fit) -> Fit:
 
 
 def _best_degree(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
-    """Re-choose the static map's degree and ridge with the effect terms in place: an
-    unexplained effect makes the static-only fit prefer a stiffer map than the suit needs."""
-    others = [fit(trial, inputs, replace(current.spec, degree=d, ridge=r))
-              for d in _degrees(inputs.u.shape[1]) for r in STATIC_RIDGES
-              if (d, r) != (current.spec.degree, current.spec.ridge)]
+    """Re-choose the static map's degree and ridges with the effect terms in place: an
+    unexplained effect makes the static-only fit prefer a stiffer map than the suit needs.
+    The map keeps its kind (a polynomial, or local functions) chosen at calibration: trying
+    the local functions under every effect, each with its lag, cost minutes per recording."""
+    spec = current.spec
+    others = [fit(trial, inputs, replace(spec, degree=m.degree, local=m.local,
+                                         local_ridge=m.local_ridge, ridge=m.ridge))
+              for m in _static_maps(inputs)
+              if m.local == spec.local and _map_of(m) != _map_of(spec)]
     return min([current] + others, key=lambda f: f.gap)
 
 
@@ -417,7 +461,7 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     """The fitted parameters of one effect term, per sensor where they differ (sensor units
     unless the name says otherwise)."""
     spec = result.spec
-    n_static = static_basis(inputs, spec.degree).shape[1]
+    n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
     cols = _column_slices(spec, n_static, inputs.thresholds.shape[1]).get(kind, slice(0, 0))
     if kind == "hysteresis":
         weights = [c[cols] for c in result.coef]
@@ -531,7 +575,9 @@ def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
 
 
 def _config(spec: Spec) -> dict:
-    return {"degree": spec.degree, "hysteresis": spec.hysteresis,
+    return {"degree": spec.degree, "local": spec.local,
+            **({"local_ridge": spec.local_ridge} if spec.local else {}),
+            "hysteresis": spec.hysteresis,
             "creep_tau_s": list(spec.creep_tau_s), "creep_quadratic": spec.creep_quadratic,
             "creep_asym_s": list(spec.creep_asym_s), "lag": spec.lag_kind,
             "lag_s": spec.lag_s, "lag_delay_s": spec.lag_delay_s,
@@ -591,24 +637,19 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         progress(f"    isolated spikes, not fitted or scored: "
                  f"{spike_counts(trial.sensor_names, trial.spikes.tolist())} (readings over "
                  f"{SPIKE_SIGMAS:g} σ from the median of their {SPIKE_WINDOW} frames)")
-    fits: list[Fit] = []
-    u = make_inputs(trial, 1, fit_static=False).u
-    n_inputs = u.shape[1]
-    uncovered = restrict_to_coverage(trial, u)
+    scaled = make_inputs(trial)  # one basis per map for every ridge
+    uncovered = restrict_to_coverage(trial, scaled.u)
     if uncovered > 0:
         progress(f"    {uncovered:.1%} of frames are poses no other fold covers: not scored")
-    for degree in _degrees(n_inputs):
-        scaled = make_inputs(trial, degree, fit_static=False)  # one basis for every ridge
-        fits += [fit(trial, scaled, Spec(degree=degree, ridge=ridge)) for ridge in STATIC_RIDGES]
-    static_fit = min(fits, key=lambda f: f.gap)
+    static_fit = _static_map(trial, scaled)
     spec = static_fit.spec
-    inputs = make_inputs(trial, spec.degree, spec.ridge)
+    inputs = make_inputs(trial, spec)
     for kind in in_model:
         spec = _refine(trial, inputs, kind, _best(trial, inputs, kind, spec)).spec
     base = fit(trial, inputs, spec) if in_model else static_fit
     before = base
     runs = [trial.sensor_names[j] for j in inputs.segment_sensors]
-    progress(f"[2] simulated with the calibrated model (degree {spec.degree}"
+    progress(f"[2] simulated with the calibrated model ({_map_words(spec, inputs)}"
              f"{', straight runs on ' + ', '.join(runs) if runs else ''}"
              f"{', with ' + ', '.join(in_model) if in_model else ''}): held-out gap "
              f"{base.gap:.4g} {trial.units}")
@@ -692,8 +733,11 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "spikes": trial.spikes.tolist(),
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
-        "static_map": {"kind": "legendre_polynomial", "degree": spec.degree,
+        "static_map": {"kind": ("legendre_polynomial_and_local" if spec.local
+                                else "legendre_polynomial"), "degree": spec.degree,
+                       "local_functions": inputs.centres.shape[0] if spec.local else 0,
                        "ridge": spec.ridge,
+                       **({"local_ridge": spec.local_ridge} if spec.local else {}),
                        "straight_runs": runs},
         "heldout_blocks": int(trial.blocks.max()) + 1,
         "localisation_before": local_before,
