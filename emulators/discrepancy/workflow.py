@@ -134,21 +134,21 @@ def _static_maps(inputs: Inputs) -> list[Spec]:
     return maps
 
 
-def _static_map(trial: Trial, inputs: Inputs) -> Fit:
+def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
     """The static map with the lowest held-out gap, except that a map with the local basis
     must also beat the best polynomial bent at stops (saturation) by more than the noise,
     by rules 1 and 2 (the bar an effect must clear to be named). A stop is a static bend
     of the reading that local functions can follow too, taking it in as the pose's doing;
     so can a loop where the arm goes out and back on different paths. Of a flexible map and
     a physical explanation, the workflow keeps the second unless the local functions predict
-    the held-out blocks better by more than it would take to name an effect."""
+    the held-out blocks better by more than it would take to name an effect (``floor``:
+    the recording's pooled noise RMS, the bar's σ)."""
     fits = [fit(trial, inputs, static_map) for static_map in _static_maps(inputs)]
     best = min(fits, key=lambda f: f.gap)
     if not best.spec.local:
         return best
     polynomial = min((f for f in fits if not f.spec.local), key=lambda f: f.gap)
     bent = _best(trial, inputs, "saturation", polynomial.spec)
-    floor = float(np.sqrt(np.mean(trial.noise**2)))
     return best if _rules(bent.block_mse, best.block_mse, floor)["significant"] else polynomial
 
 
@@ -641,7 +641,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     uncovered = restrict_to_coverage(trial, scaled.u)
     if uncovered > 0:
         progress(f"    {uncovered:.1%} of frames are poses no other fold covers: not scored")
-    static_fit = _static_map(trial, scaled)
+    static_fit = _static_map(trial, scaled, floor)
     spec = static_fit.spec
     inputs = make_inputs(trial, spec)
     for kind in in_model:
