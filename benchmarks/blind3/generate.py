@@ -7,7 +7,9 @@ Single-threaded (set OMP_NUM_THREADS=1 before numpy is imported).
 Written on 2026-11-26 by a separate session that read only the recording format and the angle
 conventions, never the discrepancy workflow; kept here, unchanged in its physics, so that the
 held-out benchmark can be re-run (``benchmarks/blind3/README.md``). Run from the repository
-root: ``python -m benchmarks.blind3.generate --out DIR [--only N ...]``.
+root: ``python -m benchmarks.blind3.generate --out DIR [--only N ...] [--without-effect]``.
+``--without-effect`` writes each recording's clean twin: every draw the same (motion, suit,
+noise, clock), the hidden effect computed but not applied, labelled clean in truth.json.
 """
 from __future__ import annotations
 
@@ -766,7 +768,7 @@ def magnitude(tr, x_off, x_on, touched):
     return float(np.sqrt(np.mean(z**2)))
 
 
-def generate(idx, eff, fam, target, seed, out):
+def generate(idx, eff, fam, target, seed, out, with_effect=True):
     rng = np.random.default_rng(seed)
     duration = float(rng.uniform(60, 200))
     n_sens = int(rng.integers(2, 8))
@@ -915,7 +917,7 @@ def generate(idx, eff, fam, target, seed, out):
         c = signal.lfilter([1], [1, -a], nrng.standard_normal(x.shape), axis=0)
         c = c / c.std(0) * white_sd * col_frac
         nz = nz + c
-    vals = tr(x_on + nz, quantise=True)
+    vals = tr((x_on if with_effect else x) + nz, quantise=True)
     n_clipped = 0
     if unit.startswith("counts"):
         n_clipped = int(((vals < 0) | (vals > tr.full - 1)).sum())
@@ -955,11 +957,14 @@ def generate(idx, eff, fam, target, seed, out):
         seg_counts[lab] = seg_counts.get(lab, 0) + 1
     truth = {
         "file": fname,
-        "effect": eff,
-        "family": fam,
-        "magnitude_x_noise": round(mag, 3),
+        "effect": eff if with_effect else "clean",
+        "family": fam if with_effect else "none",
+        **({} if with_effect or eff == "clean" else
+           {"twin_of": {"effect": eff, "family": fam, "magnitude_x_noise": round(mag, 3),
+                        "sensors_touched": [names[k] for k in touched]}}),
+        "magnitude_x_noise": round(mag, 3) if with_effect else 0.0,
         "magnitude_target": round(target, 3),
-        "sensors_touched": [names[k] for k in touched],
+        "sensors_touched": [names[k] for k in touched] if with_effect else [],
         "noise_sd": [float(f"{v:.4g}") for v in nsd],
         "noise_sd_mm": round(float(tr.noise_mm_total.mean()), 4),
         "duration_s": round(duration, 2),
@@ -990,6 +995,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True, help="folder for the recordings")
     parser.add_argument("--only", type=int, nargs="*", default=[],
                         help="regenerate only these recordings (truth.json left as it is)")
+    parser.add_argument("--without-effect", action="store_true",
+                        help="write each recording's clean twin: the same draws, no effect")
     args = parser.parse_args()
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -1003,9 +1010,10 @@ def main() -> None:
         if only and i not in only:
             continue
         ts = time.time()
-        tr = generate(i, eff, fam, tgt, int(seeds[i]), out)
+        tr = generate(i, eff, fam, tgt, int(seeds[i]), out, not args.without_effect)
         truths.append(tr)
-        print(f"{tr['file']} {eff:10s} {fam:26s} mag={tr['magnitude_x_noise']:6.2f} "
+        print(f"{tr['file']} {tr['effect']:10s} {tr['family']:26s} "
+              f"mag={tr['magnitude_x_noise']:6.2f} "
               f"(target {tgt:5.2f}) S={tr['n_sensors']} touched={tr['sensors_touched']} "
               f"{tr['units']} dur={tr['duration_s']}s  [{time.time() - ts:.1f}s]", flush=True)
     if not only:
