@@ -46,7 +46,13 @@ from exohil.emulators.discrepancy.profile import (
     write_calibrated_profile,
 )
 from exohil.emulators.discrepancy.report import markdown
-from exohil.emulators.discrepancy.workflow import _evidence, _rate_limit, drift_options
+from exohil.emulators.discrepancy.workflow import (
+    _against_curve,
+    _best,
+    _evidence,
+    _rate_limit,
+    drift_options,
+)
 from exohil.emulators.effects import Signal
 from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
@@ -504,6 +510,47 @@ def test_a_stop_the_map_absorbs_is_judged_on_the_frames_it_holds():
     assert frames["significant"] and frames["delta_mse"] > held["noise_floor"] ** 2, frames
     assert 0 < frames["share"] < 0.15 and frames["delta_mse_without_best_block"] > 0, frames
     assert f"on the {frames['share']:.1%} of their frames it holds" in markdown(s)
+
+
+def _bent_recording(bend) -> Recording:
+    """Four sensors linear in the arm direction, each read through ``bend`` of its stretch z
+    (−1 … 1 over p1–p99), 20 mm a unit, with 0.05 mm of white noise."""
+    trajectory = random_trajectory(7, 90.0)
+    geometry, gains, offsets = random_geometry(7)
+    signal = suit_lengths(trajectory, geometry, gains, offsets)
+    ang = np.deg2rad(trajectory.sample(signal.t))
+    axis = ms_to_matrix(ang[:, 0], ang[:, 1], ang[:, 2])[:, :, 1]
+    mix = np.random.default_rng(7).normal(size=(3, 4))
+    lin = axis @ mix
+    lo, hi = np.quantile(lin, [0.01, 0.99], axis=0)
+    z = (lin - (lo + hi) / 2) / ((hi - lo) / 2)
+    y = 100.0 + 20.0 * bend(z) + np.random.default_rng(8).normal(0.0, 0.05, z.shape)
+    return suit_recording(trajectory, geometry, Signal.from_values(signal.t, y),
+                          {"case": "bent"})
+
+
+@pytest.mark.parametrize("bend, stop", [
+    (lambda z: z + 0.2 * z**2 - 0.15 * z**3, False),  # a transfer curving over its range
+    (lambda z: np.minimum(z, 0.7), True),  # a hard stop over the top 10 % or so
+    (lambda z: z - 0.08 * np.logaddexp(0.0, (z - 0.6) / 0.1), True),  # a soft knee at 0.6
+])
+def test_a_stop_must_bend_more_than_a_smooth_transfer_curve(bend, stop):
+    """Rule 3: soft knees at both ends of every sensor also follow a reading that curves
+    gently over its whole range (a nonlinear transfer: calibration, not a stop), and beat a
+    quadratic map, which cannot follow the cubic bend, by far more than the noise (39 noise
+    variances when written). Added to a smooth cubic transfer curve per sensor, such knees
+    no longer clear the bar (−2.4); a hard stop (58) and a soft knee (7.5) still do."""
+    trial = prepare_trial(_bent_recording(bend))
+    quadratic = Spec(degree=2)
+    inputs = make_inputs(trial, quadratic)
+    floor = float(np.sqrt(np.mean(trial.noise**2)))
+    base = fit(trial, inputs, quadratic)
+    cand = _best(trial, inputs, "saturation", quadratic)
+    evidence = _evidence(trial, base, cand, floor)
+    assert evidence["significant"], evidence  # each bends the map by more than the noise
+    judged = _against_curve(trial, inputs, quadratic, cand, evidence, floor)
+    assert judged["significant"] is stop, judged
+    assert judged["against_smooth_curve"]["curve_gap"] < base.gap
 
 
 def test_soft_knees_at_both_ends_are_both_found(clean_101):

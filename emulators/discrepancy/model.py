@@ -196,6 +196,9 @@ class Spec:
             offset locally, where a polynomial spreads its error over the whole recording).
         saturation: stops at the ends of the sensors' ranges (hard or soft, :class:`Stops`).
         stops: the stops per sensor, once chosen (empty: choose them in every fit).
+        output_curve: a smooth transfer curve per sensor (:func:`curve_columns`). Not an
+            effect and never kept in a model: the static alternative a stop must beat to be
+            named (a reading that bends over its whole range is calibration, not a stop).
         ridge: relative ridge of the static map's columns.
     """
 
@@ -214,6 +217,7 @@ class Spec:
     drift_piecewise: bool = False
     saturation: bool = False
     stops: tuple[Stops, ...] = ()
+    output_curve: bool = False
     ridge: float = RIDGE
 
     def effects(self) -> set[str]:
@@ -597,6 +601,16 @@ def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
     return inputs.cache[key]
 
 
+def curve_columns(inputs: Inputs) -> np.ndarray:
+    """(N, S, 2) z² and z³ of each sensor's static prediction, z = (ŝ − centre) / half its
+    p1–p99 spread: with the static map's own ŝ, any cubic transfer curve of the reading."""
+    if "Q" not in inputs.cache:
+        half = inputs.thresholds[:, 0] / PLAY_FRACTIONS[0] / 2.0
+        z = (inputs.static - inputs.centre) / half
+        inputs.cache["Q"] = np.stack([z**2, z**3], axis=2)
+    return inputs.cache["Q"]
+
+
 def rate_limit_column(inputs: Inputs, j: int, rate: float, rate_hz: float) -> np.ndarray:
     """(N, 1) R_rate(ŝⱼ) − ŝⱼ: how far a reading limited to ``rate`` (units/s) falls behind
     sensor j's static prediction."""
@@ -674,6 +688,8 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
     if spec.creep_asym_s:
         build_s, recover_s = spec.creep_asym_s
         pose.append(creep_asym_columns(inputs, build_s, recover_s, rate_hz)[:, j:j + 1])
+    if spec.output_curve:
+        pose.append(curve_columns(inputs)[:, j, :])
     # the lag acts column by column, so the shared static part is lagged once (cached)
     shared = lagged_static_basis(inputs, spec, rate_hz)
     own = []

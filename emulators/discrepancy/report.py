@@ -135,8 +135,13 @@ def markdown(summary: dict) -> str:
         lines += ["", "## Not added (not beyond the noise)", ""]
         for item in summary["not_added"]:
             ev = item["evidence"]
+            curve = ev.get("against_smooth_curve")
             lines.append(f"- {item['effect']}: held-out gap {item['gap']:.4g}, removed RMS "
-                         f"{ev['removed_rms']:.4g} vs noise floor {ev['noise_floor']:.4g}")
+                         f"{ev['removed_rms']:.4g} vs noise floor {ev['noise_floor']:.4g}"
+                         + ("" if curve is None else
+                            f"; over a smooth transfer curve of each sensor (held-out gap "
+                            f"{curve['curve_gap']:.4g}) the stops remove "
+                            f"{curve['removed_rms']:.4g}: a gentle bend, not a stop"))
     lb, la = summary["localisation_before"], summary["localisation_after"]
     lines += ["", "## Where the residual was (before → after, RMS)", "",
               f"- by direction: {lb['by_direction']} → {la['by_direction']}",

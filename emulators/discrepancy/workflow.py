@@ -22,6 +22,11 @@ fitted through it spreads what it cannot bend over the rest. Those frames must b
 as a plateau spans (the share of the signature): a map that passes the stop on a handful
 of frames shows no plateau there.
 
+3. A stop must bend more than a smooth curve: a significant saturation is fitted again on
+   top of a cubic transfer curve of each sensor's static prediction and must clear rules 1
+   and 2 over that curve alone (:func:`_against_curve`). Knees at both ends of a sensor
+   can imitate a reading that curves gently over its whole range, which is calibration.
+
 Held-out error already charges a candidate for its extra parameters (fitting noise makes
 held-out error worse, not better), so no parameter-count penalty is added. Among significant
 candidates the largest ΔMSE is named; the workflow stops when none is significant.
@@ -574,6 +579,24 @@ def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
     }
 
 
+def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence: dict,
+                   floor: float) -> dict:
+    """``evidence`` of the stops ``cand`` over ``spec`` with rule 3: added to a smooth
+    transfer curve of each sensor (``Spec.output_curve``), they must still clear rules 1
+    and 2 over it, pooled or on the sensors held at hard stops. A reading that bends gently
+    over its whole range (a nonlinear transfer, a misfit spread over the poses) is
+    calibration that soft knees at both ends can imitate; a stop is a bend at an end that
+    no smooth curve follows."""
+    curve = fit(trial, inputs, replace(spec, output_curve=True))
+    bent = fit(trial, inputs, replace(cand.spec, output_curve=True))
+    rules = _rules(curve.block_mse, bent.block_mse, floor)
+    held = _held_at_stops(trial, curve, bent)
+    if held is not None:
+        rules["significant"] = rules["significant"] or held["significant"]
+    return {**evidence, "significant": rules["significant"],
+            "against_smooth_curve": {"curve_gap": round(curve.gap, 6), **rules}}
+
+
 def _config(spec: Spec) -> dict:
     return {"degree": spec.degree, "local": spec.local,
             **({"local_ridge": spec.local_ridge} if spec.local else {}),
@@ -670,7 +693,10 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         scored = []
         for kind in missing:
             cand = _best(trial, inputs, kind, spec)
-            scored.append((kind, cand, _evidence(trial, base, cand, floor)))
+            evidence = _evidence(trial, base, cand, floor)
+            if kind == "saturation" and evidence["significant"]:
+                evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
+            scored.append((kind, cand, evidence))
         scored.sort(key=lambda item: -item[2]["delta_mse"])
         table = ", ".join(f"{k} {e['heldout_gap']:.4g}" for k, _, e in scored)
         winners = [item for item in scored if item[2]["significant"]]
@@ -697,6 +723,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
             cand = _refine_lag_delay(trial, inputs, cand)
         previous = kind
         evidence = _evidence(trial, base, cand, floor)
+        if kind == "saturation":  # judged against the smooth curve when it was named
+            evidence["against_smooth_curve"] = winners[0][2]["against_smooth_curve"]
         spec, base = cand.spec, cand
         refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
                  (("lag", _lag_of(cand.spec) != lag_before),
