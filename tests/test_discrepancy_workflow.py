@@ -512,14 +512,20 @@ def test_a_stop_the_map_absorbs_is_judged_on_the_frames_it_holds():
     assert f"on the {frames['share']:.1%} of their frames it holds" in markdown(s)
 
 
+def _suit_and_arm_axis(seed: int, duration_s: float) -> tuple:
+    """A random suit and reaching movement of ``seed``: the trajectory, the geometry, its
+    ideal signal (mm, 250 Hz) and the humerus axis (N, 3) at the signal's frames."""
+    trajectory = random_trajectory(seed, duration_s)
+    geometry, gains, offsets = random_geometry(seed)
+    signal = suit_lengths(trajectory, geometry, gains, offsets)
+    ang = np.deg2rad(trajectory.sample(signal.t))
+    return trajectory, geometry, signal, ms_to_matrix(ang[:, 0], ang[:, 1], ang[:, 2])[:, :, 1]
+
+
 def _bent_recording(bend) -> Recording:
     """Four sensors linear in the arm direction, each read through ``bend`` of its stretch z
     (−1 … 1 over p1–p99), 20 mm a unit, with 0.05 mm of white noise."""
-    trajectory = random_trajectory(7, 90.0)
-    geometry, gains, offsets = random_geometry(7)
-    signal = suit_lengths(trajectory, geometry, gains, offsets)
-    ang = np.deg2rad(trajectory.sample(signal.t))
-    axis = ms_to_matrix(ang[:, 0], ang[:, 1], ang[:, 2])[:, :, 1]
+    trajectory, geometry, signal, axis = _suit_and_arm_axis(7, 90.0)
     mix = np.random.default_rng(7).normal(size=(3, 4))
     lin = axis @ mix
     lo, hi = np.quantile(lin, [0.01, 0.99], axis=0)
@@ -831,11 +837,7 @@ def test_local_functions_are_compact_and_kept_only_near_the_poses():
 def _bump_recording(noise_mm: float) -> Recording:
     """One tendon rides over a prominence: its reading rises by up to 5 mm where the arm
     points within about 15° of one direction (θ 30°, φ 60°); white noise of ``noise_mm``."""
-    trajectory = random_trajectory(5, 60.0)
-    geometry, gains, offsets = random_geometry(5)
-    signal = suit_lengths(trajectory, geometry, gains, offsets)
-    ang = np.deg2rad(trajectory.sample(signal.t))
-    axis = ms_to_matrix(ang[:, 0], ang[:, 1], ang[:, 2])[:, :, 1]
+    trajectory, geometry, signal, axis = _suit_and_arm_axis(5, 60.0)
     peak = ms_to_matrix(np.deg2rad([30.0]), np.deg2rad([60.0]), np.zeros(1))[0, :, 1]
     y = signal.values.copy()
     y[:, 0] += 5.0 * np.exp(-((np.linalg.norm(axis - peak, axis=1) / 0.25) ** 2))

@@ -588,13 +588,10 @@ def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence
     calibration that soft knees at both ends can imitate; a stop is a bend at an end that
     no smooth curve follows."""
     curve = fit(trial, inputs, replace(spec, output_curve=True))
-    bent = fit(trial, inputs, replace(cand.spec, output_curve=True))
-    rules = _rules(curve.block_mse, bent.block_mse, floor)
-    held = _held_at_stops(trial, curve, bent)
-    if held is not None:
-        rules["significant"] = rules["significant"] or held["significant"]
-    return {**evidence, "significant": rules["significant"],
-            "against_smooth_curve": {"curve_gap": round(curve.gap, 6), **rules}}
+    over = _evidence(trial, curve, fit(trial, inputs, replace(cand.spec, output_curve=True)),
+                     floor)
+    return {**evidence, "significant": over["significant"],
+            "against_smooth_curve": {"curve_gap": round(curve.gap, 6), **over}}
 
 
 def _config(spec: Spec) -> dict:
