@@ -37,6 +37,7 @@ from exohil.emulators.discrepancy.model import (
     play,
     rate_limit,
     reduce,
+    restrict_to_coverage,
 )
 from exohil.emulators.discrepancy.profile import (
     calibrated_suit,
@@ -47,10 +48,15 @@ from exohil.emulators.discrepancy.profile import (
 )
 from exohil.emulators.discrepancy.report import markdown
 from exohil.emulators.discrepancy.workflow import (
+    SIGN_TEST_LEVEL,
     _against_curve,
     _best,
+    _counted_refined,
     _evidence,
     _rate_limit,
+    _rules,
+    _static_map,
+    blocks_needed,
     drift_options,
 )
 from exohil.emulators.effects import Signal
@@ -507,7 +513,9 @@ def test_a_stop_the_map_absorbs_is_judged_on_the_frames_it_holds():
     assert evidence["delta_mse"] < evidence["noise_floor"] ** 2  # not by the pooled rule
     assert held["delta_mse"] < held["noise_floor"] ** 2  # nor on the sensor's frames
     frames = held["frames_held"]
-    assert frames["significant"] and frames["delta_mse"] > held["noise_floor"] ** 2, frames
+    # named for the frames it holds: rules 1 and 2 there, without 2's count (4 folds hold)
+    assert held["significant"] and frames["beyond_noise"], held
+    assert frames["delta_mse"] > held["noise_floor"] ** 2, frames
     assert 0 < frames["share"] < 0.15 and frames["delta_mse_without_best_block"] > 0, frames
     assert f"on the {frames['share']:.1%} of their frames it holds" in markdown(s)
 
@@ -533,6 +541,34 @@ def _bent_recording(bend) -> Recording:
     y = 100.0 + 20.0 * bend(z) + np.random.default_rng(8).normal(0.0, 0.05, z.shape)
     return suit_recording(trajectory, geometry, Signal.from_values(signal.t, y),
                           {"case": "bent"})
+
+
+def test_blocks_needed_is_the_sign_tests_threshold():
+    """Rule 2's count of improved blocks: chance (each block as likely to improve as not)
+    reaches it at most SIGN_TEST_LEVEL of the time, one block fewer more often."""
+    def chance(k: int, n: int) -> float:  # P(at least k of n blocks improve by chance)
+        return sum(math.comb(n, i) for i in range(k, n + 1)) / 2**n
+
+    assert blocks_needed(N_BLOCKS) == 7
+    for n in range(1, 13):
+        k = blocks_needed(n)
+        assert k == n + 1 or chance(k, n) <= SIGN_TEST_LEVEL, (n, k)
+        assert chance(k - 1, n) > SIGN_TEST_LEVEL, (n, k)
+    assert blocks_needed(4) == 5  # four blocks can never tell: 1 in 16 improve all by chance
+
+
+@pytest.mark.parametrize("improved, significant", [(6, False), (7, True), (8, True)])
+def test_a_candidate_must_improve_most_blocks(improved, significant):
+    """A model that misses the static map by many noise variances lets a flexible term
+    win a lot on some blocks and lose on others: ΔMSE well above σ² and still positive
+    without the best block is not enough when two blocks of eight got worse."""
+    base = np.full(N_BLOCKS, 10.0)
+    cand = base - np.where(np.arange(N_BLOCKS) < improved, 4.0, -1.0)
+    rules = _rules(base, cand, floor=1.0)
+    assert rules["delta_mse"] > 1.0 and rules["delta_mse_without_best_block"] > 0
+    assert rules["beyond_noise"]  # rules 1 and 2 before the sign test
+    assert rules["blocks_improved"] == improved and rules["blocks_needed"] == 7
+    assert rules["significant"] is significant
 
 
 @pytest.mark.parametrize("bend, stop", [
@@ -601,6 +637,32 @@ def test_an_offset_that_wanders_is_named_drift_and_followed(clean_101, tmp_path)
     loaded = load_calibrated_profile(tmp_path / "p.toml")
     sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
+
+
+def test_a_drift_is_counted_on_the_drift_it_would_become():
+    """Rule 2's sign test takes a drift's count on its refined form: on the sphere
+    benchmark's foreign geometry a piecewise-linear offset (a new value every 10–20 s) is
+    followed by degrees 1–3 on only 6 of the 8 folds, by the refined drift on all of them;
+    without the second count nothing was named (0.443 mm left against a floor of 0.150)."""
+    from benchmarks.bench_discrepancy_sphere import SphereCase
+    from benchmarks.bench_discrepancy_sphere import make_recording as sphere_recording
+
+    rec = sphere_recording(SphereCase("drift", 2, 2, 60.0))
+    trial = prepare_trial(rec)
+    floor = float(np.sqrt(np.mean(trial.noise**2)))
+    scaled = make_inputs(trial)
+    restrict_to_coverage(trial, scaled.u)
+    base = _static_map(trial, scaled, floor)
+    inputs = make_inputs(trial, base.spec)
+    cand = _best(trial, inputs, "drift", base.spec)
+    evidence = _evidence(trial, base, cand, floor)
+    assert evidence["beyond_noise"] and not evidence["significant"], evidence
+    counted = _counted_refined(trial, inputs, base, cand, evidence, floor)
+    assert counted["significant"], counted
+    assert counted["refined"]["blocks_improved"] > evidence["blocks_improved"], counted
+    summary = run(rec, "piecewise drift on a sphere").summary
+    assert summary["effects"] == ["drift"], summary["effects"]
+    assert summary["gap_after"] < 0.5 * summary["gap_before"], summary
 
 
 def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):

@@ -132,12 +132,14 @@ def markdown(summary: dict) -> str:
         lines.append(f"- step {i} ({step['effect']}): " + ", ".join(
             f"{k} {v}" for k, v in sig.items()))
     if summary["not_added"]:
-        lines += ["", "## Not added (not beyond the noise)", ""]
+        lines += ["", "## Not added (not beyond the noise, or not on enough blocks)", ""]
         for item in summary["not_added"]:
             ev = item["evidence"]
             curve = ev.get("against_smooth_curve")
             lines.append(f"- {item['effect']}: held-out gap {item['gap']:.4g}, removed RMS "
-                         f"{ev['removed_rms']:.4g} vs noise floor {ev['noise_floor']:.4g}"
+                         f"{ev['removed_rms']:.4g} vs noise floor {ev['noise_floor']:.4g}, "
+                         f"{ev['blocks_improved']} blocks improved (rule 2 needs "
+                         f"{ev['blocks_needed']})"
                          + ("" if curve is None else
                             f"; over a smooth transfer curve of each sensor (held-out gap "
                             f"{curve['curve_gap']:.4g}) the stops remove "

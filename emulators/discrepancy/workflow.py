@@ -9,15 +9,21 @@ the others), it
    squared error ΔMSE exceeds σ², σ being the white-noise floor estimated from second
    differences (:func:`noise_floor`); an effect whose contribution per sample is below the
    sensor noise cannot be told from it (signal-to-noise ratio < 1), and
-2. does not rest on one block: ΔMSE stays positive when the block with the largest
-   improvement is left out (evidence from at least two independent stretches of time).
+2. does not rest on a few blocks: ΔMSE stays positive when the block with the largest
+   improvement is left out (evidence from at least two independent stretches of time), and
+   the candidate lowers the error on so many blocks that chance would rarely do it (a sign
+   test at ``SIGN_TEST_LEVEL``: 7 of 8). A model that misses the static map by many noise
+   variances (a foreign geometry) lets any flexible term win a little on some blocks and
+   lose on others; a physical effect acts everywhere the motion shows it. A drift is
+   counted again on its refined form (:func:`_counted_refined`).
 
 A stop is a local effect: a clamp on one sensor of five can remove more than that sensor's
 noise and still less than the noise of all five. So a saturation candidate that holds some
 sensors at a hard stop (each sits on a plateau while the joint moves, its physical
 signature, see :func:`~exohil.emulators.discrepancy.model.plateaus`) is also significant
 when rules 1 and 2 hold on those sensors alone, against their own noise, or on the frames
-it holds there alone: a stop reached on 5 % of the frames changes only those, and a map
+it holds there alone (without rule 2's count, as those frames lie only in the blocks where
+the arm reached the stop): a stop reached on 5 % of the frames changes only those, and a map
 fitted through it spreads what it cannot bend over the rest. Those frames must be as many
 as a plateau spans (the share of the signature): a map that passes the stop on a handful
 of frames shows no plateau there.
@@ -99,6 +105,9 @@ CREEP_MAX_FITS = 16
 #: a one-sided lag, and on the default suit a 0.2 s low-pass stood in for the lag model's
 #: missing delay); slower than ten minutes is a ramp over any recording (drift).
 CREEP_TAU_RANGE_S = (1.0, 600.0)
+#: Rule 2's sign test: the largest chance that a candidate no better than the model it
+#: extends improves as many held-out blocks as it must (7 of 8 blocks: 3.5 %).
+SIGN_TEST_LEVEL = 0.05
 DRIFT_DEGREES = (1, 2, 3)
 #: Degrees a named drift is refined over (see _refine_drift), up to one per DRIFT_SPAN_S.
 DRIFT_REFINE_DEGREES = (4, 6, 8, 12, 16, 24, 32, 48)
@@ -147,14 +156,15 @@ def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
     so can a loop where the arm goes out and back on different paths. Of a flexible map and
     a physical explanation, the workflow keeps the second unless the local functions predict
     the held-out blocks better by more than it would take to name an effect (``floor``:
-    the recording's pooled noise RMS, the bar's σ)."""
+    the recording's pooled noise RMS, the bar's σ). Without rule 2's sign test: local
+    functions help where the poses they cover are, so on some blocks more than others."""
     fits = [fit(trial, inputs, static_map) for static_map in _static_maps(inputs)]
     best = min(fits, key=lambda f: f.gap)
     if not best.spec.local:
         return best
     polynomial = min((f for f in fits if not f.spec.local), key=lambda f: f.gap)
     bent = _best(trial, inputs, "saturation", polynomial.spec)
-    return best if _rules(bent.block_mse, best.block_mse, floor)["significant"] else polynomial
+    return best if _rules(bent.block_mse, best.block_mse, floor)["beyond_noise"] else polynomial
 
 
 def _map_of(spec: Spec) -> tuple:
@@ -521,6 +531,17 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     raise ValueError(kind)
 
 
+def blocks_needed(n: int) -> int:
+    """The fewest of ``n`` blocks a candidate must improve to pass rule 2's sign test: so many
+    that a candidate no better than the model it extends (each block as likely to improve
+    as not) improves that many with probability at most ``SIGN_TEST_LEVEL``; ``n + 1`` when
+    no count is that unlikely (too few blocks to tell)."""
+    for k in range(n + 1):
+        if sum(math.comb(n, i) for i in range(k, n + 1)) / 2.0**n <= SIGN_TEST_LEVEL:
+            return k
+    return n + 1
+
+
 def _rules(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float) -> dict:
     """Rules 1 and 2 (the module's docstring) from held-out MSE per block, over the blocks
     with scored frames, against white noise of RMS ``floor``."""
@@ -528,13 +549,17 @@ def _rules(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float) -> dict:
     delta = delta[np.isfinite(delta)]
     dmse = float(np.mean(delta)) if delta.size else 0.0
     robust = float(np.mean(np.sort(delta)[:-1])) if delta.size > 1 else 0.0
+    improved, needed = int(np.sum(delta > 0)), blocks_needed(delta.size)
+    beyond_noise = bool(dmse > floor**2 and robust > 0)
     return {
         "delta_mse": round(dmse, 8),
         "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
         "noise_floor": round(floor, 6),
-        "blocks_improved": int(np.sum(delta > 0)),
+        "blocks_improved": improved,
+        "blocks_needed": needed,
         "delta_mse_without_best_block": round(robust, 8),
-        "significant": bool(dmse > floor**2 and robust > 0),
+        "beyond_noise": beyond_noise,
+        "significant": beyond_noise and improved >= needed,
     }
 
 
@@ -559,7 +584,9 @@ def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
     frames = _rules(block_mse(trial, np.where(at_stop, base.residual[:, held], np.nan)),
                     block_mse(trial, np.where(at_stop, cand.residual[:, held], np.nan)), noise)
     return {"sensors": [trial.sensor_names[j] for j in held], **sensors,
-            "significant": sensors["significant"] or frames["significant"],
+            # the frames held lie only in the folds where the arm reached the stop (four of
+            # eight can never pass rule 2's count); the plateau there is the evidence
+            "significant": sensors["significant"] or frames["beyond_noise"],
             "frames_held": {"share": round(float(at_stop[trial.scored].mean()), 4), **frames}}
 
 
@@ -592,6 +619,20 @@ def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence
                      floor)
     return {**evidence, "significant": over["significant"],
             "against_smooth_curve": {"curve_gap": round(curve.gap, 6), **over}}
+
+
+def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
+                     floor: float) -> dict:
+    """``evidence`` of a drift beyond the noise that improves too few blocks, with rules 1
+    and 2 taken again on the drift it would become if named (:func:`_refine_drift`). Degrees
+    1–3 only rank the candidates; a slip step or a random walk that they smear over the
+    recording worsens the blocks around the step until a drift follows it. The drift is
+    still ranked by its low-degree ΔMSE, so a flexible function of time never outranks a
+    creep for its flexibility."""
+    refined = _evidence(trial, base, _refine_drift(trial, inputs, cand), floor)
+    keys = ("heldout_gap", "delta_mse", "blocks_improved", "blocks_needed", "significant")
+    return {**evidence, "significant": refined["significant"],
+            "refined": {k: refined[k] for k in keys}}
 
 
 def _config(spec: Spec) -> dict:
@@ -691,6 +732,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         for kind in missing:
             cand = _best(trial, inputs, kind, spec)
             evidence = _evidence(trial, base, cand, floor)
+            if kind == "drift" and evidence["beyond_noise"] and not evidence["significant"]:
+                evidence = _counted_refined(trial, inputs, base, cand, evidence, floor)
             if kind == "saturation" and evidence["significant"]:
                 evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
             scored.append((kind, cand, evidence))
