@@ -7,21 +7,10 @@ over-fits cannot make them look small.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from exohil.emulators.discrepancy.data import Trial
-from exohil.emulators.discrepancy.model import low_pass, map_inputs
+from exohil.emulators.discrepancy.model import holding_still, joint_speed, low_pass
 
-#: Below this angular speed (deg/s, :func:`joint_speed`) the joint is holding still.
-STILL_DEG_S = 2.0
-#: A joint still by ``STILL_DEG_S`` stays still until its speed passes this, deg/s.
-MOVING_DEG_S = 2.0 * STILL_DEG_S
-#: The joint's speed is the slope of a straight line fitted over this window, s. Over
-#: 0.25 s, 0.1° of white angle noise sampled at 100 Hz moves each rate by about 0.3 °/s
-#: (a slope's error σ·√(12 / (n·W²)), n samples in W), well below ``STILL_DEG_S``; a
-#: frame-to-frame difference after a 0.05 s low-pass moved it by several °/s and split
-#: every hold of a real mocap into pieces shorter than ``MIN_HOLD_S``.
-SPEED_WINDOW_S = 0.5
 #: A hold counts for creep when it lasts at least this long, s.
 MIN_HOLD_S = 1.0
 #: Equal time windows of the localisation in time.
@@ -35,50 +24,11 @@ def motion(trial: Trial, static: np.ndarray) -> dict[str, np.ndarray]:
     ``velocity`` (N, S) rate of change of the static prediction (sensor units/s);
     ``direction`` (N, S) +1 rising, −1 falling, 0 still.
     """
-    speed = joint_speed(trial)
+    speed = joint_speed(trial.angles, trial.angle_names, trial.rate_hz)
     velocity = np.gradient(low_pass(static, 0.05, trial.rate_hz), axis=0) * trial.rate_hz
     still = holding_still(speed)
     direction = np.where(still[:, None], 0, np.sign(velocity)).astype(np.int64)
     return {"speed_deg_s": speed, "still": still, "velocity": velocity, "direction": direction}
-
-
-def holding_still(speed: np.ndarray) -> np.ndarray:
-    """(N,) bool: the joint holds still. A frame is still below ``STILL_DEG_S``, and so is
-    every frame of a run below ``MOVING_DEG_S`` that reaches a still frame (a two-threshold
-    switch, as a debounced button): a held arm sways, and its sway's peaks would split a
-    hold into pieces too short to count; a movement passes the upper threshold."""
-    low = speed < MOVING_DEG_S
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], low.astype(np.int8), [0]])))
-    still = np.zeros(speed.shape[0], dtype=bool)
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):
-        if np.any(speed[start:stop] < STILL_DEG_S):
-            still[start:stop] = True
-    return still
-
-
-def joint_speed(trial: Trial) -> np.ndarray:
-    """(N,) the joint's angular speed at each frame, deg/s.
-
-    For a shoulder in MoBL-ARMS angles, the speed of the humerus axis (the arm direction)
-    and, when the axial rotation moves, of the whole humerus frame (‖ω‖² = ½ Σᵢ ‖ėᵢ‖² over
-    its three axes): the rate of the plane of elevation θ means nothing with the arm
-    hanging, where mocap noise sends it anywhere. For any other joint, the norm of its
-    angles' rates. Each rate is the slope of a least-squares line over ``SPEED_WINDOW_S``
-    (a Savitzky–Golay derivative), so the mocap's noise does not read as motion.
-    """
-    window = max(3, int(round(SPEED_WINDOW_S * trial.rate_hz)) | 1)
-    u, kind = map_inputs(trial.angles, trial.angle_names, np.min(trial.angles, axis=0),
-                         np.max(trial.angles, axis=0))
-    if kind == "angles":  # in degrees, not scaled
-        u = trial.angles
-    elif kind == "arm_axes":  # the humerus y and x axes; z completes the frame
-        u = np.hstack([u, np.cross(u[:, 3:], u[:, :3])])
-    rates = savgol_filter(u, window, 1, deriv=1, delta=1.0 / trial.rate_hz, axis=0)
-    speed = np.linalg.norm(rates, axis=1)
-    if kind == "angles":
-        return speed
-    scale = np.sqrt(0.5) if kind == "arm_axes" else 1.0
-    return np.rad2deg(speed * scale)
 
 
 def _rms(x: np.ndarray) -> float | None:

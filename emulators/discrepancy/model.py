@@ -40,7 +40,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.signal import lfilter, lfilter_zi
+from scipy.signal import lfilter, lfilter_zi, savgol_filter
 
 from exohil.emulators.discrepancy.data import N_BLOCKS, Trial
 from exohil.emulators.effects import Creep, Signal
@@ -71,6 +71,16 @@ SHARED_ITERATIONS = 2
 OWN_ITERATIONS = 1
 #: Coverage radius in the static map's input space (unit arm vector or scaled angles).
 COVER_RADIUS = 0.1
+#: Below this angular speed (deg/s, :func:`joint_speed`) the joint is holding still.
+STILL_DEG_S = 2.0
+#: A joint still by ``STILL_DEG_S`` stays still until its speed passes this, deg/s.
+MOVING_DEG_S = 2.0 * STILL_DEG_S
+#: The joint's speed is the slope of a straight line fitted over this window, s. Over
+#: 0.5 s, 0.1° of white angle noise sampled at 100 Hz moves each rate by about 0.1 °/s
+#: (a slope's error σ·√(12 / (n·W²)), n samples in W), well below ``STILL_DEG_S``; a
+#: frame-to-frame difference after a 0.05 s low-pass moved it by several °/s and split
+#: every hold of a real mocap into pieces shorter than a second.
+SPEED_WINDOW_S = 0.5
 #: Play-operator thresholds as fractions of the sensor's range (p1–p99).
 PLAY_FRACTIONS = (0.005, 0.015, 0.04, 0.1, 0.25)
 #: The static map's local basis (offered beside the polynomials for an arm direction): a
@@ -183,6 +193,9 @@ class Spec:
             proportional to the stretch (a fabric whose load stiffens, or eases, with it).
         creep_asym_s: (build, recover) time constants of an asymmetric creep state, s
             (empty = none): builds while the stretch grows, recovers more slowly.
+        creep_hold_s: (grow, recover) time constants of a creep that flows only while the
+            joint holds still and recovers while it moves, s (empty = none;
+            :func:`creep_hold_columns`).
         lag_kind: "" (none), "first_order", "delay", "first_order_delay" (a low-pass
             followed by a delay) or "rate_limit".
         lag_s: the lag's time constant (first order, with or without a delay) or delay, s.
@@ -209,6 +222,7 @@ class Spec:
     creep_tau_s: tuple[float, ...] = ()
     creep_quadratic: bool = False
     creep_asym_s: tuple[float, ...] = ()
+    creep_hold_s: tuple[float, ...] = ()
     lag_kind: str = ""
     lag_s: float = 0.0
     lag_delay_s: float = 0.0
@@ -223,7 +237,7 @@ class Spec:
     def effects(self) -> set[str]:
         """The vocabulary names of the effect terms that are on."""
         on = {"hysteresis": self.hysteresis,
-              "creep": bool(self.creep_tau_s) or bool(self.creep_asym_s),
+              "creep": bool(self.creep_tau_s or self.creep_asym_s or self.creep_hold_s),
               "lag": bool(self.lag_kind), "drift": self.drift_degree > 0,
               "saturation": self.saturation}
         return {name for name, flag in on.items() if flag}
@@ -365,6 +379,8 @@ class Inputs:
             :func:`fit_segments`), on the degree-2 products of ``u``; the static basis ends
             with their lengths √Q. (P₂, 0) or empty: none.
         segment_sensors: the sensor (column) each run was found on.
+        still: (N,) bool, the joint holds still (:func:`holding_still`); empty where no
+            term needs it yet.
     """
 
     u: np.ndarray
@@ -382,6 +398,7 @@ class Inputs:
     segment_sensors: tuple[int, ...] = ()
     static_local: bool = False
     centres: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    still: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     cache: dict = field(default_factory=dict)
 
 
@@ -412,6 +429,48 @@ def map_inputs(angles: np.ndarray, angle_names: tuple[str, ...], lo: np.ndarray,
             return np.hstack([rot[:, :, 1], rot[:, :, 0]]), "arm_axes"
         return rot[:, :, 1], "arm_direction"
     return scale_angles(angles, lo, hi), "angles"
+
+
+def joint_speed(angles: np.ndarray, angle_names: tuple[str, ...], rate_hz: float
+                ) -> np.ndarray:
+    """(N,) the joint's angular speed at each of the frames ``angles`` (N, A, degrees,
+    sampled at ``rate_hz``) holds, deg/s.
+
+    For a shoulder in MoBL-ARMS angles, the speed of the humerus axis (the arm direction)
+    and, when the axial rotation moves, of the whole humerus frame (‖ω‖² = ½ Σᵢ ‖ėᵢ‖² over
+    its three axes): the rate of the plane of elevation θ means nothing with the arm
+    hanging, where mocap noise sends it anywhere. For any other joint, the norm of its
+    angles' rates. Each rate is the slope of a least-squares line over ``SPEED_WINDOW_S``
+    (a Savitzky–Golay derivative), so the mocap's noise does not read as motion.
+    """
+    n = angles.shape[0]
+    window = min(max(3, int(round(SPEED_WINDOW_S * rate_hz)) | 1), n - 1 + n % 2)
+    if window < 3:
+        return np.zeros(n)
+    u, kind = map_inputs(angles, angle_names, np.min(angles, axis=0), np.max(angles, axis=0))
+    if kind == "angles":  # in degrees, not scaled
+        u = angles
+    elif kind == "arm_axes":  # the humerus y and x axes; z completes the frame
+        u = np.hstack([u, np.cross(u[:, 3:], u[:, :3])])
+    speed = np.linalg.norm(savgol_filter(u, window, 1, deriv=1, delta=1.0 / rate_hz, axis=0),
+                           axis=1)
+    if kind == "angles":
+        return speed
+    return np.rad2deg(speed * (math.sqrt(0.5) if kind == "arm_axes" else 1.0))
+
+
+def holding_still(speed: np.ndarray) -> np.ndarray:
+    """(N,) bool: the joint holds still. A frame is still below ``STILL_DEG_S``, and so is
+    every frame of a run below ``MOVING_DEG_S`` that reaches a still frame (a two-threshold
+    switch, as a debounced button): a held arm sways, and its sway's peaks would split a
+    hold into pieces too short to count; a movement passes the upper threshold."""
+    low = speed < MOVING_DEG_S
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], low.astype(np.int8), [0]])))
+    still = np.zeros(speed.shape[0], dtype=bool)
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        if np.any(speed[start:stop] < STILL_DEG_S):
+            still[start:stop] = True
+    return still
 
 
 def segment_lengths(u: np.ndarray, segments: np.ndarray) -> np.ndarray:
@@ -601,6 +660,41 @@ def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
     return inputs.cache[key]
 
 
+def creep_hold_columns(inputs: Inputs, grow_s: float, recover_s: float,
+                       rate_hz: float) -> np.ndarray:
+    """(N, S + 1) creep states that flow only while the joint holds still (``inputs.still``):
+    each rises toward its driver (ŝ of each sensor, then 1, so the load may be any linear
+    function of the stretch) with ``grow_s`` while still, and falls back to zero with
+    ``recover_s`` while the joint moves. A fabric or tendon that creeps under a held load
+    and recovers once it moves again; the state carries over from hold to hold. Column j
+    belongs to sensor j, the last to every sensor."""
+    key = ("CH", grow_s, recover_s)
+    if key not in inputs.cache:
+        # The state moves over seconds: step it at about FIT_RATE_HZ (each step still for
+        # the share of its frames that are, then moving) and interpolate back to every frame.
+        n = inputs.static.shape[0]
+        t = np.arange(n) / rate_hz
+        step = max(1, int(round(rate_hz / FIT_RATE_HZ)))
+        at = np.arange(0, n, step)
+        if at[-1] != n - 1:
+            at = np.append(at, n - 1)
+        drive = np.column_stack([inputs.static[at], np.ones(at.size)])
+        # the share of still frames in each step (at[i−1], at[i]]
+        share = np.add.reduceat(inputs.still.astype(np.float64), at) / np.diff(np.append(at, n))
+        share = np.concatenate([[0.0], share[:-1]])
+        dt = np.diff(t[at], prepend=t[0])
+        keep_grow = np.exp(-dt * share / grow_s)
+        keep_recover = np.exp(-dt * (1.0 - share) / recover_s)
+        state = np.zeros_like(drive)
+        c = np.zeros(drive.shape[1])
+        for i in range(at.size):
+            c = (drive[i] + (c - drive[i]) * keep_grow[i]) * keep_recover[i]
+            state[i] = c
+        inputs.cache[key] = np.column_stack([np.interp(t, t[at], state[:, j])
+                                             for j in range(state.shape[1])])
+    return inputs.cache[key]
+
+
 def curve_columns(inputs: Inputs) -> np.ndarray:
     """(N, S, 2) z² and z³ of each sensor's static prediction, z = (ŝ − centre) / half its
     p1–p99 spread: with the static map's own ŝ, any cubic transfer curve of the reading."""
@@ -688,6 +782,9 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
     if spec.creep_asym_s:
         build_s, recover_s = spec.creep_asym_s
         pose.append(creep_asym_columns(inputs, build_s, recover_s, rate_hz)[:, j:j + 1])
+    if spec.creep_hold_s:
+        grow_s, recover_s = spec.creep_hold_s
+        pose.append(creep_hold_columns(inputs, grow_s, recover_s, rate_hz)[:, [j, -1]])
     if spec.output_curve:
         pose.append(curve_columns(inputs)[:, j, :])
     # the lag acts column by column, so the shared static part is lagged once (cached)
@@ -1229,6 +1326,10 @@ def make_inputs(trial: Trial, static_map: Spec | None = None) -> Inputs:
                     static=np.empty(0), static_coef=np.empty(0), static_degree=1,
                     thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
                     t_span=(t0, t1))
+    if "still" not in trial.cache:
+        trial.cache["still"] = holding_still(joint_speed(trial.angles, trial.angle_names,
+                                                         trial.rate_hz))
+    inputs.still = trial.cache["still"]
     if "segments" not in trial.cache:
         trial.cache["segments"] = fit_segments(trial, u, kind)
     inputs.segments, inputs.segment_sensors = trial.cache["segments"]

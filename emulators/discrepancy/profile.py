@@ -23,6 +23,8 @@ from exohil.emulators.discrepancy.model import (
     Spec,
     Stops,
     design,
+    holding_still,
+    joint_speed,
     map_inputs,
     static_terms,
 )
@@ -138,6 +140,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             "creep_tau_s": list(spec.creep_tau_s),
             "creep_quadratic": spec.creep_quadratic,
             "creep_build_recover_s": list(spec.creep_asym_s),
+            "creep_hold_grow_recover_s": list(spec.creep_hold_s),
             "lag_kind": spec.lag_kind or "none",
             "lag_s": spec.lag_s,
             "lag_delay_s": spec.lag_delay_s,
@@ -228,6 +231,8 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                     creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
                     creep_quadratic=bool(terms.get("creep_quadratic", False)),
                     creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
+                    creep_hold_s=tuple(float(v) for v in
+                                       terms.get("creep_hold_grow_recover_s", ())),
                     lag_kind=_lag_kind(terms["lag_kind"]), lag_s=float(terms["lag_s"]),
                     lag_delay_s=float(terms.get("lag_delay_s", 0.0)),
                     lag_rates=tuple(float(v) for v in terms.get("lag_rates_per_s", ())),
@@ -285,7 +290,8 @@ def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inpu
                     static_local=suit.inputs.static_local, centres=suit.inputs.centres,
                     thresholds=suit.inputs.thresholds,
                     t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1),
-                    centre=suit.inputs.centre, segments=suit.inputs.segments)
+                    centre=suit.inputs.centre, segments=suit.inputs.segments,
+                    still=holding_still(joint_speed(angles_deg, suit.angles, suit.rate_hz)))
     inputs.static = static_terms(u, inputs.static_degree, inputs.segments,
                                  inputs.centres if inputs.static_local else None
                                  ) @ inputs.static_coef

@@ -95,6 +95,8 @@ RATE_LIMIT_STEPS = 7
 CREEP_TAU_S = (1.5, 5.0, 15.0, 45.0)
 #: (build, recover) pairs of the asymmetric creep state, s.
 CREEP_ASYM_S = ((3.0, 9.0), (10.0, 30.0), (30.0, 90.0))
+#: (grow, recover) pairs of the creep that flows only during holds, s.
+CREEP_HOLD_S = ((3.0, 2.0), (3.0, 10.0), (20.0, 2.0), (20.0, 10.0))
 #: Refinement of a named creep's time constants (Nelder–Mead on log seconds): first step,
 #: tolerance and the most fits it may spend.
 CREEP_LOG_STEP = math.log(1.6)
@@ -209,9 +211,10 @@ def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
     return best
 
 
-def _creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit]:
+def _creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit, Fit]:
     """The best creep of each family on its grid added to ``spec``: low-passes of the stretch
-    (one time constant, then a second if it helps) and the asymmetric build/recover state.
+    (one time constant, then a second if it helps), the asymmetric build/recover state and
+    the state that flows only during holds.
     Kept for the last ``spec`` asked: a named creep is refined from the grid it was
     compared on (:func:`_best`, then :func:`_refine`)."""
     kept = inputs.cache.get("creep_families")
@@ -221,7 +224,7 @@ def _creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit]
     return kept[1]
 
 
-def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit]:
+def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit, Fit]:
     lows = min((fit(trial, inputs, replace(spec, creep_tau_s=(tau,))) for tau in CREEP_TAU_S),
                key=lambda f: f.gap)
     tau = lows.spec.creep_tau_s[0]
@@ -229,7 +232,9 @@ def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit]:
                          for other in CREEP_TAU_S if other != tau], key=lambda f: f.gap)
     asym = min((fit(trial, inputs, replace(spec, creep_asym_s=pair)) for pair in CREEP_ASYM_S),
                key=lambda f: f.gap)
-    return lows, asym
+    hold = min((fit(trial, inputs, replace(spec, creep_hold_s=pair)) for pair in CREEP_HOLD_S),
+               key=lambda f: f.gap)
+    return lows, asym, hold
 
 
 def _refine_lag(trial: Trial, inputs: Inputs, spec: Spec, lag_kind: str,
@@ -373,13 +378,13 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
         return _refine_drift(trial, inputs, current)
     if kind != "creep":
         return current
-    bare = replace(current.spec, creep_tau_s=(), creep_asym_s=())
-    lows, asym = (_refine_creep(trial, inputs, start)
-                  for start in _creep_families(trial, inputs, bare))
+    bare = replace(current.spec, creep_tau_s=(), creep_asym_s=(), creep_hold_s=())
+    lows, asym, hold = (_refine_creep(trial, inputs, start)
+                        for start in _creep_families(trial, inputs, bare))
     # the low-passes again with a driver that is not proportional to the stretch
     quadratic = _refine_creep(trial, inputs, fit(trial, inputs, replace(
         lows.spec, creep_quadratic=True)))
-    return min((lows, asym, quadratic), key=lambda f: f.gap)
+    return min((lows, asym, hold, quadratic), key=lambda f: f.gap)
 
 
 def _refine_drift(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
@@ -416,16 +421,19 @@ def _refine_creep(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     """Nelder–Mead on the log time constants of ``current``'s creep term, within
     ``CREEP_TAU_RANGE_S``."""
     spec = current.spec
-    asym = bool(spec.creep_asym_s)
-    start = np.log(np.asarray(spec.creep_asym_s if asym else spec.creep_tau_s, dtype=float))
+    field = ("creep_asym_s" if spec.creep_asym_s else "creep_hold_s" if spec.creep_hold_s
+             else "creep_tau_s")
+    start = np.log(np.asarray(getattr(spec, field), dtype=float))
     fits = {tuple(start.round(6)): current}
 
     def gap(log_s: np.ndarray) -> float:
         key = tuple(np.asarray(log_s).round(6))
         if key not in fits:
             values = tuple(float(f"{v:.4g}") for v in np.exp(key))
-            fits[key] = fit(trial, inputs, replace(spec, creep_asym_s=values) if asym
-                            else replace(spec, creep_tau_s=values))
+            shaped = (replace(spec, creep_asym_s=values) if field == "creep_asym_s" else
+                      replace(spec, creep_hold_s=values) if field == "creep_hold_s" else
+                      replace(spec, creep_tau_s=values))
+            fits[key] = fit(trial, inputs, shaped)
         return fits[key].gap
 
     simplex = np.vstack([start] + [start + CREEP_LOG_STEP * np.eye(start.size)[i]
@@ -464,7 +472,7 @@ def _column_slices(spec: Spec, n_static: int, n_play: int) -> dict[str, slice]:
     out, at = {}, n_static
     for kind, width in (("hysteresis", n_play if spec.hysteresis else 0),
                         ("creep", len(spec.creep_tau_s) * (2 if spec.creep_quadratic else 1)
-                         + (1 if spec.creep_asym_s else 0)),
+                         + (1 if spec.creep_asym_s else 0) + (2 if spec.creep_hold_s else 0)),
                         ("lag", 1 if spec.lag_kind == "rate_limit" else 0),
                         ("drift", spec.drift_degree)):
         out[kind] = slice(at, at + width)
@@ -487,10 +495,12 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
         return {"loop_width": [round(w, 5) for w in width],
                 "play_thresholds": np.round(inputs.thresholds, 5).tolist(),
                 "weights": [np.round(w, 5).tolist() for w in weights]}
-    if kind == "creep":  # columns: a low-pass of ŝ per τ, of (ŝ − centre)² per τ, asymmetric
+    if kind == "creep":  # columns: a low-pass of ŝ per τ, of (ŝ − centre)² per τ, asymmetric,
+        # held (driven by ŝ, by 1)
         n = len(spec.creep_tau_s)
         quadratic = slice(n, 2 * n if spec.creep_quadratic else n)
         return {"tau_s": list(spec.creep_tau_s), "build_recover_s": list(spec.creep_asym_s),
+                "hold_grow_recover_s": list(spec.creep_hold_s),
                 "gain": [np.round(np.r_[c[cols][:n], c[cols][quadratic.stop:]], 5).tolist()
                          for c in result.coef],
                 "quadratic_gain_per_unit": ([np.round(c[cols][quadratic], 8).tolist()
@@ -640,7 +650,8 @@ def _config(spec: Spec) -> dict:
             **({"local_ridge": spec.local_ridge} if spec.local else {}),
             "hysteresis": spec.hysteresis,
             "creep_tau_s": list(spec.creep_tau_s), "creep_quadratic": spec.creep_quadratic,
-            "creep_asym_s": list(spec.creep_asym_s), "lag": spec.lag_kind,
+            "creep_asym_s": list(spec.creep_asym_s), "creep_hold_s": list(spec.creep_hold_s),
+            "lag": spec.lag_kind,
             "lag_s": spec.lag_s, "lag_delay_s": spec.lag_delay_s,
             "lag_rates": _rates(spec),
             "drift_degree": spec.drift_degree, "drift_piecewise": spec.drift_piecewise,
