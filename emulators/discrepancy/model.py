@@ -16,7 +16,9 @@ held fixed as the *input* of the history-dependent terms) the model is
 * H (``hysteresis``): Prandtl–Ishlinskii basis, ŝ − play_r(ŝ) for play operators of thresholds
   r spread over the sensor's range; any weighted sum is a rate-independent loop.
 * C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
-  relaxation toward the current stretch).
+  relaxation toward the current stretch), an asymmetric build/recover state, or states
+  that flow toward the stretch only while the joint holds still and recover while it
+  moves (:func:`creep_hold_columns`).
 * Lag (``lag``): first-order low-pass (time constant τ), a pure delay, or the low-pass
   followed by a delay, applied to every pose-driven column, so the fitted map is the map of
   the lagged response; or a rate limit (a slew-rate limit: the reading follows at most at
