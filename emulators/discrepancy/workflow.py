@@ -211,7 +211,7 @@ def _best(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
     return best
 
 
-def _creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit, Fit]:
+def _creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, ...]:
     """The best creep of each family on its grid added to ``spec``: low-passes of the stretch
     (one time constant, then a second if it helps), the asymmetric build/recover state and
     the state that flows only during holds.
@@ -224,7 +224,15 @@ def _creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit,
     return kept[1]
 
 
-def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit, Fit]:
+def _flows_within_holds(trial: Trial, inputs: Inputs, held: Fit) -> bool:
+    """A creep during holds must beat the same model with both time constants one frame
+    long (an offset while still that does not flow within the hold) by the naming rule."""
+    instant = fit(trial, inputs, replace(held.spec, creep_hold_s=(1.0 / trial.rate_hz,) * 2))
+    floor = float(np.sqrt(np.mean(trial.noise**2)))
+    return bool(_evidence(trial, instant, held, floor)["significant"])
+
+
+def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, ...]:
     lows = min((fit(trial, inputs, replace(spec, creep_tau_s=(tau,))) for tau in CREEP_TAU_S),
                key=lambda f: f.gap)
     tau = lows.spec.creep_tau_s[0]
@@ -234,7 +242,7 @@ def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, Fit, Fi
                key=lambda f: f.gap)
     hold = min((fit(trial, inputs, replace(spec, creep_hold_s=pair)) for pair in CREEP_HOLD_S),
                key=lambda f: f.gap)
-    return lows, asym, hold
+    return (lows, asym, hold) if _flows_within_holds(trial, inputs, hold) else (lows, asym)
 
 
 def _refine_lag(trial: Trial, inputs: Inputs, spec: Spec, lag_kind: str,
@@ -379,12 +387,15 @@ def _refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     if kind != "creep":
         return current
     bare = replace(current.spec, creep_tau_s=(), creep_asym_s=(), creep_hold_s=())
-    lows, asym, hold = (_refine_creep(trial, inputs, start)
-                        for start in _creep_families(trial, inputs, bare))
+    refined = [_refine_creep(trial, inputs, start)
+               for start in _creep_families(trial, inputs, bare)]
+    lows = refined[0]
+    refined = [f for f in refined if not f.spec.creep_hold_s
+               or _flows_within_holds(trial, inputs, f)]
     # the low-passes again with a driver that is not proportional to the stretch
     quadratic = _refine_creep(trial, inputs, fit(trial, inputs, replace(
         lows.spec, creep_quadratic=True)))
-    return min((lows, asym, hold, quadratic), key=lambda f: f.gap)
+    return min(refined + [quadratic], key=lambda f: f.gap)
 
 
 def _refine_drift(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
