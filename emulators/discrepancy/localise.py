@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from exohil.emulators.discrepancy.data import Trial
-from exohil.emulators.discrepancy.model import holding_still, joint_speed, low_pass
+from exohil.emulators.discrepancy.model import low_pass, trial_motion
 
 #: A hold counts for creep when it lasts at least this long, s.
 MIN_HOLD_S = 1.0
@@ -24,9 +24,8 @@ def motion(trial: Trial, static: np.ndarray) -> dict[str, np.ndarray]:
     ``velocity`` (N, S) rate of change of the static prediction (sensor units/s);
     ``direction`` (N, S) +1 rising, −1 falling, 0 still.
     """
-    speed = joint_speed(trial.angles, trial.angle_names, trial.rate_hz)
+    speed, still = trial_motion(trial)
     velocity = np.gradient(low_pass(static, 0.05, trial.rate_hz), axis=0) * trial.rate_hz
-    still = holding_still(speed)
     direction = np.where(still[:, None], 0, np.sign(velocity)).astype(np.int64)
     return {"speed_deg_s": speed, "still": still, "velocity": velocity, "direction": direction}
 

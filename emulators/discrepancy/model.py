@@ -475,6 +475,15 @@ def holding_still(speed: np.ndarray) -> np.ndarray:
     return still
 
 
+def trial_motion(trial: Trial) -> tuple[np.ndarray, np.ndarray]:
+    """The joint's speed (N,) deg/s and whether it holds still (N,) bool at each frame of
+    ``trial``, computed once per trial (cached)."""
+    if "joint_motion" not in trial.cache:
+        speed = joint_speed(trial.angles, trial.angle_names, trial.rate_hz)
+        trial.cache["joint_motion"] = (speed, holding_still(speed))
+    return trial.cache["joint_motion"]
+
+
 def segment_lengths(u: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """(N, K) the lengths √Q(u) of the straight runs ``segments`` (P₂, K) describes, up to
     each run's scale (a Q below zero, outside the poses it was fitted on, reads 0)."""
@@ -640,6 +649,19 @@ def creep_quadratic_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.
     return inputs.cache[key]
 
 
+def _fit_rate_steps(n: int, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Frame times t (N,) s and the frames ``at`` where a slow state is stepped: about
+    FIT_RATE_HZ, always ending on the last frame."""
+    t = np.arange(n) / rate_hz
+    at = np.arange(0, n, max(1, int(round(rate_hz / FIT_RATE_HZ))))
+    return t, (at if at[-1] == n - 1 else np.append(at, n - 1))
+
+
+def _every_frame(t: np.ndarray, at: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """(N, K) a state stepped at the frames ``at`` (len(at), K), interpolated to every frame."""
+    return np.column_stack([np.interp(t, t[at], state[:, j]) for j in range(state.shape[1])])
+
+
 def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
                        rate_hz: float) -> np.ndarray:
     """(N, S) asymmetric creep state for unit gain: relaxes toward ŝ − ŝ₀ (the stretch since
@@ -648,17 +670,11 @@ def creep_asym_columns(inputs: Inputs, build_s: float, recover_s: float,
     if key not in inputs.cache:
         # The state moves over seconds: step it at about FIT_RATE_HZ (exact step-invariant
         # updates over the longer steps) and interpolate back to every frame.
-        n = inputs.static.shape[0]
-        t = np.arange(n) / rate_hz
-        at = np.arange(0, n, max(1, int(round(rate_hz / FIT_RATE_HZ))))
-        if at[-1] != n - 1:
-            at = np.append(at, n - 1)
+        t, at = _fit_rate_steps(inputs.static.shape[0], rate_hz)
         signal = Signal.from_values(t[at], inputs.static[at])
         crept = Creep(gain=1.0, tau_build_s=build_s, tau_recover_s=recover_s).apply(
             signal, np.random.default_rng(0))
-        state = crept.values - inputs.static[at]
-        inputs.cache[key] = np.column_stack([np.interp(t, t[at], state[:, j])
-                                             for j in range(state.shape[1])])
+        inputs.cache[key] = _every_frame(t, at, crept.values - inputs.static[at])
     return inputs.cache[key]
 
 
@@ -675,11 +691,7 @@ def creep_hold_columns(inputs: Inputs, grow_s: float, recover_s: float,
         # The state moves over seconds: step it at about FIT_RATE_HZ (each step still for
         # the share of its frames that are, then moving) and interpolate back to every frame.
         n = inputs.static.shape[0]
-        t = np.arange(n) / rate_hz
-        step = max(1, int(round(rate_hz / FIT_RATE_HZ)))
-        at = np.arange(0, n, step)
-        if at[-1] != n - 1:
-            at = np.append(at, n - 1)
+        t, at = _fit_rate_steps(n, rate_hz)
         drive = np.column_stack([inputs.static[at], np.ones(at.size)])
         # the share of still frames in each step (at[i−1], at[i]]
         share = np.add.reduceat(inputs.still.astype(np.float64), at) / np.diff(np.append(at, n))
@@ -692,8 +704,7 @@ def creep_hold_columns(inputs: Inputs, grow_s: float, recover_s: float,
         for i in range(at.size):
             c = (drive[i] + (c - drive[i]) * keep_grow[i]) * keep_recover[i]
             state[i] = c
-        inputs.cache[key] = np.column_stack([np.interp(t, t[at], state[:, j])
-                                             for j in range(state.shape[1])])
+        inputs.cache[key] = _every_frame(t, at, state)
     return inputs.cache[key]
 
 
@@ -1328,10 +1339,7 @@ def make_inputs(trial: Trial, static_map: Spec | None = None) -> Inputs:
                     static=np.empty(0), static_coef=np.empty(0), static_degree=1,
                     thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
                     t_span=(t0, t1))
-    if "still" not in trial.cache:
-        trial.cache["still"] = holding_still(joint_speed(trial.angles, trial.angle_names,
-                                                         trial.rate_hz))
-    inputs.still = trial.cache["still"]
+    inputs.still = trial_motion(trial)[1]
     if "segments" not in trial.cache:
         trial.cache["segments"] = fit_segments(trial, u, kind)
     inputs.segments, inputs.segment_sensors = trial.cache["segments"]

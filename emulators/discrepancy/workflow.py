@@ -224,12 +224,16 @@ def _creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, ...]
     return kept[1]
 
 
+def pooled_noise(trial: Trial) -> float:
+    """The recording's noise RMS over its sensors (the naming rule's σ), sensor units."""
+    return float(np.sqrt(np.mean(trial.noise**2)))
+
+
 def _flows_within_holds(trial: Trial, inputs: Inputs, held: Fit) -> bool:
     """A creep during holds must beat the same model with both time constants one frame
     long (an offset while still that does not flow within the hold) by the naming rule."""
     instant = fit(trial, inputs, replace(held.spec, creep_hold_s=(1.0 / trial.rate_hz,) * 2))
-    floor = float(np.sqrt(np.mean(trial.noise**2)))
-    return bool(_evidence(trial, instant, held, floor)["significant"])
+    return bool(_evidence(trial, instant, held, pooled_noise(trial))["significant"])
 
 
 def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, ...]:
@@ -708,7 +712,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     """
     trial = prepare_trial(rec, name)
     floors = trial.noise
-    floor = float(np.sqrt(np.mean(floors**2)))
+    floor = pooled_noise(trial)
     placed = "" if trial.placed_by == FRAME_COUNTER else f" (placed by {trial.placed_by})"
     progress(f"[1] calibrating the static map: {trial.n_sensors} sensors ({trial.units}) from "
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
