@@ -204,6 +204,9 @@ class Spec:
         lag_delay_s: the delay after the low-pass of ``first_order_delay``, s.
         lag_rates: per sensor, the most a ``rate_limit`` reading changes per second, sensor
             units/s.
+        lag_sensors: the sensors (columns) a low-pass or delay acts on, ascending; empty:
+            every sensor. One string potentiometer's filter, or one tendon's sticky sheath,
+            lags that sensor alone.
         drift_degree: how many functions of time the drift has (0 = no drift): the degree
             of a Legendre polynomial of time or, with ``drift_piecewise``, the intervals of a
             piecewise-linear function of time (evenly spaced knots).
@@ -229,6 +232,7 @@ class Spec:
     lag_s: float = 0.0
     lag_delay_s: float = 0.0
     lag_rates: tuple[float, ...] = ()
+    lag_sensors: tuple[int, ...] = ()
     drift_degree: int = 0
     drift_piecewise: bool = False
     saturation: bool = False
@@ -243,6 +247,12 @@ class Spec:
               "lag": bool(self.lag_kind), "drift": self.drift_degree > 0,
               "saturation": self.saturation}
         return {name for name, flag in on.items() if flag}
+
+    def for_sensor(self, j: int) -> Spec:
+        """The model of sensor j: without the low-pass or delay where it does not act on j."""
+        if self.lag_kind in ("", "rate_limit") or not self.lag_sensors or j in self.lag_sensors:
+            return self
+        return replace(self, lag_kind="", lag_s=0.0, lag_delay_s=0.0, lag_sensors=())
 
 
 def legendre_products(u: np.ndarray, degree: int) -> tuple[np.ndarray, list[tuple[int, ...]]]:
@@ -784,6 +794,7 @@ class Design:
 
 def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
     """The design of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
+    spec = spec.for_sensor(j)
     pose = []
     if spec.hysteresis:
         pose.append(hysteresis_columns(inputs)[:, j, :])

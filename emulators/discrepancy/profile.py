@@ -145,6 +145,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             "lag_s": spec.lag_s,
             "lag_delay_s": spec.lag_delay_s,
             "lag_rates_per_s": list(spec.lag_rates),
+            "lag_sensors": [suit.sensors[j] for j in spec.lag_sensors],
             "drift_degree": spec.drift_degree,
             "drift_piecewise": spec.drift_piecewise,
             "saturation": spec.saturation,
@@ -217,6 +218,14 @@ def _segments(rows: list, input_kind: str) -> np.ndarray:
     return np.asarray(rows, dtype=np.float64).T
 
 
+def _lag_sensors(names: list, sensors: list[str]) -> tuple[int, ...]:
+    """The columns of the sensors a low-pass or delay acts on (none listed: every sensor)."""
+    unknown = [n for n in names if n not in sensors]
+    if unknown:
+        raise ValueError(f"lag_sensors {unknown} are not among the sensors {sensors}")
+    return tuple(sorted({sensors.index(n) for n in names}))
+
+
 def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
     """Read a calibrated suit profile; one :class:`ProfileError` line on any problem."""
     path = Path(path)
@@ -236,6 +245,8 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                     lag_kind=_lag_kind(terms["lag_kind"]), lag_s=float(terms["lag_s"]),
                     lag_delay_s=float(terms.get("lag_delay_s", 0.0)),
                     lag_rates=tuple(float(v) for v in terms.get("lag_rates_per_s", ())),
+                    lag_sensors=_lag_sensors(terms.get("lag_sensors", []),
+                                             [str(s["name"]) for s in sensors]),
                     drift_degree=int(terms["drift_degree"]),
                     drift_piecewise=bool(terms.get("drift_piecewise", False)),
                     saturation=bool(terms["saturation"]))
