@@ -802,6 +802,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         if not missing:
             break
         sig = signatures(trial, base.residual, mot, floor)
+        inputs.cache["without_lag"] = base  # the lag candidates' model without the lag
         scored = []
         for kind in missing:
             cand = _best(trial, inputs, kind, spec)
