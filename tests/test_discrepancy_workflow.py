@@ -67,6 +67,7 @@ from exohil.emulators.discrepancy.workflow import (
     _static_map,
     blocks_needed,
     drift_options,
+    pooled_noise,
 )
 from exohil.emulators.effects import Signal
 from exohil.emulators.suit_profile import ProfileError
@@ -567,8 +568,7 @@ def test_an_offset_while_still_that_does_not_flow_is_no_creep_during_holds(clean
     rec, _ = clean_101
     t = rec.sensors.t
     clean = prepare_trial(rec)
-    still = np.interp(t, clean.t, model.holding_still(
-        model.joint_speed(clean.angles, clean.angle_names, clean.rate_hz)).astype(float)) > 0.5
+    still = np.interp(t, clean.t, model.trial_motion(clean)[1].astype(float)) > 0.5
     y = rec.sensors.values.copy()
     lo, hi = np.quantile(y, [0.01, 0.99], axis=0)
     y += 0.4 * still[:, None] * (y - lo) / (hi - lo)
@@ -720,7 +720,7 @@ def test_a_stop_must_bend_more_than_a_smooth_transfer_curve(bend, stop):
     trial = prepare_trial(_bent_recording(bend))
     quadratic = Spec(degree=2)
     inputs = make_inputs(trial, quadratic)
-    floor = float(np.sqrt(np.mean(trial.noise**2)))
+    floor = pooled_noise(trial)
     base = fit(trial, inputs, quadratic)
     cand = _best(trial, inputs, "saturation", quadratic)
     evidence = _evidence(trial, base, cand, floor)
@@ -784,7 +784,7 @@ def test_a_drift_is_counted_on_the_drift_it_would_become():
 
     rec = sphere_recording(SphereCase("drift", 2, 2, 60.0))
     trial = prepare_trial(rec)
-    floor = float(np.sqrt(np.mean(trial.noise**2)))
+    floor = pooled_noise(trial)
     scaled = make_inputs(trial)
     restrict_to_coverage(trial, scaled.u)
     base = _static_map(trial, scaled, floor)

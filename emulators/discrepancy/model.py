@@ -248,11 +248,16 @@ class Spec:
               "saturation": self.saturation}
         return {name for name, flag in on.items() if flag}
 
+    def without_lag(self) -> Spec:
+        """The same model without its lag term (of any kind)."""
+        return replace(self, lag_kind="", lag_s=0.0, lag_delay_s=0.0, lag_rates=(),
+                       lag_sensors=())
+
     def for_sensor(self, j: int) -> Spec:
         """The model of sensor j: without the low-pass or delay where it does not act on j."""
         if self.lag_kind in ("", "rate_limit") or not self.lag_sensors or j in self.lag_sensors:
             return self
-        return replace(self, lag_kind="", lag_s=0.0, lag_delay_s=0.0, lag_sensors=())
+        return self.without_lag()
 
 
 def legendre_products(u: np.ndarray, degree: int) -> tuple[np.ndarray, list[tuple[int, ...]]]:

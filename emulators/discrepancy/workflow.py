@@ -327,7 +327,7 @@ def _rate_limit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     (a negative gain at a very low limit is a filter of the pose's history, creep's
     ground, not a rate limit). A sensor with no such limit gets none (rate +inf).
     """
-    spec = replace(spec, lag_kind="", lag_s=0.0, lag_delay_s=0.0, lag_rates=(), lag_sensors=())
+    spec = spec.without_lag()
     speed = np.abs(np.gradient(inputs.static, axis=0))[trial.valid] * trial.rate_hz
     # quantiles of the speed while the prediction moves: a recording that holds still most
     # of the time would otherwise put the lower quantiles at 0 units/s
@@ -388,8 +388,7 @@ def _refine_lag_delay(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     total0 = spec.lag_s + spec.lag_delay_s
     share0 = {"delay": 1.0, "first_order": 0.0}.get(spec.lag_kind, spec.lag_delay_s / total0)
     fits = {(round(math.log(total0), 6), round(share0, 6)): current}
-    plain = _without_lag(trial, inputs, replace(spec, lag_kind="", lag_s=0.0, lag_delay_s=0.0,
-                                                lag_sensors=()))
+    plain = _without_lag(trial, inputs, spec.without_lag())
 
     def gap(point: np.ndarray) -> float:
         key = (round(float(point[0]), 6), round(float(point[1]), 6))
