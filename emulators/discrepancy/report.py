@@ -126,6 +126,13 @@ def markdown(summary: dict) -> str:
                       f"{held['removed_rms']:.4g} {u} against their noise floor "
                       f"{held['noise_floor']:.4g} {u}; on the {frames['share']:.1%} of their "
                       f"frames it holds at the stops, {frames['removed_rms']:.4g} {u}."]
+        alone = step["evidence"].get("on_one_sensor")
+        if alone and alone["significant"]:
+            lines += ["", f"Step {i} ({step['effect']}) on each sensor alone, every sensor's "
+                      f"blocks against its own noise: " + "; ".join(
+                          f"{name} removed RMS {r['removed_rms']:.4g} {u} against "
+                          f"{r['noise_floor']:.4g} {u}, {r['blocks_improved']} blocks improved"
+                          for name, r in alone["sensors"].items()) + "."]
     lines += ["", "## Signatures in the residual at each step", ""]
     for i, step in enumerate(summary["steps"], start=1):
         sig = step["evidence"]["signature"]

@@ -28,6 +28,14 @@ fitted through it spreads what it cannot bend over the rest. Those frames must b
 as a plateau spans (the share of the signature): a map that passes the stop on a handful
 of frames shows no plateau there.
 
+Any other effect can also act on some sensors only (one sensor's warm-up, one sheath's
+creep): it is also significant when rules 1 and 2 hold on one sensor alone, against that
+sensor's noise, with rule 2's sign test shared among the sensors (Bonferroni: each at
+``SIGN_TEST_LEVEL`` divided by their number, every one of eight blocks), so that a suit
+with more sensors is not given more chances to name what its map misses on one of them.
+Stops are judged on their plateaus instead (above): a map that misses one sensor bends
+like a stop there.
+
 3. A stop must bend more than a smooth curve: a significant saturation is fitted again on
    top of a cubic transfer curve of each sensor's static prediction and must clear rules 1
    and 2 over that curve alone (:func:`_against_curve`). Knees at both ends of a sensor
@@ -603,25 +611,27 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     raise ValueError(kind)
 
 
-def blocks_needed(n: int) -> int:
+def blocks_needed(n: int, level: float = SIGN_TEST_LEVEL) -> int:
     """The fewest of ``n`` blocks a candidate must improve to pass rule 2's sign test: so many
     that a candidate no better than the model it extends (each block as likely to improve
-    as not) improves that many with probability at most ``SIGN_TEST_LEVEL``; ``n + 1`` when
-    no count is that unlikely (too few blocks to tell)."""
+    as not) improves that many with probability at most ``level``; ``n + 1`` when no count
+    is that unlikely (too few blocks to tell)."""
     for k in range(n + 1):
-        if sum(math.comb(n, i) for i in range(k, n + 1)) / 2.0**n <= SIGN_TEST_LEVEL:
+        if sum(math.comb(n, i) for i in range(k, n + 1)) / 2.0**n <= level:
             return k
     return n + 1
 
 
-def _rules(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float) -> dict:
+def _rules(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float,
+           level: float = SIGN_TEST_LEVEL) -> dict:
     """Rules 1 and 2 (the module's docstring) from held-out MSE per block, over the blocks
-    with scored frames, against white noise of RMS ``floor``."""
+    with scored frames, against white noise of RMS ``floor``, rule 2's sign test at
+    ``level``."""
     delta = base_mse - cand_mse
     delta = delta[np.isfinite(delta)]
     dmse = float(np.mean(delta)) if delta.size else 0.0
     robust = float(np.mean(np.sort(delta)[:-1])) if delta.size > 1 else 0.0
-    improved, needed = int(np.sum(delta > 0)), blocks_needed(delta.size)
+    improved, needed = int(np.sum(delta > 0)), blocks_needed(delta.size, level)
     beyond_noise = bool(dmse > floor**2 and robust > 0)
     return {
         "delta_mse": round(dmse, 8),
@@ -662,19 +672,43 @@ def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
             "frames_held": {"share": round(float(at_stop[trial.scored].mean()), 4), **frames}}
 
 
+def _on_one_sensor(trial: Trial, base: Fit, cand: Fit) -> dict | None:
+    """Rules 1 and 2 on each sensor alone, against its own noise, with rule 2's sign test
+    shared among the sensors (Bonferroni: at ``SIGN_TEST_LEVEL`` / sensors each, so every
+    one of eight blocks with up to twelve sensors, and never with more): the sensors where
+    ``cand`` passes, or None with one sensor."""
+    if trial.n_sensors < 2:
+        return None
+    level = SIGN_TEST_LEVEL / trial.n_sensors
+    passing = {}
+    for j in range(trial.n_sensors):
+        rules = _rules(block_mse(trial, base.residual[:, [j]]),
+                       block_mse(trial, cand.residual[:, [j]]), float(trial.noise[j]), level)
+        if rules["significant"]:
+            passing[trial.sensor_names[j]] = {
+                k: rules[k] for k in ("delta_mse", "removed_rms", "noise_floor",
+                                      "blocks_improved", "blocks_needed")}
+    return {"significant": bool(passing), "sensors": passing}
+
+
 def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
-    """Rules 1 and 2 for ``cand`` over ``base``, pooled over the sensors; a candidate that
-    adds hard stops is also judged on the sensors it holds at them."""
+    """Rules 1 and 2 for ``cand`` over ``base``, pooled over the sensors; a candidate that adds
+    stops is also judged on the sensors it holds at hard stops, any other on each sensor
+    alone."""
     rules = _rules(base.block_mse, cand.block_mse, floor)
     held = _held_at_stops(trial, base, cand)
-    if held is not None:
-        rules["significant"] = rules["significant"] or held["significant"]
+    stops = cand.spec.saturation and not base.spec.saturation
+    alone = None if stops else _on_one_sensor(trial, base, cand)
+    for extra in (held, alone):
+        if extra is not None:
+            rules["significant"] = rules["significant"] or extra["significant"]
     return {
         "heldout_gap": round(cand.gap, 6),
         "gap_reduction": round((base.gap - cand.gap) / base.gap, 4) if base.gap > 0 else 0.0,
         **rules,
         "config": _config(cand.spec),
         **({} if held is None else {"held_at_stops": held}),
+        **({} if alone is None else {"on_one_sensor": alone}),
     }
 
 
