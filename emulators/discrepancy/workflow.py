@@ -32,7 +32,9 @@ Any other effect can also act on some sensors only (one sensor's warm-up, one sh
 creep): it is also significant when rules 1 and 2 hold on one sensor alone, against that
 sensor's noise, with rule 2's sign test shared among the sensors (Bonferroni: each at
 ``SIGN_TEST_LEVEL`` divided by their number, every one of eight blocks), so that a suit
-with more sensors is not given more chances to name what its map misses on one of them.
+with more sensors is not given more chances to name what its map misses on one of them,
+and the candidate lowers the held-out error of all sensors together (also without its
+best block): a term that follows one sensor's misfit and fits noise on the others does not.
 Stops are judged on their plateaus instead (above): a map that misses one sensor bends
 like a stop there.
 
@@ -79,6 +81,7 @@ from exohil.emulators.discrepancy.model import (
     fit,
     make_inputs,
     restrict_to_coverage,
+    sensor_block_mse,
     static_basis,
 )
 from exohil.formats.recording import Recording
@@ -672,18 +675,24 @@ def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
             "frames_held": {"share": round(float(at_stop[trial.scored].mean()), 4), **frames}}
 
 
-def _on_one_sensor(trial: Trial, base: Fit, cand: Fit) -> dict | None:
+def _on_one_sensor(trial: Trial, base: Fit, cand: Fit, pooled: dict) -> dict | None:
     """Rules 1 and 2 on each sensor alone, against its own noise, with rule 2's sign test
     shared among the sensors (Bonferroni: at ``SIGN_TEST_LEVEL`` / sensors each, so every
     one of eight blocks with up to twelve sensors, and never with more): the sensors where
-    ``cand`` passes, or None with one sensor."""
+    ``cand`` passes, or None with one sensor. Only where ``cand`` also lowers the held-out
+    error of all sensors together, without its best block too (``pooled``, rules 1 and 2
+    over all of them): a term that follows what the map misses on one sensor and fits noise
+    on the others makes the model worse."""
     if trial.n_sensors < 2:
         return None
+    if not (pooled["delta_mse"] > 0 and pooled["delta_mse_without_best_block"] > 0):
+        return {"significant": False, "sensors": {}}
     level = SIGN_TEST_LEVEL / trial.n_sensors
+    base_mse = sensor_block_mse(trial, base.residual)
+    cand_mse = sensor_block_mse(trial, cand.residual)
     passing = {}
     for j in range(trial.n_sensors):
-        rules = _rules(block_mse(trial, base.residual[:, [j]]),
-                       block_mse(trial, cand.residual[:, [j]]), float(trial.noise[j]), level)
+        rules = _rules(base_mse[:, j], cand_mse[:, j], float(trial.noise[j]), level)
         if rules["significant"]:
             passing[trial.sensor_names[j]] = {
                 k: rules[k] for k in ("delta_mse", "removed_rms", "noise_floor",
@@ -698,7 +707,7 @@ def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
     rules = _rules(base.block_mse, cand.block_mse, floor)
     held = _held_at_stops(trial, base, cand)
     stops = cand.spec.saturation and not base.spec.saturation
-    alone = None if stops else _on_one_sensor(trial, base, cand)
+    alone = None if stops else _on_one_sensor(trial, base, cand, rules)
     for extra in (held, alone):
         if extra is not None:
             rules["significant"] = rules["significant"] or extra["significant"]
