@@ -679,14 +679,14 @@ def _on_one_sensor(trial: Trial, base: Fit, cand: Fit, pooled: dict) -> dict | N
     """Rules 1 and 2 on each sensor alone, against its own noise, with rule 2's sign test
     shared among the sensors (Bonferroni: at ``SIGN_TEST_LEVEL`` / sensors each, so every
     one of eight blocks with up to twelve sensors, and never with more): the sensors where
-    ``cand`` passes, or None with one sensor. Only where ``cand`` also lowers the held-out
-    error of all sensors together, without its best block too (``pooled``, rules 1 and 2
-    over all of them): a term that follows what the map misses on one sensor and fits noise
-    on the others makes the model worse."""
+    ``cand`` passes, or None with one sensor. None passes unless ``cand`` also lowers the
+    held-out error of all sensors together, without its best block too (``pooled``: its
+    rules over all of them): a term that follows what the map misses on one sensor and
+    fits noise on the others makes the model worse."""
     if trial.n_sensors < 2:
         return None
     if not (pooled["delta_mse"] > 0 and pooled["delta_mse_without_best_block"] > 0):
-        return {"significant": False, "sensors": {}}
+        return {"significant": False, "pooled_error_lowered": False, "sensors": {}}
     level = SIGN_TEST_LEVEL / trial.n_sensors
     base_mse = sensor_block_mse(trial, base.residual)
     cand_mse = sensor_block_mse(trial, cand.residual)
@@ -697,7 +697,7 @@ def _on_one_sensor(trial: Trial, base: Fit, cand: Fit, pooled: dict) -> dict | N
             passing[trial.sensor_names[j]] = {
                 k: rules[k] for k in ("delta_mse", "removed_rms", "noise_floor",
                                       "blocks_improved", "blocks_needed")}
-    return {"significant": bool(passing), "sensors": passing}
+    return {"significant": bool(passing), "pooled_error_lowered": True, "sensors": passing}
 
 
 def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
