@@ -36,7 +36,6 @@ from exohil.emulators.discrepancy.model import (
     Ridge,
     Spec,
     Stops,
-    block_mse,
     delay,
     fit,
     fold_coefs,
@@ -46,7 +45,6 @@ from exohil.emulators.discrepancy.model import (
     rate_limit,
     reduce,
     restrict_to_coverage,
-    sensor_block_mse,
 )
 from exohil.emulators.discrepancy.profile import (
     calibrated_suit,
@@ -713,19 +711,6 @@ def _bent_recording(bend) -> Recording:
     y = 100.0 + 20.0 * bend(z) + np.random.default_rng(8).normal(0.0, 0.05, z.shape)
     return suit_recording(trajectory, geometry, Signal.from_values(signal.t, y),
                           {"case": "bent"})
-
-
-def test_each_sensors_block_mse_is_its_own_block_mse():
-    """One pass over the blocks for every sensor gives what each sensor's column alone
-    gives, with frames not scored on some sensors only and a block with none on one."""
-    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
-    residual = np.random.default_rng(2).normal(size=(trial.n, trial.n_sensors))
-    residual[::7, 0] = np.nan
-    residual[trial.blocks == 3, 1] = np.nan
-    each = np.stack([block_mse(trial, residual[:, [j]]) for j in range(trial.n_sensors)], 1)
-    together = sensor_block_mse(trial, residual)
-    np.testing.assert_allclose(together, each, rtol=1e-12)
-    assert np.isnan(together[3, 1]) and np.isfinite(together[3, 0])
 
 
 def test_blocks_needed_is_the_sign_tests_threshold():

@@ -1317,20 +1317,6 @@ def block_mse(trial: Trial, residual: np.ndarray) -> np.ndarray:
     return out
 
 
-def sensor_block_mse(trial: Trial, residual: np.ndarray) -> np.ndarray:
-    """(N_BLOCKS, sensors) mean squared held-out ``residual`` (N, sensors) per block and
-    sensor over its scored frames (NaN where it is not): :func:`block_mse` of each column,
-    in one pass."""
-    out = np.full((N_BLOCKS, residual.shape[1]), np.nan)
-    for b in range(N_BLOCKS):
-        r = residual[trial.blocks == b]
-        finite = np.isfinite(r)
-        count = finite.sum(axis=0)
-        total = np.where(finite, r, 0.0) ** 2
-        out[b] = np.where(count > 0, total.sum(axis=0) / np.maximum(count, 1), np.nan)
-    return out
-
-
 def restrict_to_coverage(trial: Trial, u: np.ndarray) -> float:
     """Score only held-out frames whose pose the other folds cover.
 

@@ -81,7 +81,6 @@ from exohil.emulators.discrepancy.model import (
     fit,
     make_inputs,
     restrict_to_coverage,
-    sensor_block_mse,
     static_basis,
 )
 from exohil.formats.recording import Recording
@@ -648,11 +647,16 @@ def _rules(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float,
     }
 
 
+def _adds_stops(base: Fit, cand: Fit) -> bool:
+    """Whether ``cand`` is ``base`` with the stops (saturation) added."""
+    return cand.spec.saturation and not base.spec.saturation
+
+
 def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
     """Rules 1 and 2 on the sensors ``cand`` holds at a hard stop, against their own noise,
     over all their frames and over the frames it holds (see the module's docstring); None
     unless ``cand`` adds the stops and holds a sensor."""
-    if base.spec.saturation or not cand.spec.saturation:
+    if not _adds_stops(base, cand):
         return None
     held = [j for j, st in enumerate(cand.stops) if st.hard]
     if not held:
@@ -688,11 +692,10 @@ def _on_one_sensor(trial: Trial, base: Fit, cand: Fit, pooled: dict) -> dict | N
     if not (pooled["delta_mse"] > 0 and pooled["delta_mse_without_best_block"] > 0):
         return {"significant": False, "pooled_error_lowered": False, "sensors": {}}
     level = SIGN_TEST_LEVEL / trial.n_sensors
-    base_mse = sensor_block_mse(trial, base.residual)
-    cand_mse = sensor_block_mse(trial, cand.residual)
     passing = {}
     for j in range(trial.n_sensors):
-        rules = _rules(base_mse[:, j], cand_mse[:, j], float(trial.noise[j]), level)
+        rules = _rules(block_mse(trial, base.residual[:, [j]]),
+                       block_mse(trial, cand.residual[:, [j]]), float(trial.noise[j]), level)
         if rules["significant"]:
             passing[trial.sensor_names[j]] = {
                 k: rules[k] for k in ("delta_mse", "removed_rms", "noise_floor",
@@ -706,8 +709,7 @@ def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
     alone."""
     rules = _rules(base.block_mse, cand.block_mse, floor)
     held = _held_at_stops(trial, base, cand)
-    stops = cand.spec.saturation and not base.spec.saturation
-    alone = None if stops else _on_one_sensor(trial, base, cand, rules)
+    alone = None if _adds_stops(base, cand) else _on_one_sensor(trial, base, cand, rules)
     for extra in (held, alone):
         if extra is not None:
             rules["significant"] = rules["significant"] or extra["significant"]
