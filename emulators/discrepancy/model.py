@@ -796,6 +796,21 @@ class Design:
             out = out + self.own @ coefs[..., ps:].T
         return out
 
+    def by_fold(self, coefs: np.ndarray, blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The design times fold coefficients ``coefs`` (N_BLOCKS + 1, P): (held, full),
+        each (N,): every frame times the row of the fold that held it out (``blocks``), and
+        every frame times the last row. One product per run of frames of one block rather
+        than every row for every frame (a third of the time on four minutes at 250 Hz)."""
+        ps = self.shared.shape[1]
+        held = np.empty(blocks.shape[0])
+        edges = np.flatnonzero(np.diff(blocks)) + 1
+        for start, end in zip(np.r_[0, edges], np.r_[edges, blocks.shape[0]], strict=True):
+            row = coefs[blocks[start]]
+            held[start:end] = self.shared[start:end] @ row[:ps]
+            if self.own.shape[1]:
+                held[start:end] += self.own[start:end] @ row[ps:]
+        return held, self.times(coefs[-1])
+
 
 def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
     """The design of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
@@ -1108,15 +1123,14 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
 
 def fold_predictions(trial: Trial, x: Design, y: np.ndarray, coefs: np.ndarray,
                      stops: Stops = NO_STOPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A fit's outputs from its fold coefficients ``coefs`` (N_BLOCKS + 1, P), in one
-    product of the design with every row: the held-out residual (N,), measurement minus
+    """A fit's outputs from its fold coefficients ``coefs`` (N_BLOCKS + 1, P)
+    (:meth:`Design.by_fold`): the held-out residual (N,), measurement minus
     the prediction (through ``stops``) of the fold that did not see the frame, NaN where not
     scored; the all-block coefficients (P,); and their prediction through ``stops`` (N,)."""
-    product = x.times(coefs)  # (N, N_BLOCKS + 1): each frame's fold column picked
-    held = product[np.arange(len(y)), trial.blocks]
+    held, full = x.by_fold(coefs, trial.blocks)
     with np.errstate(invalid="ignore"):  # y may be NaN or inf where invalid, never scored
         residual = np.where(trial.scored, y - stops.apply(held), np.nan)
-    return residual, coefs[-1], stops.apply(product[:, -1])
+    return residual, coefs[-1], stops.apply(full)
 
 
 def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
