@@ -133,6 +133,12 @@ def markdown(summary: dict) -> str:
                           f"{name} removed RMS {r['removed_rms']:.4g} {u} against "
                           f"{r['noise_floor']:.4g} {u}, {r['blocks_improved']} blocks improved"
                           for name, r in alone["sensors"].items()) + "."]
+        low = step["evidence"].get("low_degrees")
+        if low:
+            lines += ["", f"Step {i} ({step['effect']}) was counted on the drift it became: "
+                      f"degrees 1–3 of time, which rank the candidates, removed RMS "
+                      f"{low['removed_rms']:.4g} {u} and improved {low['blocks_improved']} "
+                      f"blocks (rule 2 needs {low['blocks_needed']})."]
     lines += ["", "## Signatures in the residual at each step", ""]
     for i, step in enumerate(summary["steps"], start=1):
         sig = step["evidence"]["signature"]

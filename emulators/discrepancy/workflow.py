@@ -55,6 +55,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 from scipy.optimize import minimize, minimize_scalar
 
 from exohil.emulators.discrepancy.data import (
@@ -752,6 +753,35 @@ def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidenc
             "refined": {k: refined[k] for k in keys}}
 
 
+def _last_count(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
+                floor: float) -> dict:
+    """``evidence`` of a drift when no candidate is significant: counted on the drift it
+    would become if named (:func:`_counted_refined`) unless it was already, and only if its
+    low degrees lower the held-out error at all. Degrees 1–3 smear a sawtooth that re-zeroes
+    every 20–50 s over the whole recording: they may pass neither rule, or one, while the
+    piecewise-linear drift that follows its ramps passes both. Taken only before the
+    workflow would conclude and where the residual's slow part holds more than the noise
+    (:func:`_slow_part`; a refined drift costs a dozen fits), so the drift is still never
+    named over a candidate that passes on its low degrees."""
+    if ("refined" in evidence or evidence["delta_mse"] <= 0
+            or _slow_part(trial, base.residual) <= floor**2):
+        return evidence
+    return _counted_refined(trial, inputs, base, cand, evidence, floor)
+
+
+def _slow_part(trial: Trial, residual: np.ndarray) -> float:
+    """Mean square of the held-out ``residual`` averaged over ``DRIFT_SPAN_S`` windows of
+    each sensor (sensor units²; white noise leaves σ² / frames per window of it): about the
+    most a drift of one function per window can remove from the held-out error. Under one
+    noise variance no refined drift can pass rule 1, and its dozen fits are spared."""
+    window = max(int(round(DRIFT_SPAN_S * trial.rate_hz)), 1)
+    finite = np.isfinite(residual)
+    sums = uniform_filter1d(np.where(finite, residual, 0.0), window, axis=0, mode="constant")
+    counts = uniform_filter1d(finite.astype(float), window, axis=0, mode="constant")
+    slow = np.where(finite, sums / np.maximum(counts, 1e-12), np.nan)
+    return float(np.nanmean(slow**2)) if finite.any() else 0.0
+
+
 def _config(spec: Spec) -> dict:
     return {"degree": spec.degree, "local": spec.local,
             **({"local_ridge": spec.local_ridge} if spec.local else {}),
@@ -856,6 +886,9 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
             if kind == "saturation" and evidence["significant"]:
                 evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
             scored.append((kind, cand, evidence))
+        if not any(e["significant"] for _, _, e in scored):
+            scored = [(k, c, _last_count(trial, inputs, base, c, e, floor) if k == "drift"
+                       else e) for k, c, e in scored]
         scored.sort(key=lambda item: -item[2]["delta_mse"])
         table = ", ".join(f"{k} {e['heldout_gap']:.4g}" for k, _, e in scored)
         winners = [item for item in scored if item[2]["significant"]]
@@ -884,6 +917,10 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         evidence = _evidence(trial, base, cand, floor)
         if kind == "saturation":  # judged against the smooth curve when it was named
             evidence["against_smooth_curve"] = winners[0][2]["against_smooth_curve"]
+        if "refined" in winners[0][2]:  # a drift counted on the drift it would become
+            evidence["low_degrees"] = {k: winners[0][2][k] for k in (
+                "heldout_gap", "delta_mse", "removed_rms", "blocks_improved", "blocks_needed",
+                "beyond_noise")}
         spec, base = cand.spec, cand
         refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
                  (("lag", _lag_of(cand.spec) != lag_before),
