@@ -15,7 +15,8 @@ the others), it
    test at ``SIGN_TEST_LEVEL``: 7 of 8). A model that misses the static map by many noise
    variances (a foreign geometry) lets any flexible term win a little on some blocks and
    lose on others; a physical effect acts everywhere the motion shows it. A drift is
-   counted again on its refined form (:func:`_counted_refined`).
+   counted again on its refined form (:func:`_counted_refined`), and once more before the
+   workflow concludes that nothing is significant (:func:`_last_count`).
 
 A stop is a local effect: a clamp on one sensor of five can remove more than that sensor's
 noise and still less than the noise of all five. So a saturation candidate that holds some
