@@ -469,14 +469,21 @@ def _refine_drift(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     on even knots (a step or a walk, followed locally where a polynomial rings over the
     whole recording). The choice is made again, from degree 1 up, after each effect added
     later (see :func:`run`): one made before another effect was in place may have stood in
-    for part of it.
+    for part of it. Kept for the last ``current`` asked: a drift counted on its refined form
+    (:func:`_counted_refined`) and then named is refined from the same fit.
     """
+    kept = inputs.cache.get("refined_drift")
+    if kept is not None and kept[0] == current.spec:
+        return kept[1]
     here = _drift_of(current.spec)
-    return min([current] + [fit(trial, inputs, replace(current.spec, drift_degree=d,
-                                                        drift_piecewise=piecewise))
-                            for d, piecewise in drift_options(inputs.t_span[1] - inputs.t_span[0])
-                            if (d, piecewise) != here],
-               key=lambda f: f.gap)
+    refined = min([current] + [fit(trial, inputs, replace(current.spec, drift_degree=d,
+                                                           drift_piecewise=piecewise))
+                               for d, piecewise in drift_options(inputs.t_span[1]
+                                                                 - inputs.t_span[0])
+                               if (d, piecewise) != here],
+                  key=lambda f: f.gap)
+    inputs.cache["refined_drift"] = (current.spec, refined)
+    return refined
 
 
 def drift_options(span_s: float) -> list[tuple[int, bool]]:
