@@ -899,15 +899,17 @@ class Fit:
 
 
 def _solve(gram: np.ndarray, rhs: np.ndarray, loading: np.ndarray) -> np.ndarray:
-    """Ridge solve with ``loading`` (P,) added to the Gram matrix's diagonal (the columns are
-    scaled to unit norm for the solve, for conditioning). A column that is zero on every
-    fitted frame (a rate limit no move reaches) gets coefficient 0."""
-    diag = np.diag(gram)
+    """Ridge solve with ``loading`` (..., P) added to the Gram matrix's diagonal (the columns
+    are scaled to unit norm for the solve, for conditioning); ``gram`` (..., P, P) and
+    ``rhs`` (..., P) may be stacks (one LAPACK call for all folds). A column that is zero on
+    every fitted frame (a rate limit no move reaches) gets coefficient 0."""
+    diag = np.diagonal(gram, axis1=-2, axis2=-1)
     dead = diag <= 0
     scale = np.sqrt(np.where(dead, 1.0, diag))
-    g = gram / np.outer(scale, scale)
-    g[np.diag_indices_from(g)] += loading / scale**2 + dead
-    return np.linalg.solve(g, rhs / scale) / scale
+    g = gram / (scale[..., :, None] * scale[..., None, :])
+    on_diagonal = np.arange(gram.shape[-1])
+    g[..., on_diagonal, on_diagonal] += loading / scale**2 + dead
+    return np.linalg.solve(g, (rhs / scale)[..., None])[..., 0] / scale
 
 
 @dataclass(frozen=True)
@@ -944,11 +946,13 @@ class Ridge:
                    local_ridge=spec.local_ridge)
 
     def static_loading(self, diag: np.ndarray) -> np.ndarray:
-        """(n_static,) diagonal loading of the static columns from their energies ``diag``."""
+        """(..., n_static) diagonal loading of the static columns from their energies
+        ``diag`` (..., n_static)."""
         out = self.static * diag
         start, stop = self.local
         if stop > start:
-            out[start:stop] = self.local_ridge * diag[start:stop].mean()
+            out[..., start:stop] = self.local_ridge * diag[..., start:stop].mean(
+                axis=-1, keepdims=True)
         return out
 
     def effect_loading(self, gram_all: np.ndarray) -> np.ndarray:
@@ -964,11 +968,13 @@ class Ridge:
         return self.effect * np.maximum(added, 1e-12 * diag_all[n:])
 
     def loading(self, gram: np.ndarray, effect: np.ndarray) -> np.ndarray:
-        """(P,) diagonal loading for a fold's ``gram``: the static columns' from the fold,
-        the effect columns' ``effect`` (:meth:`effect_loading`)."""
-        out = np.empty(gram.shape[0])
-        out[:self.n_static] = self.static_loading(np.diag(gram)[:self.n_static])
-        out[self.n_static:] = effect
+        """(..., P) diagonal loading for a fold's ``gram`` (..., P, P), or a stack of folds':
+        the static columns' from the fold, the effect columns' ``effect``
+        (:meth:`effect_loading`)."""
+        diag = np.diagonal(gram, axis1=-2, axis2=-1)
+        out = np.empty(diag.shape)
+        out[..., :self.n_static] = self.static_loading(diag[..., :self.n_static])
+        out[..., self.n_static:] = effect
         return out
 
 
@@ -1117,9 +1123,10 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
         rhs[b] = xb.T @ yb
     gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
     effect = ridge.effect_loading(gram_all)
-    folds = [(gram_all - grams[b], rhs_all - rhs[b]) for b in range(N_BLOCKS)]
-    return np.vstack([_solve(gram, rhs, ridge.loading(gram, effect))
-                      for gram, rhs in folds + [(gram_all, rhs_all)]])
+    # fold b's Gram matrix is the total minus block b's; the last is the total
+    fold_grams = np.concatenate([gram_all - grams, gram_all[None]])
+    fold_rhs = np.concatenate([rhs_all - rhs, rhs_all[None]])
+    return _solve(fold_grams, fold_rhs, ridge.loading(fold_grams, effect))
 
 
 def fold_predictions(trial: Trial, x: Design, y: np.ndarray, coefs: np.ndarray,
@@ -1161,11 +1168,13 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
     for _ in range(own):
         xw = linearised(red.xd[ok], red.yd[ok], coefs[-1])[0]
         effect = ridge.effect_loading(xw.T @ xw)
+        grams = np.empty(coefs.shape + coefs.shape[1:])
+        rhs = np.empty(coefs.shape)
         for b in range(N_BLOCKS + 1):
             sel = ok & (red.rows.bd != b)
             xw, target = linearised(red.xd[sel], red.yd[sel], coefs[b])
-            gram = xw.T @ xw
-            coefs[b] = _solve(gram, xw.T @ target, ridge.loading(gram, effect))
+            grams[b], rhs[b] = xw.T @ xw, xw.T @ target
+        coefs = _solve(grams, rhs, ridge.loading(grams, effect))
     return coefs
 
 
