@@ -114,6 +114,9 @@ STATIC_RIDGES = (1e-10, 1e-9, 1e-8, RIDGE)
 #: Relative ridge of the effect columns: 0.1 % of the energy each adds beyond the static map
 #: (:class:`Ridge`), a negligible bias.
 EFFECT_RIDGE = 1e-3
+#: Lags whose lagged effect columns are kept (:func:`lagged_term`): the model's and the
+#: one being tried against it.
+KEPT_LAGS = 2
 
 
 @dataclass(frozen=True)
@@ -800,33 +803,51 @@ class Design:
 def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
     """The design of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
     spec = spec.for_sensor(j)
-    pose = []
+
+    def lagged(columns: Callable[..., np.ndarray], *args: float) -> np.ndarray:
+        return lagged_term(inputs, spec, rate_hz, columns, *args)
+
+    own = []
     if spec.hysteresis:
-        pose.append(hysteresis_columns(inputs)[:, j, :])
+        own.append(lagged(hysteresis_columns)[:, j, :])
     for tau in spec.creep_tau_s:
-        pose.append(creep_columns(inputs, tau, rate_hz)[:, j:j + 1])
+        own.append(lagged(creep_columns, tau, rate_hz)[:, j:j + 1])
     if spec.creep_quadratic:
         for tau in spec.creep_tau_s:
-            pose.append(creep_quadratic_columns(inputs, tau, rate_hz)[:, j:j + 1])
+            own.append(lagged(creep_quadratic_columns, tau, rate_hz)[:, j:j + 1])
     if spec.creep_asym_s:
-        build_s, recover_s = spec.creep_asym_s
-        pose.append(creep_asym_columns(inputs, build_s, recover_s, rate_hz)[:, j:j + 1])
+        own.append(lagged(creep_asym_columns, *spec.creep_asym_s, rate_hz)[:, j:j + 1])
     if spec.creep_hold_s:
-        grow_s, recover_s = spec.creep_hold_s
-        pose.append(creep_hold_columns(inputs, grow_s, recover_s, rate_hz)[:, [j, -1]])
+        own.append(lagged(creep_hold_columns, *spec.creep_hold_s, rate_hz)[:, [j, -1]])
     if spec.output_curve:
-        pose.append(curve_columns(inputs)[:, j, :])
-    # the lag acts column by column, so the shared static part is lagged once (cached)
-    shared = lagged_static_basis(inputs, spec, rate_hz)
-    own = []
-    if pose:
-        own.append(apply_lag(np.hstack(pose), spec.lag_kind, spec.lag_s, rate_hz,
-                             spec.lag_delay_s))
+        own.append(lagged(curve_columns)[:, j, :])
     if spec.lag_kind == "rate_limit":
         own.append(rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz))
     if spec.drift_degree:
         own.append(drift_columns(inputs.t_norm, spec.drift_degree, spec.drift_piecewise))
+    shared = lagged_static_basis(inputs, spec, rate_hz)
     return Design(shared=shared, own=np.hstack(own) if own else shared[:, :0])
+
+
+def lagged_term(inputs: Inputs, spec: Spec, rate_hz: float,
+                columns: Callable[..., np.ndarray], *args: float) -> np.ndarray:
+    """The effect columns ``columns(inputs, *args)`` of every sensor, (N, S, ...), with
+    ``spec``'s lag applied (the lag acts column by column). Kept for the last ``KEPT_LAGS``
+    lags: the candidates and refits of one model share their terms."""
+    if spec.lag_kind in ("", "rate_limit"):
+        return columns(inputs, *args)
+    lag = (spec.lag_kind, spec.lag_s, spec.lag_delay_s)
+    kept: dict[tuple, dict[tuple, np.ndarray]] = inputs.cache.setdefault("lagged_terms", {})
+    terms = kept.get(lag)
+    if terms is None:
+        if len(kept) >= KEPT_LAGS:
+            del kept[next(iter(kept))]  # the lag asked for longest ago
+        terms = kept[lag] = {}
+    key = (columns.__name__, *args)
+    if key not in terms:
+        terms[key] = apply_lag(columns(inputs, *args), spec.lag_kind, spec.lag_s, rate_hz,
+                               spec.lag_delay_s)
+    return terms[key]
 
 
 def plateaus(trial: Trial, inputs: Inputs, j: int) -> tuple[float, float]:
