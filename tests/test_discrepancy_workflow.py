@@ -1237,3 +1237,36 @@ def test_a_slip_step_is_followed_by_a_piecewise_linear_drift(clean_101, tmp_path
     assert loaded.spec.drift_piecewise
     sim = simulate_calibrated(loaded, outcome.trial.t, outcome.trial.angles)
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
+
+
+def test_designs_and_fold_products_are_their_plain_definitions():
+    """The fits' shortcuts (effect terms lagged once per lag and kept, the shared basis
+    lagged and sorted once, predictions formed block by block) give the numbers of the plain
+    construction, for lags asked in turn and back again, on every sensor."""
+    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
+    inputs = make_inputs(trial, Spec(degree=2))
+    rate = trial.rate_hz
+    rng = np.random.default_rng(0)
+    for kind, value, after in [("first_order", 0.05, 0.0), ("delay", 0.03, 0.0),
+                               ("first_order_delay", 0.05, 0.02), ("first_order", 0.05, 0.0),
+                               ("first_order", 0.2, 0.0), ("", 0.0, 0.0)]:
+        spec = Spec(degree=2, hysteresis=True, creep_tau_s=(1.0, 5.0), creep_quadratic=True,
+                    lag_kind=kind, lag_s=value, lag_delay_s=after, drift_degree=3)
+        for j in range(trial.n_sensors):
+            x = model.design(rate, inputs, spec, j)
+            terms = np.hstack([model.hysteresis_columns(inputs)[:, j, :]]
+                              + [model.creep_columns(inputs, tau, rate)[:, j:j + 1]
+                                 for tau in (1.0, 5.0)]
+                              + [model.creep_quadratic_columns(inputs, tau, rate)[:, j:j + 1]
+                                 for tau in (1.0, 5.0)])
+            np.testing.assert_array_equal(x.shared, model.apply_lag(
+                model.static_basis(inputs, 2), kind, value, rate, after))
+            np.testing.assert_array_equal(x.own, np.hstack([
+                model.apply_lag(terms, kind, value, rate, after),
+                model.drift_columns(inputs.t_norm, 3)]))
+            dense = np.hstack([x.shared, x.own])
+            coefs = rng.normal(size=(N_BLOCKS + 1, dense.shape[1]))
+            held, full = model.fold_products(trial, x, coefs)
+            np.testing.assert_allclose(held, np.einsum("np,np->n", dense, coefs[trial.blocks]),
+                                       rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(full, dense @ coefs[-1], rtol=1e-12, atol=1e-12)
