@@ -341,7 +341,14 @@ def delay(x: np.ndarray, delay_s: float, rate_hz: float) -> np.ndarray:
             out[by:] = x[-1]
         return out
 
-    return shifted(k) if frac == 0 else (1.0 - frac) * shifted(k) + frac * shifted(k + 1)
+    if frac == 0:
+        return shifted(k)
+    out = shifted(k)  # (1 − frac)·x[i − k] + frac·x[i − k − 1], in place: no temporaries
+    out *= 1.0 - frac
+    later = shifted(k + 1)
+    later *= frac
+    out += later
+    return out
 
 
 def rate_limit(x: np.ndarray, rate: float, rate_hz: float) -> np.ndarray:
