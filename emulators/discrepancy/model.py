@@ -114,8 +114,8 @@ STATIC_RIDGES = (1e-10, 1e-9, 1e-8, RIDGE)
 #: Relative ridge of the effect columns: 0.1 % of the energy each adds beyond the static map
 #: (:class:`Ridge`), a negligible bias.
 EFFECT_RIDGE = 1e-3
-#: Lags whose lagged effect columns are kept (:func:`lagged_term`): the model's and the
-#: one being tried against it.
+#: Lags whose lagged columns are kept (:func:`lagged_term`): the model's and the one being
+#: tried against it.
 KEPT_LAGS = 2
 
 
@@ -765,21 +765,6 @@ def drift_columns(t_norm: np.ndarray, degree: int, piecewise: bool = False) -> n
     return np.clip(1.0 - np.abs(t_norm[:, None] - knots[None, :]) / width, 0.0, None)
 
 
-def lagged_static_basis(inputs: Inputs, spec: Spec, rate_hz: float) -> np.ndarray:
-    """The static basis with ``spec``'s lag applied: the same for every sensor, so it is
-    computed once per (static basis, lag) and kept until another one is asked for (a single
-    entry: the lag refinement visits many lags, each on a full-rate (N, P) array)."""
-    basis = static_basis(inputs, spec.degree, spec.local)
-    if spec.lag_kind in ("", "rate_limit"):
-        return basis
-    key = (spec.degree, spec.local, spec.lag_kind, spec.lag_s, spec.lag_delay_s)
-    kept = inputs.cache.get("BL")
-    if kept is None or kept[0] != key:
-        kept = (key, apply_lag(basis, spec.lag_kind, spec.lag_s, rate_hz, spec.lag_delay_s))
-        inputs.cache["BL"] = kept
-    return kept[1]
-
-
 @dataclass(frozen=True)
 class Design:
     """One sensor's design matrix [shared | own], (N, Ps + Pe), kept as its two blocks.
@@ -832,15 +817,15 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
         own.append(rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz))
     if spec.drift_degree:
         own.append(drift_columns(inputs.t_norm, spec.drift_degree, spec.drift_piecewise))
-    shared = lagged_static_basis(inputs, spec, rate_hz)
+    shared = lagged(static_basis, spec.degree, spec.local)  # the same for every sensor
     return Design(shared=shared, own=np.hstack(own) if own else shared[:, :0])
 
 
 def lagged_term(inputs: Inputs, spec: Spec, rate_hz: float,
                 columns: Callable[..., np.ndarray], *args: float) -> np.ndarray:
-    """The effect columns ``columns(inputs, *args)`` of every sensor, (N, S, ...), with
-    ``spec``'s lag applied (the lag acts column by column). Kept for the last ``KEPT_LAGS``
-    lags: the candidates and refits of one model share their terms."""
+    """The columns ``columns(inputs, *args)`` (the static basis, or an effect term of every
+    sensor, (N, S, ...)) with ``spec``'s lag applied (the lag acts column by column). Kept
+    for the last ``KEPT_LAGS`` lags: the candidates and refits of one model share them."""
     if spec.lag_kind in ("", "rate_limit"):
         return columns(inputs, *args)
     lag = (spec.lag_kind, spec.lag_s, spec.lag_delay_s)
