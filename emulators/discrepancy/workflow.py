@@ -699,17 +699,28 @@ def _on_one_sensor(trial: Trial, base: Fit, cand: Fit, pooled: dict) -> dict | N
     if trial.n_sensors < 2:
         return None
     if not (pooled["delta_mse"] > 0 and pooled["delta_mse_without_best_block"] > 0):
-        return {"significant": False, "pooled_error_lowered": False, "sensors": {}}
+        return {"significant": False, "pooled_error_lowered": False, "sensors": {},
+                "beyond_noise_sensors": []}
     level = SIGN_TEST_LEVEL / trial.n_sensors
-    passing = {}
+    passing, beyond_noise = {}, []
     for j in range(trial.n_sensors):
         rules = _rules(block_mse(trial, base.residual[:, [j]]),
                        block_mse(trial, cand.residual[:, [j]]), float(trial.noise[j]), level)
+        if rules["beyond_noise"]:
+            beyond_noise.append(trial.sensor_names[j])
         if rules["significant"]:
             passing[trial.sensor_names[j]] = {
                 k: rules[k] for k in ("delta_mse", "removed_rms", "noise_floor",
                                       "blocks_improved", "blocks_needed")}
-    return {"significant": bool(passing), "pooled_error_lowered": True, "sensors": passing}
+    return {"significant": bool(passing), "pooled_error_lowered": True, "sensors": passing,
+            "beyond_noise_sensors": beyond_noise}
+
+
+def _beyond_noise(evidence: dict) -> bool:
+    """Rule 1 and the first half of rule 2 (without the sign test), pooled over the sensors
+    or on one sensor alone (:func:`_on_one_sensor`)."""
+    alone = evidence.get("on_one_sensor")
+    return bool(evidence["beyond_noise"] or (alone and alone["beyond_noise_sensors"]))
 
 
 def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
@@ -889,7 +900,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         for kind in missing:
             cand = _best(trial, inputs, kind, spec)
             evidence = _evidence(trial, base, cand, floor)
-            if kind == "drift" and evidence["beyond_noise"] and not evidence["significant"]:
+            if kind == "drift" and _beyond_noise(evidence) and not evidence["significant"]:
                 evidence = _counted_refined(trial, inputs, base, cand, evidence, floor)
             if kind == "saturation" and evidence["significant"]:
                 evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
@@ -926,9 +937,12 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         if kind == "saturation":  # judged against the smooth curve when it was named
             evidence["against_smooth_curve"] = winners[0][2]["against_smooth_curve"]
         if "refined" in winners[0][2]:  # a drift counted on the drift it would become
-            evidence["low_degrees"] = {k: winners[0][2][k] for k in (
-                "heldout_gap", "delta_mse", "removed_rms", "blocks_improved", "blocks_needed",
-                "beyond_noise")}
+            low = winners[0][2]
+            evidence["low_degrees"] = {
+                **{k: low[k] for k in ("heldout_gap", "delta_mse", "removed_rms",
+                                       "blocks_improved", "blocks_needed", "beyond_noise")},
+                "beyond_noise_sensors": low.get("on_one_sensor", {}).get(
+                    "beyond_noise_sensors", [])}
         spec, base = cand.spec, cand
         refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
                  (("lag", _lag_of(cand.spec) != lag_before),
