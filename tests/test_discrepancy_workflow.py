@@ -666,6 +666,31 @@ def test_a_drift_of_one_sensor_of_twelve_is_judged_on_each_sensor():
         f"noise: {names[4]} removed RMS" in markdown(s)
 
 
+def test_a_sawtooth_on_one_sensor_of_twelve_is_counted_before_nothing_is_named():
+    """One sensor of twelve ramps by 3 mm and re-zeroes twice in 60 s (a sawtooth written
+    here, apart from the workflow's drift): degrees 1–3 make the held-out error worse, and
+    the residual's slow part, pooled over twelve sensors, is under the pooled noise, so
+    nothing was named (code c38053b). Its own slow part is over its own noise: counted on
+    the piecewise-linear drift it would become, it is named drift (on that sensor's eight
+    blocks) and more than half of what it adds over the same suit without it is removed
+    (measured: 59 %); that suit gets nothing (the stop's test above)."""
+    y, names, suit = _twelve_sensors()
+    t = suit(y).sensors.t - suit(y).sensors.t[0]
+    resets = np.array([0.35, 0.7]) * t[-1]
+    since = t - np.concatenate([[0.0], resets])[np.searchsorted(resets, t, side="right")]
+    sawtooth = y.copy()
+    sawtooth[:, 4] += 3.0 * since / (0.35 * t[-1])
+    clean = run(suit(y), "twelve sensors").summary["gap_before"]
+    s = run(suit(sawtooth), "one sawtooth").summary
+    assert s["effects"][:1] == ["drift"], s["effects"]
+    evidence = s["steps"][0]["evidence"]
+    low = evidence["low_degrees"]
+    assert low["delta_mse"] < 0, low  # degrees 1-3 alone: worse than no drift
+    assert evidence["delta_mse"] < evidence["noise_floor"] ** 2  # not by the pooled rule
+    assert evidence["on_one_sensor"]["beyond_noise_sensors"] == [names[4]], evidence
+    assert s["gap_after"] ** 2 - clean**2 < 0.5 * (s["gap_before"] ** 2 - clean**2), (s, clean)
+
+
 def test_a_stop_the_map_absorbs_is_judged_on_the_frames_it_holds():
     """A rail under one sensor's lowest 8 % (the reading held exactly there, as an ADC holds
     a channel at 0): a cubic map bends toward it and leaves under one σ² on that sensor's

@@ -775,30 +775,31 @@ def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidenc
 def _last_count(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
                 floor: float) -> dict:
     """``evidence`` of a drift when no candidate is significant: counted on the drift it
-    would become if named (:func:`_counted_refined`) unless it was already, and only if its
-    low degrees lower the held-out error at all. Degrees 1–3 smear a sawtooth that re-zeroes
-    every 20–50 s over the whole recording: they may pass neither rule, or one, while the
-    piecewise-linear drift that follows its ramps passes both. Taken only before the
-    workflow would conclude and where the residual's slow part holds more than the noise
-    (:func:`_slow_part`; a refined drift costs a dozen fits), so the drift is still never
-    named over a candidate that passes on its low degrees."""
-    if ("refined" in evidence or evidence["delta_mse"] <= 0
-            or _slow_part(trial, base.residual) <= floor**2):
+    would become if named (:func:`_counted_refined`) unless it was already. Degrees 1–3
+    smear a sawtooth that re-zeroes every 20–50 s over the whole recording: they may pass
+    neither rule, or make the error worse, while the piecewise-linear drift that follows its
+    ramps passes both. Taken only before the workflow would conclude and where the
+    residual's slow part holds more than the noise on some sensor, against that sensor's
+    own noise (:func:`_slow_part`; a refined drift costs a dozen fits, and one sensor's
+    sawtooth among twelve is under the pooled noise), so the drift is still never named over
+    a candidate that passes on its low degrees."""
+    if "refined" in evidence or not np.any(_slow_part(trial, base.residual) > trial.noise**2):
         return evidence
     return _counted_refined(trial, inputs, base, cand, evidence, floor)
 
 
-def _slow_part(trial: Trial, residual: np.ndarray) -> float:
-    """Mean square of the held-out ``residual`` averaged over ``DRIFT_SPAN_S`` windows of
-    each sensor (sensor units²; white noise leaves σ² / frames per window of it): about the
-    most a drift of one function per window can remove from the held-out error. Under one
-    noise variance no refined drift can pass rule 1, and its dozen fits are spared."""
+def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
+    """Mean square of the held-out ``residual`` averaged over ``DRIFT_SPAN_S`` windows, per
+    sensor (sensor units²; white noise leaves σ² / frames per window of it): about the most
+    a drift of one function per window can remove from each sensor's held-out error. Under
+    each sensor's noise variance no refined drift can pass rule 1, pooled or on one sensor,
+    and its dozen fits are spared."""
     window = max(int(round(DRIFT_SPAN_S * trial.rate_hz)), 1)
     finite = np.isfinite(residual)
     sums = uniform_filter1d(np.where(finite, residual, 0.0), window, axis=0, mode="constant")
     counts = uniform_filter1d(finite.astype(float), window, axis=0, mode="constant")
     slow = np.where(finite, sums / np.maximum(counts, 1e-12), np.nan)
-    return float(np.nanmean(slow**2)) if finite.any() else 0.0
+    return np.nanmean(slow**2, axis=0)  # every sensor analysed has finite frames
 
 
 def _config(spec: Spec) -> dict:
