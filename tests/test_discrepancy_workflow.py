@@ -688,6 +688,8 @@ def test_a_sawtooth_on_one_sensor_of_twelve_is_counted_before_nothing_is_named()
     assert low["delta_mse"] < 0, low  # degrees 1-3 alone: worse than no drift
     assert evidence["delta_mse"] < evidence["noise_floor"] ** 2  # not by the pooled rule
     assert evidence["on_one_sensor"]["beyond_noise_sensors"] == [names[4]], evidence
+    assert evidence["refined"]["significant_on_sensors"] == [names[4]], evidence
+    assert f"on {names[4]} alone it passed both rules against its own noise" in markdown(s)
     assert s["gap_after"] ** 2 - clean**2 < 0.5 * (s["gap_before"] ** 2 - clean**2), (s, clean)
 
 

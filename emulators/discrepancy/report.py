@@ -90,6 +90,16 @@ def _runs(sensors: list[str]) -> str:
     return f"; straight runs on {', '.join(sensors)}" if sensors else ""
 
 
+def _refined_count(refined: dict, units: str) -> str:
+    """The sentence on the count a drift was named on (its refined form, before the map's
+    degree was chosen again)."""
+    on = refined["significant_on_sensors"]
+    alone = f"; on {', '.join(on)} alone it passed both rules against its own noise" if on else ""
+    return (f"The drift it would become left a held-out gap of {refined['heldout_gap']:.4g} "
+            f"{units} and improved {refined['blocks_improved']} blocks (rule 2 needs "
+            f"{refined['blocks_needed']}){alone}.")
+
+
 def markdown(summary: dict) -> str:
     """The human-readable report."""
     u = summary["units"]
@@ -142,7 +152,8 @@ def markdown(summary: dict) -> str:
                       f"{step['evidence']['noise_floor']:.4g} {u} and improved "
                       f"{low['blocks_improved']} blocks (rule 2 needs {low['blocks_needed']})"
                       + (f"; beyond its own noise on {', '.join(alone)} alone, on too few "
-                         f"blocks there" if alone else "") + "."]
+                         f"blocks there" if alone else "") + ". " + _refined_count(
+                             step["evidence"]["refined"], u)]
     lines += ["", "## Signatures in the residual at each step", ""]
     for i, step in enumerate(summary["steps"], start=1):
         sig = step["evidence"]["signature"]

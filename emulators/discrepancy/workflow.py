@@ -768,8 +768,10 @@ def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidenc
     creep for its flexibility."""
     refined = _evidence(trial, base, _refine_drift(trial, inputs, cand), floor)
     keys = ("heldout_gap", "delta_mse", "blocks_improved", "blocks_needed", "significant")
+    alone = refined.get("on_one_sensor") or {"sensors": {}}
     return {**evidence, "significant": refined["significant"],
-            "refined": {k: refined[k] for k in keys}}
+            "refined": {**{k: refined[k] for k in keys},
+                        "significant_on_sensors": list(alone["sensors"])}}
 
 
 def _last_count(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
@@ -944,6 +946,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
                                        "blocks_improved", "blocks_needed", "beyond_noise")},
                 "beyond_noise_sensors": low.get("on_one_sensor", {}).get(
                     "beyond_noise_sensors", [])}
+            evidence["refined"] = low["refined"]  # the count it was named on
         spec, base = cand.spec, cand
         refit = {k: effect_params(k, cand, inputs, trial) for k, changed in
                  (("lag", _lag_of(cand.spec) != lag_before),
