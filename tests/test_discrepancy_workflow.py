@@ -675,7 +675,8 @@ def test_a_sawtooth_on_one_sensor_of_twelve_is_counted_before_nothing_is_named()
     blocks) and more than half of what it adds over the same suit without it is removed
     (measured: 59 %); that suit gets nothing (the stop's test above)."""
     y, names, suit = _twelve_sensors()
-    t = suit(y).sensors.t - suit(y).sensors.t[0]
+    t = suit(y).sensors.t
+    t = t - t[0]
     resets = np.array([0.35, 0.7]) * t[-1]
     since = t - np.concatenate([[0.0], resets])[np.searchsorted(resets, t, side="right")]
     sawtooth = y.copy()

@@ -145,14 +145,14 @@ def markdown(summary: dict) -> str:
                           for name, r in alone["sensors"].items()) + "."]
         low = step["evidence"].get("low_degrees")
         if low:
-            alone = low.get("beyond_noise_sensors")
+            beyond = low.get("beyond_noise_sensors")
             lines += ["", f"Step {i} ({step['effect']}) was counted on the drift it became: "
                       f"degrees 1–3 of time, which rank the candidates, removed RMS "
                       f"{low['removed_rms']:.4g} {u} against the noise floor "
                       f"{step['evidence']['noise_floor']:.4g} {u} and improved "
                       f"{low['blocks_improved']} blocks (rule 2 needs {low['blocks_needed']})"
-                      + (f"; beyond its own noise on {', '.join(alone)} alone, on too few "
-                         f"blocks there" if alone else "") + ". " + _refined_count(
+                      + (f"; beyond its own noise on {', '.join(beyond)} alone, on too few "
+                         f"blocks there" if beyond else "") + ". " + _refined_count(
                              step["evidence"]["refined"], u)]
     lines += ["", "## Signatures in the residual at each step", ""]
     for i, step in enumerate(summary["steps"], start=1):
