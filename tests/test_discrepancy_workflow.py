@@ -1294,7 +1294,7 @@ def test_designs_and_fold_products_are_their_plain_definitions():
                 model.drift_columns(inputs.t_norm, 3)]))
             dense = np.hstack([x.shared, x.own])
             coefs = rng.normal(size=(N_BLOCKS + 1, dense.shape[1]))
-            held, full = model.fold_products(trial, x, coefs)
+            held, full = (a[:, 0] for a in model.fold_products(trial, [x], [coefs]))
             np.testing.assert_allclose(held, np.einsum("np,np->n", dense, coefs[trial.blocks]),
                                        rtol=1e-12, atol=1e-12)
             np.testing.assert_allclose(full, dense @ coefs[-1], rtol=1e-12, atol=1e-12)

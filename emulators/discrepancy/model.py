@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -117,6 +117,9 @@ EFFECT_RIDGE = 1e-3
 #: Lags whose lagged columns are kept (:func:`lagged_term`): the model's and the one being
 #: tried against it.
 KEPT_LAGS = 2
+#: Row selections whose shared Gram matrices are kept (:class:`SharedGrams`): the valid
+#: rows, and those off a sensor's hard stops while they are chosen.
+KEPT_GRAMS = 4
 
 
 @dataclass(frozen=True)
@@ -1030,11 +1033,40 @@ class Reduced:
         xd: (M, P) design, mean of each row's valid frames.
         yd: (M,) measurement, same rows.
         rows: how the rows were formed (:class:`Groups`).
+        shared_grams: the per-block Gram matrices of the first columns of ``xd``, a shared
+            block's average (the same array for every sensor of a fit), by the rows they
+            were formed on (:func:`block_grams`); None: every Gram matrix is formed anew.
     """
 
     xd: np.ndarray
     yd: np.ndarray
     rows: Groups
+    shared_grams: SharedGrams | None = None
+
+
+@dataclass
+class SharedGrams:
+    """The per-block Gram matrices (N_BLOCKS, Ps, Ps) of a shared block's first ``ps``
+    columns of the averaged design, kept for the last ``KEPT_GRAMS`` row selections:
+    every sensor of a fit asks for the same ones."""
+
+    ps: int
+    by_rows: dict[bytes, np.ndarray] = field(default_factory=dict)
+
+    def of(self, xd: np.ndarray, ok: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+        """(N_BLOCKS, Ps, Ps) for the design's rows ``ok`` (M,), rows sorted by block
+        between ``bounds``."""
+        key = ok.tobytes()
+        grams = self.by_rows.get(key)
+        if grams is None:
+            if len(self.by_rows) >= KEPT_GRAMS:
+                del self.by_rows[next(iter(self.by_rows))]
+            grams = np.empty((N_BLOCKS, self.ps, self.ps))
+            for b in range(N_BLOCKS):
+                xs = xd[bounds[b]:bounds[b + 1], :self.ps][ok[bounds[b]:bounds[b + 1]]]
+                grams[b] = xs.T @ xs
+            self.by_rows[key] = grams
+        return grams
 
 
 def fit_groups(trial: Trial) -> Groups:
@@ -1071,53 +1103,65 @@ def reduce(trial: Trial, x: Design, y: np.ndarray) -> Reduced:
     groups = fit_groups(trial)
     kept = trial.cache.get("shared")
     if kept is None or kept[0] is not x.shared:
-        kept = (x.shared, groups.mean(x.shared))
+        kept = (x.shared, groups.mean(x.shared), SharedGrams(ps=x.shared.shape[1]))
         trial.cache["shared"] = kept
     xd = np.hstack([kept[1], groups.mean(x.own)]) if x.own.shape[1] else kept[1]
     yd = groups.mean(np.where(trial.valid, y, 0.0)[:, None])[:, 0]
-    return Reduced(xd=xd, yd=yd, rows=groups)
+    return Reduced(xd=xd, yd=yd, rows=groups, shared_grams=kept[2])
 
 
-def fit_design(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = None,
-               fit_mask: np.ndarray | None = None, reduced: Reduced | None = None,
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Blocked CV and full-data fit of one sensor on design x (N, P).
-
-    Args:
-        trial: blocks, validity and rate.
-        x: the design, (N, P).
-        y: (N,) measurement.
-        ridge: the relative ridge (default: ``RIDGE`` on every column).
-        fit_mask: (N,) frames allowed in the fits (default: all valid frames); held-out
-            residuals are reported for every scored frame.
-        reduced: ``reduce(trial, x, y)`` when the caller already has it (several masks on
-            one design).
-
-    Returns:
-        held-out residual (N,) (NaN where not scored), full-data coefficients (P,), and the
-        full-data prediction (N,).
-    """
-    mask = trial.valid if fit_mask is None else trial.valid & fit_mask
-    red = reduce(trial, x, y) if reduced is None else reduced
+def fit_coefs(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = None,
+              ) -> np.ndarray:
+    """Blocked CV and full-data fit of one sensor on design x (N, P) and measurement y (N,)
+    over the valid frames, with the relative ridge ``ridge`` (default: ``RIDGE`` on every
+    column): the (N_BLOCKS + 1, P) fold coefficients (:func:`fold_coefs`), whose held-out
+    and full-data predictions :func:`fold_products` forms."""
+    red = reduce(trial, x, y)
     ridge = Ridge(n_static=red.xd.shape[1]) if ridge is None else ridge
-    coefs = fold_coefs(red, red.rows.usable(mask), ridge)
-    return fold_predictions(trial, x, y, coefs)
+    return fold_coefs(red, red.rows.usable(trial.valid), ridge)
 
 
-def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
-    """(N_BLOCKS + 1, P) ridge coefficients: row b fitted without block b, the last row on
-    every block (one Gram matrix per block; a fold's is the total minus its block's)."""
+def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
+                target: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-block Gram matrices (N_BLOCKS, P, P) and right-hand sides (N_BLOCKS, P) of the
+    rows ``ok`` (M,) of the averaged design, each row times ``weights`` (M,; default 1),
+    against ``target`` (M,; default the averaged measurement). The shared columns'
+    unweighted Gram matrices come formed (``red.shared_grams``, the same for every sensor
+    of a fit); only rows whose weight is not 1 (in a stop's knee) correct them."""
     p = red.xd.shape[1]
+    y = red.yd if target is None else target
     grams = np.empty((N_BLOCKS, p, p))
     rhs = np.empty((N_BLOCKS, p))
     bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))  # rows sorted by block
+    ps = 0
+    if red.shared_grams is not None:
+        ps = red.shared_grams.ps
+        grams[:, :ps, :ps] = red.shared_grams.of(red.xd, ok, bounds)
     for b in range(N_BLOCKS):
         rows = slice(bounds[b], bounds[b + 1])
-        xb, yb, keep = red.xd[rows], red.yd[rows], ok[rows]
+        xb, yb, keep = red.xd[rows], y[rows], ok[rows]
+        wb = None if weights is None else weights[rows]
         if not keep.all():  # a view where every row counts (no copy)
             xb, yb = xb[keep], yb[keep]
-        grams[b] = xb.T @ xb
+            wb = None if wb is None else wb[keep]
+        if wb is not None:
+            bent = wb != 1.0
+            if ps and bent.any():
+                xs = xb[bent, :ps]
+                grams[b, :ps, :ps] += (xs * (wb[bent] ** 2 - 1.0)[:, None]).T @ xs
+            xb = xb * wb[:, None]
+        grams[b, :, ps:] = xb.T @ xb[:, ps:]
+        grams[b, ps:, :ps] = grams[b, :ps, ps:].T
         rhs[b] = xb.T @ yb
+    return grams, rhs
+
+
+def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge, weights: np.ndarray | None = None,
+               target: np.ndarray | None = None) -> np.ndarray:
+    """(N_BLOCKS + 1, P) ridge coefficients: row b fitted without block b, the last row on
+    every block (one Gram matrix per block, :func:`block_grams`; a fold's is the total
+    minus its block's)."""
+    grams, rhs = block_grams(red, ok, weights, target)
     gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
     effect = ridge.effect_loading(gram_all)
     # fold b's Gram matrix is the total minus block b's; the last is the total
@@ -1126,46 +1170,47 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge) -> np.ndarray:
     return _solve(fold_grams, fold_rhs, ridge.loading(fold_grams, effect))
 
 
-def fold_products(trial: Trial, x: Design, coefs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The design times fold coefficients ``coefs`` (N_BLOCKS + 1, P): (held, full), each
-    (N,): every frame times the row of the fold that held it out, and every frame times the
-    last row. Both come from one pass over the frames sorted by block (the shared block
-    sorted once per design that shares it): the design is read once, in N_BLOCKS products,
-    instead of once per 2.5 s run of a block and once more for the full fit."""
+def fold_products(trial: Trial, designs: Sequence[Design], coefs: Sequence[np.ndarray],
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Each design times its fold coefficients (N_BLOCKS + 1, P): (held, full), each (N, K)
+    for K designs: every frame times the row of the fold that held it out, and every frame
+    times the last row. All come from one pass over the frames sorted by block (a shared
+    block sorted once per design that shares it): each shared block is read once, in
+    N_BLOCKS products for every design that shares it (all sensors of one fit), instead of
+    once per sensor, per 2.5 s run of a block and once more for the full fit."""
     kept = trial.cache.get("by_block")
     if kept is None:
         order = np.argsort(trial.blocks, kind="stable")
         bounds = np.searchsorted(trial.blocks[order], np.arange(N_BLOCKS + 1))
         kept = trial.cache["by_block"] = (order, bounds)
     order, bounds = kept
-    sorted_shared = trial.cache.get("shared_by_block")
-    if sorted_shared is None or sorted_shared[0] is not x.shared:
-        sorted_shared = trial.cache["shared_by_block"] = (x.shared, x.shared[order])
-    shared = sorted_shared[1]
-    own = x.own[order] if x.own.shape[1] else None
-    ps = x.shared.shape[1]
-    out = np.empty((x.shared.shape[0], 2))
-    for b in range(N_BLOCKS):
-        rows = slice(bounds[b], bounds[b + 1])
-        pair = coefs[[b, -1]].T  # (P, 2): the fold without block b, the full fit
-        out[rows] = shared[rows] @ pair[:ps]
-        if own is not None:
-            out[rows] += own[rows] @ pair[ps:]
+    out = np.empty((trial.n, 2, len(designs)))  # [:, 0]: held, [:, 1]: full; sorted by block
+    sharing: dict[int, list[int]] = {}
+    for k, x in enumerate(designs):
+        sharing.setdefault(id(x.shared), []).append(k)
+    for members in sharing.values():
+        sorted_shared = trial.cache.get("shared_by_block")
+        if sorted_shared is None or sorted_shared[0] is not designs[members[0]].shared:
+            basis = designs[members[0]].shared
+            sorted_shared = trial.cache["shared_by_block"] = (basis, basis[order])
+        shared = sorted_shared[1]
+        ps = shared.shape[1]
+        for b in range(N_BLOCKS):
+            rows = slice(bounds[b], bounds[b + 1])
+            # (Ps, 2·members): per design, the fold without block b and the full fit
+            pairs = np.stack([coefs[k][[b, -1], :ps].T for k in members], axis=-1)
+            out[rows][:, :, members] = (shared[rows] @ pairs.reshape(ps, -1)).reshape(
+                -1, 2, len(members))
+    for k, x in enumerate(designs):
+        if not x.own.shape[1]:
+            continue
+        own, ps = x.own[order], x.shared.shape[1]
+        for b in range(N_BLOCKS):
+            rows = slice(bounds[b], bounds[b + 1])
+            out[rows, :, k] += own[rows] @ coefs[k][[b, -1], ps:].T
     products = np.empty_like(out)
     products[order] = out
     return products[:, 0], products[:, 1]
-
-
-def fold_predictions(trial: Trial, x: Design, y: np.ndarray, coefs: np.ndarray,
-                     stops: Stops = NO_STOPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A fit's outputs from its fold coefficients ``coefs`` (N_BLOCKS + 1, P)
-    (:func:`fold_products`): the held-out residual (N,), measurement minus
-    the prediction (through ``stops``) of the fold that did not see the frame, NaN where not
-    scored; the all-block coefficients (P,); and their prediction through ``stops`` (N,)."""
-    held, full = fold_products(trial, x, coefs)
-    with np.errstate(invalid="ignore"):  # y may be NaN or inf where invalid, never scored
-        residual = np.where(trial.scored, y - stops.apply(held), np.nan)
-    return residual, coefs[-1], stops.apply(full)
 
 
 def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
@@ -1181,26 +1226,23 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
     :func:`fold_coefs`); the last ``own`` linearise each fold at its own prediction, so that no
     fold's fit depends on its held-out block.
     """
-    def linearised(x: np.ndarray, y: np.ndarray, coef: np.ndarray,
-                   ) -> tuple[np.ndarray, np.ndarray]:
-        """Rows weighted by h′(ŝ) and the target y − h(ŝ) + h′(ŝ)·ŝ, at ŝ = x·coef."""
-        pred = x @ coef
+    def linearised(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each row's weight h′(ŝ) and target y − h(ŝ) + h′(ŝ)·ŝ, at ŝ = x·coef."""
+        pred = red.xd @ coef
         slope = stops.slope(pred)
-        return x * slope[:, None], y - stops.apply(pred) + slope * pred
+        return slope, red.yd - stops.apply(pred) + slope * pred
 
     coefs = coefs.copy()
     for _ in range(shared):
-        xw, target = linearised(red.xd, red.yd, coefs[-1])
-        coefs = fold_coefs(replace(red, xd=xw, yd=target), ok, ridge)
+        coefs = fold_coefs(red, ok, ridge, *linearised(coefs[-1]))
     for _ in range(own):
-        xw = linearised(red.xd[ok], red.yd[ok], coefs[-1])[0]
-        effect = ridge.effect_loading(xw.T @ xw)
+        effect = ridge.effect_loading(block_grams(red, ok, *linearised(coefs[-1]))[0].sum(0))
         grams = np.empty(coefs.shape + coefs.shape[1:])
         rhs = np.empty(coefs.shape)
         for b in range(N_BLOCKS + 1):
-            sel = ok & (red.rows.bd != b)
-            xw, target = linearised(red.xd[sel], red.yd[sel], coefs[b])
-            grams[b], rhs[b] = xw.T @ xw, xw.T @ target
+            block_g, block_r = block_grams(red, ok, *linearised(coefs[b]))
+            others = np.arange(N_BLOCKS) != b  # every block for the last row
+            grams[b], rhs[b] = block_g[others].sum(axis=0), block_r[others].sum(axis=0)
         coefs = _solve(grams, rhs, ridge.loading(grams, effect))
     return coefs
 
@@ -1313,16 +1355,14 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
     return best[1]
 
 
-def fit_with_stops(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge,
-                   stops: Stops, sigma: float, red: Reduced, plain: np.ndarray,
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`fit_design`'s outputs for a sensor with ``stops``: with hard stops only, the map
-    fitted off them; with a soft knee, fitted through the knees (:func:`fit_through_stops`,
-    starting from ``plain``, the fold fits without stops)."""
+def fit_with_stops(trial: Trial, y: np.ndarray, ridge: Ridge, stops: Stops, sigma: float,
+                   red: Reduced, plain: np.ndarray) -> np.ndarray:
+    """:func:`fit_coefs`'s fold coefficients for a sensor with ``stops``: with hard stops
+    only, the map fitted off them; with a soft knee, fitted through the knees
+    (:func:`fit_through_stops`, starting from ``plain``, the fold fits without stops)."""
     ok = red.rows.usable(trial.valid & off_hard_stops(y, stops, sigma))
-    coefs = (fit_through_stops(red, ok, ridge, stops, plain) if stops.soft
-             else fold_coefs(red, ok, ridge))
-    return fold_predictions(trial, x, y, coefs, stops)
+    return (fit_through_stops(red, ok, ridge, stops, plain) if stops.soft
+            else fold_coefs(red, ok, ridge))
 
 
 def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
@@ -1331,12 +1371,10 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     With the saturation term each sensor's map bends at its stops: ``spec.stops`` when
     given, else chosen (:func:`choose_stops`), then fitted (:func:`fit_with_stops`).
     """
-    s = trial.n_sensors
-    residual = np.empty_like(trial.y)
-    prediction = np.empty_like(trial.y)
-    coefs: list[np.ndarray] = []
+    designs: list[Design] = []
+    fold: list[np.ndarray] = []  # per sensor, (N_BLOCKS + 1, P) fold coefficients
     stops: list[Stops] = []
-    for j in range(s):
+    for j in range(trial.n_sensors):
         y = trial.y[:, j]
         x = design(trial.rate_hz, inputs, spec, j)
         ridge = Ridge.of_map(inputs, spec)
@@ -1345,13 +1383,21 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
             plain = fold_coefs(red, red.rows.usable(trial.valid), ridge)
             stop = (spec.stops[j] if spec.stops
                     else choose_stops(trial, inputs, y, ridge, j, red, plain))
-            r, c, p = fit_with_stops(trial, x, y, ridge, stop, float(trial.noise[j]), red,
-                                     plain)
+            c = fit_with_stops(trial, y, ridge, stop, float(trial.noise[j]), red, plain)
         else:
-            (r, c, p), stop = fit_design(trial, x, y, ridge), NO_STOPS
+            c, stop = fit_coefs(trial, x, y, ridge), NO_STOPS
+        designs.append(x)
+        fold.append(c)
         stops.append(stop)
-        residual[:, j], prediction[:, j] = r, p
-        coefs.append(c)
+    held, full = fold_products(trial, designs, fold)
+    residual = np.empty_like(trial.y)
+    prediction = np.empty_like(trial.y)
+    for j, stop in enumerate(stops):
+        with np.errstate(invalid="ignore"):  # y may be NaN or inf where invalid, never scored
+            residual[:, j] = np.where(trial.scored, trial.y[:, j] - stop.apply(held[:, j]),
+                                      np.nan)
+        prediction[:, j] = stop.apply(full[:, j])
+    coefs = [c[-1] for c in fold]
     return Fit(spec=spec, residual=residual, block_mse=block_mse(trial, residual), coef=coefs,
                prediction=prediction, stops=stops)
 
@@ -1419,7 +1465,7 @@ def make_inputs(trial: Trial, static_map: Spec | None = None) -> Inputs:
     inputs.static_degree, inputs.static_local = static_map.degree, static_map.local
     basis = static_basis(inputs, static_map.degree, static_map.local)
     static_ridge = Ridge.of_map(inputs, static_map)
-    coef = np.column_stack([fit_design(trial, Design.of(basis), trial.y[:, j], static_ridge)[1]
+    coef = np.column_stack([fit_coefs(trial, Design.of(basis), trial.y[:, j], static_ridge)[-1]
                             for j in range(trial.n_sensors)])
     inputs.static_coef = coef
     inputs.static = basis @ coef
