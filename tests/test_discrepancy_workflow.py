@@ -1267,6 +1267,36 @@ def test_a_slip_step_is_followed_by_a_piecewise_linear_drift(clean_101, tmp_path
     np.testing.assert_allclose(sim, outcome.after.prediction, atol=1e-6)
 
 
+def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
+    """The fold fits' shortcuts (the shared columns' Gram matrices kept per row selection
+    and reused by every sensor, rows weighted in a stop's knee correcting them) solve the
+    plain ridge system of each fold: Σ w²·x·xᵀ and Σ w·x·t over its rows, formed directly."""
+    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
+    inputs = make_inputs(trial, Spec(degree=2))
+    spec = Spec(degree=2, hysteresis=True, drift_degree=2)
+    ridge = model.Ridge.of_map(inputs, spec)
+    rng = np.random.default_rng(1)
+    for j in range(trial.n_sensors):  # the later sensors reuse the first one's matrices
+        red = model.reduce(trial, model.design(trial.rate_hz, inputs, spec, j), trial.y[:, j])
+        assert red.shared_grams is not None and red.shared_grams.ps < red.xd.shape[1]
+        m = red.yd.size
+        usable = red.rows.usable(trial.valid)
+        knees = np.where(rng.random(m) < 0.05, rng.random(m), 1.0)
+        for ok in (usable, usable & (rng.random(m) > 0.1)):
+            for weights, target in ((None, None), (knees, red.yd + rng.normal(size=m))):
+                got = model.fold_coefs(red, ok, ridge, weights, target)
+                xw = red.xd * (np.ones(m) if weights is None else weights)[:, None]
+                t = red.yd if target is None else target
+                effect = ridge.effect_loading(xw[ok].T @ xw[ok])
+                for b in range(N_BLOCKS + 1):  # the last: every block
+                    rows = ok & (red.rows.bd != b)
+                    gram, rhs = xw[rows].T @ xw[rows], xw[rows].T @ t[rows]
+                    want = model._solve(gram, rhs, ridge.loading(gram, effect))
+                    # the basis is nearly collinear: compared where it matters, as fits
+                    np.testing.assert_allclose(red.xd @ got[b], red.xd @ want, rtol=0,
+                                               atol=1e-9 * np.abs(red.yd).max())
+
+
 def test_designs_and_fold_products_are_their_plain_definitions():
     """The fits' shortcuts (effect terms lagged once per lag and kept, the shared basis
     lagged and sorted once, predictions formed block by block) give the numbers of the plain
