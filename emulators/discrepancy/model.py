@@ -1236,14 +1236,14 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
     for _ in range(shared):
         coefs = fold_coefs(red, ok, ridge, *linearised(coefs[-1]))
     for _ in range(own):
-        effect = ridge.effect_loading(block_grams(red, ok, *linearised(coefs[-1]))[0].sum(0))
         grams = np.empty(coefs.shape + coefs.shape[1:])
         rhs = np.empty(coefs.shape)
         for b in range(N_BLOCKS + 1):
             block_g, block_r = block_grams(red, ok, *linearised(coefs[b]))
             others = np.arange(N_BLOCKS) != b  # every block for the last row
             grams[b], rhs[b] = block_g[others].sum(axis=0), block_r[others].sum(axis=0)
-        coefs = _solve(grams, rhs, ridge.loading(grams, effect))
+        # the effect columns' ridge from the all-block fit's system (the last row's)
+        coefs = _solve(grams, rhs, ridge.loading(grams, ridge.effect_loading(grams[-1])))
     return coefs
 
 
@@ -1374,10 +1374,10 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     designs: list[Design] = []
     fold: list[np.ndarray] = []  # per sensor, (N_BLOCKS + 1, P) fold coefficients
     stops: list[Stops] = []
+    ridge = Ridge.of_map(inputs, spec)  # the static map is the same for every sensor
     for j in range(trial.n_sensors):
         y = trial.y[:, j]
         x = design(trial.rate_hz, inputs, spec, j)
-        ridge = Ridge.of_map(inputs, spec)
         if spec.saturation:
             red = reduce(trial, x, y)
             plain = fold_coefs(red, red.rows.usable(trial.valid), ridge)
