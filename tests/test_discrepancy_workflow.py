@@ -66,7 +66,6 @@ from exohil.emulators.discrepancy.workflow import (
     _rate_limit,
     _rules,
     _static_map,
-    _static_maps,
     blocks_needed,
     drift_options,
     pooled_noise,
@@ -1065,89 +1064,6 @@ def test_a_suit_turned_about_the_humerus_is_calibrated_on_both_arm_axes(axial_ou
         load_calibrated_profile(one_more(0))  # count 0: every sensor
     with pytest.raises(ProfileError, match="different numbers of coef"):
         load_calibrated_profile(one_more(1))
-
-
-def test_the_axial_rotation_is_the_twist_about_the_humerus_axis():
-    """The humerus of (θ, φ, ψ) is the shortest rotation S taking the hanging humerus axis
-    (thorax y) to its pose, then a turn by ψ about its own axis: Sᵀ·R = Ry(ψ), also with the
-    arm almost hanging (where θ is undefined). This is what lets ``twist_input`` stand for
-    the humerus's second axis beside the first."""
-    rng = np.random.default_rng(7)
-    theta = rng.uniform(-90.0, 180.0, 500)
-    phi = np.concatenate([rng.uniform(0.01, 1.0, 100), rng.uniform(1.0, 170.0, 400)])
-    psi = rng.uniform(-90.0, 90.0, 500)
-    rot = ms_to_matrix(*np.deg2rad([theta, phi, psi]))
-    axis = rot[:, :, 1]
-    k = np.cross([0.0, 1.0, 0.0], axis)
-    sin = np.linalg.norm(k, axis=1)
-    k /= sin[:, None]
-    cross = np.zeros((500, 3, 3))
-    cross[:, [2, 0, 1], [1, 2, 0]] = k
-    cross[:, [1, 2, 0], [2, 0, 1]] = -k
-    swing = (np.eye(3) + sin[:, None, None] * cross
-             + (1.0 - axis[:, 1])[:, None, None] * cross @ cross)
-    np.testing.assert_allclose(swing[:, :, 1], axis, atol=1e-12)
-    p = np.deg2rad(psi)
-    turn = np.zeros((500, 3, 3))
-    turn[:, 0, 0] = turn[:, 2, 2] = np.cos(p)
-    turn[:, 0, 2], turn[:, 2, 0], turn[:, 1, 1] = np.sin(p), -np.sin(p), 1.0
-    np.testing.assert_allclose(np.transpose(swing, (0, 2, 1)) @ rot, turn, atol=1e-9)
-
-
-def test_a_static_map_of_the_arm_axis_and_twist_round_trips_through_a_profile(
-        axial_outcome, tmp_path):
-    """With ψ moving the static map may be a polynomial of the humerus axis and the scaled
-    twist (four inputs) instead of the two axes (six): its basis has C(d + 4, 4) terms and
-    the straight runs; a profile with it, and hysteresis driven by a static input of that
-    kind, loads and simulates the workflow's prediction; it needs the axial rotation."""
-    trial = axial_outcome.trial
-    inputs = make_inputs(trial, Spec(degree=4, twist=True))
-    assert inputs.static_twist and inputs.twist.shape == (trial.n, 1)
-    k = list(trial.angle_names).index("shoulder_rot")
-    np.testing.assert_allclose(inputs.twist[[int(np.argmin(trial.angles[:, k])),
-                                             int(np.argmax(trial.angles[:, k]))], 0],
-                               [-1.0, 1.0])
-    runs = inputs.segments.shape[1]
-    basis = model.static_basis(inputs, 5, twist=True)
-    assert basis.shape[1] == math.comb(5 + 4, 4) + runs
-    assert model.static_basis(inputs, 5).shape[1] == math.comb(5 + 6, 6) + runs
-    after = fit(trial, inputs, Spec(degree=5, twist=True, hysteresis=True))
-    outcome = replace(axial_outcome, inputs=inputs, after=after,
-                      summary={**axial_outcome.summary, "effects": ["hysteresis"]})
-    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(outcome, "twist"))
-    loaded = load_calibrated_profile(tmp_path / "p.toml")
-    assert loaded.spec.twist and loaded.inputs.static_twist
-    np.testing.assert_allclose(simulate_calibrated(loaded, trial.t, trial.angles),
-                               after.prediction, atol=1e-6)
-    text = (tmp_path / "p.toml").read_text()
-    direction = re.sub(r"^segments = .*$", "segments = []", text, flags=re.M)
-    assert direction != text  # the straight runs are on the two axes: gone with them
-    (tmp_path / "direction.toml").write_text(direction.replace('inputs = "arm_axes"',
-                                                               'inputs = "arm_direction"'))
-    with pytest.raises(ProfileError, match="twist needs arm_axes"):
-        load_calibrated_profile(tmp_path / "direction.toml")
-
-
-def test_a_map_of_axis_and_twist_is_kept_only_beyond_what_a_bent_polynomial_explains():
-    """A clean suit turned within ±35° for 120 s: a quintic of the arm axis and twist
-    predicts the held-out blocks best of all static maps, but the best plain polynomial
-    bent at stops comes within the noise of it, so the plain polynomial is kept (a flexible
-    map must beat a stop by the bar an effect must clear, as the local functions must),
-    and nothing is named; where the twist map is kept, ŝ is that map's prediction."""
-    trajectory = random_trajectory(6, 120.0, axial_deg=35.0)
-    geometry, gains, offsets = random_geometry(6)
-    signal = suit_lengths(trajectory, geometry, gains, offsets)
-    y = signal.values + np.random.default_rng(6).normal(0.0, 0.1, signal.values.shape)
-    outcome = run(suit_recording(trajectory, geometry, Signal.from_values(signal.t, y),
-                                 {"case": "axial 120 s"}), "axial")
-    trial, inputs = outcome.trial, outcome.inputs
-    assert inputs.twist.shape == (trial.n, 1)
-    fits = [fit(trial, inputs, m) for m in _static_maps(inputs)]
-    assert min(fits, key=lambda f: f.gap).spec.twist
-    assert outcome.summary["static_map"]["kind"] == "legendre_polynomial"
-    assert not outcome.before.spec.twist and outcome.summary["effects"] == []
-    kept = _static_map(trial, inputs, pooled_noise(trial))
-    assert not kept.spec.twist
 
 
 def test_a_straight_run_under_the_arm_is_followed_by_the_static_map(tmp_path, monkeypatch):

@@ -11,10 +11,8 @@ held fixed as the *input* of the history-dependent terms) the model is
 
 * B: Legendre-product polynomial of the normalised angles (total degree chosen by held-out
   error): geometry, routing, gains, offsets and units in one calibrated map; for an arm
-  direction it may instead be a cubic plus compact functions on the sphere (``local``);
-  with axial rotation it is of the two humerus axes or, at higher degrees, of the humerus
-  axis and the axial rotation (``twist``), and ends with the lengths of straight tendon
-  runs.
+  direction it may instead be a cubic plus compact functions on the sphere (``local``),
+  and with axial rotation it ends with the lengths of straight tendon runs.
 * H (``hysteresis``): Prandtl–Ishlinskii basis, ŝ − play_r(ŝ) for play operators of thresholds
   r spread over the sensor's range; any weighted sum is a rate-independent loop.
 * C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
@@ -196,8 +194,6 @@ class Spec:
     Attributes:
         degree: total degree of the static polynomial.
         local: the static map also has the local basis (:func:`local_terms`).
-        twist: the static polynomial is of the humerus axis and the axial rotation
-            (:func:`static_terms`) instead of the two humerus axes (``arm_axes`` inputs).
         local_ridge: the local functions' ridge (:class:`Ridge`).
         hysteresis: play-operator term on.
         creep_tau_s: time constants of the creep low-passes, s (empty = none).
@@ -232,7 +228,6 @@ class Spec:
 
     degree: int = 3
     local: bool = False
-    twist: bool = False
     local_ridge: float = LOCAL_RIDGES[0]
     hysteresis: bool = False
     creep_tau_s: tuple[float, ...] = ()
@@ -403,9 +398,6 @@ class Inputs:
         static_coef: (P, S) its coefficients on the degree-``static_degree`` basis.
         static_degree: degree of that basis.
         static_local: that basis has the local functions.
-        static_twist: that basis is of the humerus axis and the axial rotation.
-        twist: (N, 1) the axial rotation ψ scaled to [−1, 1] over its recorded range
-            (:func:`twist_input`); (N, 0) where the inputs have none (not ``arm_axes``).
         centres: (K, 3) centres of the local basis's functions (unit vectors; (0, 3): the
             map's inputs are not an arm direction, and no local basis is offered).
         thresholds: (S, K) play thresholds, sensor units.
@@ -435,8 +427,6 @@ class Inputs:
     segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     segment_sensors: tuple[int, ...] = ()
     static_local: bool = False
-    static_twist: bool = False
-    twist: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     centres: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     still: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     cache: dict = field(default_factory=dict)
@@ -469,24 +459,6 @@ def map_inputs(angles: np.ndarray, angle_names: tuple[str, ...], lo: np.ndarray,
             return np.hstack([rot[:, :, 1], rot[:, :, 0]]), "arm_axes"
         return rot[:, :, 1], "arm_direction"
     return scale_angles(angles, lo, hi), "angles"
-
-
-def twist_input(angles: np.ndarray, angle_names: tuple[str, ...], lo: np.ndarray,
-                hi: np.ndarray) -> np.ndarray:
-    """(N, 1) the axial rotation ψ (``shoulder_rot``) scaled to [−1, 1] over [lo, hi] for a
-    shoulder whose axial rotation is recorded (``arm_axes`` inputs), else (N, 0).
-
-    In the MoBL-ARMS coupled form the humerus is Ry(θ)·Rx(−φ)·Ry(−θ)·Ry(ψ): a swing that
-    takes the hanging humerus axis to its pose about a horizontal axis, then a twist ψ about
-    the humerus's own axis. ψ is that twist, defined with the arm hanging too (where θ is
-    not), so the humerus axis and ψ describe the pose with four inputs where the two axes
-    take six: a polynomial of them reaches higher degrees for the same number of columns.
-    """
-    names = list(angle_names)
-    if not {"elv_angle", "shoulder_elv", "shoulder_rot"} <= set(names):
-        return np.zeros((angles.shape[0], 0))
-    k = names.index("shoulder_rot")
-    return scale_angles(angles[:, k:k + 1], lo[k:k + 1], hi[k:k + 1])
 
 
 def joint_speed(angles: np.ndarray, angle_names: tuple[str, ...], rate_hz: float
@@ -587,28 +559,21 @@ def local_terms(u: np.ndarray, centres: np.ndarray) -> np.ndarray:
 
 
 def static_terms(u: np.ndarray, degree: int, segments: np.ndarray,
-                 centres: np.ndarray | None = None, twist: np.ndarray | None = None
-                 ) -> np.ndarray:
-    """(N, P) the static map's basis: Legendre products up to ``degree`` of ``u`` or, given
-    ``twist`` (N, 1) (:func:`twist_input`), of the humerus axis u[:, :3] and the twist; the
-    local functions of ``centres`` when given (:func:`local_terms`); then the lengths of the
-    straight runs ``segments`` (:func:`fit_segments`, always on the two axes ``u``)."""
+                 centres: np.ndarray | None = None) -> np.ndarray:
+    """(N, P) the static map's basis: Legendre products of ``u`` up to ``degree``, the local
+    functions of ``centres`` when given (:func:`local_terms`), then the lengths of the
+    straight runs ``segments`` (:func:`fit_segments`)."""
     local = (local_terms(u, centres) if centres is not None and centres.size
              else np.zeros((u.shape[0], 0)))
-    poly_of = u if twist is None else np.hstack([u[:, :3], twist])
-    return np.hstack([legendre_products(poly_of, degree)[0], local,
-                      segment_lengths(u, segments)])
+    return np.hstack([legendre_products(u, degree)[0], local, segment_lengths(u, segments)])
 
 
-def static_basis(inputs: Inputs, degree: int, local: bool = False, twist: bool = False
-                 ) -> np.ndarray:
-    """The static map's basis over the run's frames (cached per degree, local basis and
-    twist)."""
-    key = ("B", degree, local, twist)
+def static_basis(inputs: Inputs, degree: int, local: bool = False) -> np.ndarray:
+    """The static map's basis over the run's frames (cached per degree and local basis)."""
+    key = ("B", degree, local)
     if key not in inputs.cache:
         inputs.cache[key] = static_terms(inputs.u, degree, inputs.segments,
-                                         inputs.centres if local else None,
-                                         inputs.twist if twist else None)
+                                         inputs.centres if local else None)
     return inputs.cache[key]
 
 
@@ -855,7 +820,7 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
         own.append(rate_limit_column(inputs, j, spec.lag_rates[j], rate_hz))
     if spec.drift_degree:
         own.append(drift_columns(inputs.t_norm, spec.drift_degree, spec.drift_piecewise))
-    shared = lagged(static_basis, spec.degree, spec.local, spec.twist)  # every sensor's
+    shared = lagged(static_basis, spec.degree, spec.local)  # the same for every sensor
     return Design(shared=shared, own=np.hstack(own) if own else shared[:, :0])
 
 
@@ -974,8 +939,8 @@ class Ridge:
     @classmethod
     def of_map(cls, inputs: Inputs, spec: Spec) -> Ridge:
         """The ridge of a design whose static map is ``spec``'s."""
-        n_static = static_basis(inputs, spec.degree, spec.local, spec.twist).shape[1]
-        start = math.comb(spec.degree + (4 if spec.twist else inputs.u.shape[1]), spec.degree)
+        n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
+        start = math.comb(spec.degree + inputs.u.shape[1], spec.degree)
         count = inputs.centres.shape[0] if spec.local else 0
         return cls(n_static=n_static, static=spec.ridge, local=(start, start + count),
                    local_ridge=spec.local_ridge)
@@ -1488,7 +1453,6 @@ def make_inputs(trial: Trial, static_map: Spec | None = None) -> Inputs:
                     thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
                     t_span=(t0, t1))
     inputs.still = trial_motion(trial)[1]
-    inputs.twist = twist_input(trial.angles, trial.angle_names, lo, hi)
     if "segments" not in trial.cache:
         trial.cache["segments"] = fit_segments(trial, u, kind)
     inputs.segments, inputs.segment_sensors = trial.cache["segments"]
@@ -1499,8 +1463,7 @@ def make_inputs(trial: Trial, static_map: Spec | None = None) -> Inputs:
     if static_map is None:
         return inputs
     inputs.static_degree, inputs.static_local = static_map.degree, static_map.local
-    inputs.static_twist = static_map.twist
-    basis = static_basis(inputs, static_map.degree, static_map.local, static_map.twist)
+    basis = static_basis(inputs, static_map.degree, static_map.local)
     static_ridge = Ridge.of_map(inputs, static_map)
     coef = np.column_stack([fit_coefs(trial, Design.of(basis), trial.y[:, j], static_ridge)[-1]
                             for j in range(trial.n_sensors)])

@@ -27,7 +27,6 @@ from exohil.emulators.discrepancy.model import (
     joint_speed,
     map_inputs,
     static_terms,
-    twist_input,
 )
 from exohil.emulators.discrepancy.workflow import Outcome
 from exohil.emulators.effects import Noise, Signal
@@ -129,10 +128,8 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
             "angle_hi_deg": inputs.angle_hi.tolist(),
             "input_degree": inputs.static_degree,
             "input_local": inputs.static_local,
-            "input_twist": inputs.static_twist,
             "degree": spec.degree,
             "local": spec.local,
-            "twist": spec.twist,
             "local_centres": (inputs.centres.tolist()
                               if spec.local or inputs.static_local else []),
             "time_span_s": list(inputs.t_span),
@@ -239,7 +236,6 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
     try:
         sm, terms, sensors = data["static_map"], data["terms"], data["sensor"]
         spec = Spec(degree=int(sm["degree"]), local=bool(sm.get("local", False)),
-                    twist=bool(sm.get("twist", False)),
                     hysteresis=bool(terms["hysteresis"]),
                     creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
                     creep_quadratic=bool(terms.get("creep_quadratic", False)),
@@ -265,7 +261,6 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                         static_coef=np.column_stack([s["input_coef"] for s in sensors]),
                         static_degree=int(sm["input_degree"]),
                         static_local=bool(sm.get("input_local", False)),
-                        static_twist=bool(sm.get("input_twist", False)),
                         centres=_centres(sm.get("local_centres", [])),
                         thresholds=np.asarray([s["play_thresholds"] for s in sensors]),
                         t_norm=np.empty(0),
@@ -278,9 +273,6 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                 inputs.input_kind != "arm_direction" or not inputs.centres.size):
             raise ValueError("a static map with the local basis needs arm_direction inputs "
                              "and local_centres")
-        if (spec.twist or inputs.static_twist) and inputs.input_kind != "arm_axes":
-            raise ValueError("a static map of the arm axis and twist needs arm_axes inputs "
-                             "(the axial rotation recorded)")
         counts = {s["name"]: len(s["coef"]) for s in sensors}
         if len(set(counts.values())) > 1:
             raise ValueError(f"sensors have different numbers of coef: {counts}")
@@ -300,23 +292,19 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
 
 def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inputs:
     """The model's inputs for angles (N, A) in degrees (``suit.angles`` order) at times t."""
-    lo, hi = suit.inputs.angle_lo, suit.inputs.angle_hi
-    u, _ = map_inputs(angles_deg, suit.angles, lo, hi)
+    u, _ = map_inputs(angles_deg, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
     t0, t1 = suit.inputs.t_span
     inputs = Inputs(u=u, input_kind=suit.inputs.input_kind, angle_lo=suit.inputs.angle_lo,
                     angle_hi=suit.inputs.angle_hi, static=np.empty(0),
                     static_coef=suit.inputs.static_coef,
                     static_degree=suit.inputs.static_degree,
-                    static_local=suit.inputs.static_local,
-                    static_twist=suit.inputs.static_twist,
-                    twist=twist_input(angles_deg, suit.angles, lo, hi),
-                    centres=suit.inputs.centres, thresholds=suit.inputs.thresholds,
+                    static_local=suit.inputs.static_local, centres=suit.inputs.centres,
+                    thresholds=suit.inputs.thresholds,
                     t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1),
                     centre=suit.inputs.centre, segments=suit.inputs.segments,
                     still=holding_still(joint_speed(angles_deg, suit.angles, suit.rate_hz)))
     inputs.static = static_terms(u, inputs.static_degree, inputs.segments,
-                                 inputs.centres if inputs.static_local else None,
-                                 inputs.twist if inputs.static_twist else None
+                                 inputs.centres if inputs.static_local else None
                                  ) @ inputs.static_coef
     return inputs
 
@@ -326,12 +314,9 @@ def _check_coef_counts(suit: CalibratedSuit) -> None:
     and each sensor one coefficient per column of its model (a design of two frames at the
     neutral pose gives the counts)."""
     neutral = np.zeros((2, len(suit.angles)))
-    lo, hi = suit.inputs.angle_lo, suit.inputs.angle_hi
-    u, _ = map_inputs(neutral, suit.angles, lo, hi)
+    u, _ = map_inputs(neutral, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
     n_terms = static_terms(u, suit.inputs.static_degree, suit.inputs.segments,
-                           suit.inputs.centres if suit.inputs.static_local else None,
-                           twist_input(neutral, suit.angles, lo, hi)
-                           if suit.inputs.static_twist else None).shape[1]
+                           suit.inputs.centres if suit.inputs.static_local else None).shape[1]
     if suit.inputs.static_coef.shape[0] != n_terms:
         runs = suit.inputs.segments.shape[1]
         raise ValueError(f"input_coef has {suit.inputs.static_coef.shape[0]} terms per "

@@ -149,23 +149,13 @@ class Outcome:
     summary: dict
 
 
-#: Static polynomial degrees tried per number of inputs (an arm direction has 3, the arm
-#: axes 6, the humerus axis with the twist 4; any other joint its angles).
-_DEGREES = {1: range(1, 8), 2: range(2, 7), 3: range(2, 6), 4: range(4, 7)}
-
-
 def _static_maps(inputs: Inputs) -> list[Spec]:
     """Static maps tried, each with every ridge: more polynomial degrees for fewer inputs
-    (the basis grows as degree^inputs), for an arm direction also the local basis beside
-    a cubic (:func:`~.model.local_terms`) with each of its ridges, and with the axial
-    rotation recorded also polynomials of the humerus axis and the twist
-    (:func:`~.model.twist_input`; four inputs where the two axes are six, so degrees 4–6
-    for about the columns of the axes' cubic to 2.5 times them)."""
-    degrees = _DEGREES.get(inputs.u.shape[1], range(2, 4))
+    (the basis grows as degree^inputs), and for an arm direction also the local basis beside
+    a cubic (:func:`~.model.local_terms`) with each of its ridges."""
+    n_inputs = inputs.u.shape[1]
+    degrees = {1: range(1, 8), 2: range(2, 7), 3: range(2, 6)}.get(n_inputs, range(2, 4))
     maps = [Spec(degree=d, ridge=r) for d in degrees for r in STATIC_RIDGES]
-    if inputs.twist.shape[1]:
-        maps += [Spec(degree=d, twist=True, ridge=r) for d in _DEGREES[4]
-                 for r in STATIC_RIDGES]
     if inputs.centres.shape[0]:
         maps += [Spec(degree=LOCAL_DEGREE, local=True, local_ridge=q, ridge=r)
                  for q in LOCAL_RIDGES for r in LOCAL_STATIC_RIDGES]
@@ -173,37 +163,33 @@ def _static_maps(inputs: Inputs) -> list[Spec]:
 
 
 def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
-    """The static map with the lowest held-out gap, except that a flexible map (with the
-    local basis, or of the arm axis and twist to degree 4–6) must also beat the best plain
-    polynomial bent at stops (saturation) by more than the noise, by rules 1 and 2 (the bar
-    an effect must clear to be named). A stop is a static bend of the reading that a
-    flexible map can follow too, taking it in as the pose's doing; so can a loop where the
-    arm goes out and back on different paths. Of a flexible map and a physical
-    explanation, the workflow keeps the second unless the flexible map predicts the
-    held-out blocks better by more than it would take to name an effect (``floor``: the
-    recording's pooled noise RMS, the bar's σ). Without rule 2's sign test: a flexible map
-    helps where the poses it follows better are, so on some blocks more than others."""
+    """The static map with the lowest held-out gap, except that a map with the local basis
+    must also beat the best polynomial bent at stops (saturation) by more than the noise,
+    by rules 1 and 2 (the bar an effect must clear to be named). A stop is a static bend
+    of the reading that local functions can follow too, taking it in as the pose's doing;
+    so can a loop where the arm goes out and back on different paths. Of a flexible map and
+    a physical explanation, the workflow keeps the second unless the local functions predict
+    the held-out blocks better by more than it would take to name an effect (``floor``:
+    the recording's pooled noise RMS, the bar's σ). Without rule 2's sign test: local
+    functions help where the poses they cover are, so on some blocks more than others."""
     fits = [fit(trial, inputs, static_map) for static_map in _static_maps(inputs)]
     best = min(fits, key=lambda f: f.gap)
-    if not (best.spec.local or best.spec.twist):
+    if not best.spec.local:
         return best
-    polynomial = min((f for f in fits if not (f.spec.local or f.spec.twist)),
-                     key=lambda f: f.gap)
+    polynomial = min((f for f in fits if not f.spec.local), key=lambda f: f.gap)
     bent = _best(trial, inputs, "saturation", polynomial.spec)
     return best if _rules(bent.block_mse, best.block_mse, floor)["beyond_noise"] else polynomial
 
 
 def _map_of(spec: Spec) -> tuple:
     """What identifies ``spec``'s static map."""
-    return ((spec.degree, spec.ridge, spec.twist)
-            + ((spec.local_ridge,) if spec.local else ()))
+    return (spec.degree, spec.ridge) + ((spec.local_ridge,) if spec.local else ())
 
 
 def _map_words(spec: Spec, inputs: Inputs) -> str:
     """The static map in words: "degree 4", or "degree 3 and 212 local functions"."""
     return (f"degree {spec.degree}"
-            + (f" and {inputs.centres.shape[0]} local functions" if spec.local else "")
-            + (" of the arm axis and axial rotation" if spec.twist else ""))
+            + (f" and {inputs.centres.shape[0]} local functions" if spec.local else ""))
 
 
 def _candidates(kind: str, spec: Spec) -> list[Spec]:
@@ -360,7 +346,7 @@ def _rate_limit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     grid = np.log(np.column_stack([np.quantile(v[v > 0] if (v > 0).any() else np.ones(1),
                                                RATE_LIMIT_QUANTILES) for v in speed.T]))
     sensors = np.arange(grid.shape[1])
-    n_static = static_basis(inputs, spec.degree, spec.local, spec.twist).shape[1]
+    n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
 
     def at(log_rates: np.ndarray) -> tuple[Fit, np.ndarray]:
         """The fit with these limits and its held-out mean squared error per sensor (+inf
@@ -549,15 +535,13 @@ def _keep_stops(current: Fit) -> Fit:
 def _best_degree(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     """Re-choose the static map's degree and ridges with the effect terms in place: an
     unexplained effect makes the static-only fit prefer a stiffer map than the suit needs.
-    The map keeps its kind (a polynomial of its inputs, local functions, or a polynomial of
-    the arm axis and twist) chosen at calibration: trying the local functions under every
-    effect, each with its lag, cost minutes per recording."""
+    The map keeps its kind (a polynomial, or local functions) chosen at calibration: trying
+    the local functions under every effect, each with its lag, cost minutes per recording."""
     spec = current.spec
     others = [fit(trial, inputs, replace(spec, degree=m.degree, local=m.local,
-                                         local_ridge=m.local_ridge, twist=m.twist,
-                                         ridge=m.ridge))
+                                         local_ridge=m.local_ridge, ridge=m.ridge))
               for m in _static_maps(inputs)
-              if (m.local, m.twist) == (spec.local, spec.twist) and _map_of(m) != _map_of(spec)]
+              if m.local == spec.local and _map_of(m) != _map_of(spec)]
     return min([current] + others, key=lambda f: f.gap)
 
 
@@ -578,7 +562,7 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     """The fitted parameters of one effect term, per sensor where they differ (sensor units
     unless the name says otherwise)."""
     spec = result.spec
-    n_static = static_basis(inputs, spec.degree, spec.local, spec.twist).shape[1]
+    n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
     cols = _column_slices(spec, n_static, inputs.thresholds.shape[1]).get(kind, slice(0, 0))
     if kind == "hysteresis":
         weights = [c[cols] for c in result.coef]
@@ -821,7 +805,7 @@ def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
 
 
 def _config(spec: Spec) -> dict:
-    return {"degree": spec.degree, "local": spec.local, "twist": spec.twist,
+    return {"degree": spec.degree, "local": spec.local,
             **({"local_ridge": spec.local_ridge} if spec.local else {}),
             "hysteresis": spec.hysteresis,
             "creep_tau_s": list(spec.creep_tau_s), "creep_quadratic": spec.creep_quadratic,
@@ -1000,7 +984,6 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
         "static_map": {"kind": ("legendre_polynomial_and_local" if spec.local
-                                else "legendre_polynomial_of_axis_and_twist" if spec.twist
                                 else "legendre_polynomial"), "degree": spec.degree,
                        "local_functions": inputs.centres.shape[0] if spec.local else 0,
                        "ridge": spec.ridge,
