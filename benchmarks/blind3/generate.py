@@ -10,6 +10,8 @@ held-out benchmark can be re-run (``benchmarks/blind3/README.md``). Run from the
 root: ``python -m benchmarks.blind3.generate --out DIR [--only N ...] [--without-effect]``.
 ``--without-effect`` writes each recording's clean twin: every draw the same (motion, suit,
 noise, clock), the hidden effect computed but not applied, labelled clean in truth.json.
+``--duration S --sensors N`` (timing only, with ``--only``) override a recording's drawn
+length and tendon count; what is drawn after them differs, so it is no longer one of the 40.
 """
 from __future__ import annotations
 
@@ -768,10 +770,13 @@ def magnitude(tr, x_off, x_on, touched):
     return float(np.sqrt(np.mean(z**2)))
 
 
-def generate(idx, eff, fam, target, seed, out, with_effect=True):
+def generate(idx, eff, fam, target, seed, out, with_effect=True, duration_s=None, n_sensors=None):
     rng = np.random.default_rng(seed)
     duration = float(rng.uniform(60, 200))
     n_sens = int(rng.integers(2, 8))
+    # timing only (added by the project): the draws are made, then overridden
+    duration = duration if duration_s is None else float(duration_s)
+    n_sens = n_sens if n_sensors is None else int(n_sensors)
     psi_varies = idx % 2 == 0
     psi_fixed = float(np.round(rng.uniform(-15, 15), 1)) if rng.random() < 0.7 else 0.0
     unit = str(rng.choice(["mm", "V", "counts", "counts16", "mrad"], p=[0.3, 0.2, 0.2, 0.1, 0.2]))
@@ -997,7 +1002,13 @@ def main() -> None:
                         help="regenerate only these recordings (truth.json left as it is)")
     parser.add_argument("--without-effect", action="store_true",
                         help="write each recording's clean twin: the same draws, no effect")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="timing only (with --only): this length, s, instead of the drawn one")
+    parser.add_argument("--sensors", type=int, default=None,
+                        help="timing only (with --only): tendons (2-8) instead of the drawn count")
     args = parser.parse_args()
+    if (args.duration is not None or args.sensors is not None) and not args.only:
+        parser.error("--duration and --sensors are for timing single recordings: give --only")
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(MASTER_SEED)
@@ -1010,7 +1021,8 @@ def main() -> None:
         if only and i not in only:
             continue
         ts = time.time()
-        tr = generate(i, eff, fam, tgt, int(seeds[i]), out, not args.without_effect)
+        tr = generate(i, eff, fam, tgt, int(seeds[i]), out, not args.without_effect,
+                      args.duration, args.sensors)
         truths.append(tr)
         print(f"{tr['file']} {tr['effect']:10s} {tr['family']:26s} "
               f"mag={tr['magnitude_x_noise']:6.2f} "
