@@ -938,6 +938,26 @@ def test_rate_limit_follows_at_most_its_rate():
     np.testing.assert_allclose(never.residual, fit(trial, inputs, Spec()).residual, atol=1e-9)
 
 
+def test_rate_limit_is_the_frame_by_frame_limiter():
+    """The limiter skips the frames where the reading keeps up: exactly the frame-by-frame
+    recursion y = x clipped to y_prev ± step, on signals that fall behind often, rarely,
+    for long and never."""
+    def per_frame(x: np.ndarray, step: float) -> np.ndarray:
+        y, out = x[0], np.empty_like(x)
+        for i, target in enumerate(x):
+            y = y + step if target > y + step else y - step if target < y - step else target
+            out[i] = y
+        return out
+
+    rng = np.random.default_rng(4)
+    for _ in range(60):
+        n = int(rng.integers(1, 800))
+        x = (np.cumsum(rng.normal(size=n)) * rng.uniform(0.05, 3.0)
+             + rng.choice([0.0, 30.0]) * np.sin(np.arange(n) / rng.uniform(3.0, 60.0)))
+        rate = rng.uniform(0.01, 10.0) * 250.0
+        np.testing.assert_array_equal(rate_limit(x, rate, 250.0), per_frame(x, rate / 250.0))
+
+
 def _slew_limited_recording(seed: int, duration_s: float, sign: float = 1.0) -> Recording:
     """A suit whose readings follow at most at the 98th percentile of their own speed (a
     slew-rate limit, written here apart from the workflow's), then white noise. With
@@ -1269,8 +1289,10 @@ def test_a_slip_step_is_followed_by_a_piecewise_linear_drift(clean_101, tmp_path
 
 def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
     """The fold fits' shortcuts (the shared columns' Gram matrices kept per row selection
-    and reused by every sensor, rows weighted in a stop's knee correcting them) solve the
-    plain ridge system of each fold: Σ w²·x·xᵀ and Σ w·x·t over its rows, formed directly."""
+    and reused by every sensor, each fold's static block factored once and the rest solved by
+    block elimination, rows weighted in a stop's knee correcting them, the all-block fit
+    alone) solve the plain ridge system of each fold: Σ w²·x·xᵀ and Σ w·x·t over its rows,
+    formed directly."""
     trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
     inputs = make_inputs(trial, Spec(degree=2))
     spec = Spec(degree=2, hysteresis=True, drift_degree=2)
@@ -1285,6 +1307,8 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
         for ok in (usable, usable & (rng.random(m) > 0.1)):
             for weights, target in ((None, None), (knees, red.yd + rng.normal(size=m))):
                 got = model.fold_coefs(red, ok, ridge, weights, target)
+                np.testing.assert_array_equal(
+                    model.fold_coefs(red, ok, ridge, weights, target, folds=False), got[-1:])
                 xw = red.xd * (np.ones(m) if weights is None else weights)[:, None]
                 t = red.yd if target is None else target
                 effect = ridge.effect_loading(xw[ok].T @ xw[ok])
@@ -1295,12 +1319,13 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
                     # the basis is nearly collinear: compared where it matters, as fits
                     np.testing.assert_allclose(red.xd @ got[b], red.xd @ want, rtol=0,
                                                atol=1e-9 * np.abs(red.yd).max())
+        assert red.shared_grams.factors  # the unweighted fits took the factored path
 
 
 def test_designs_and_fold_products_are_their_plain_definitions():
     """The fits' shortcuts (effect terms lagged once per lag and kept, the shared basis
-    lagged and sorted once, predictions formed block by block) give the numbers of the plain
-    construction, for lags asked in turn and back again, on every sensor."""
+    lagged once, predictions formed run by run of a held-out block) give the numbers of the
+    plain construction, for lags asked in turn and back again, on every sensor."""
     trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
     inputs = make_inputs(trial, Spec(degree=2))
     rate = trial.rate_hz

@@ -358,17 +358,29 @@ def rate_limit(x: np.ndarray, rate: float, rate_hz: float) -> np.ndarray:
     """x (N,) through a slew-rate limit: the output follows x but changes by at most
     ``rate`` (units/s) per second, starting at x[0]."""
     step = rate / rate_hz
-    out = np.empty(x.shape[0])
-    y = float(x[0])
-    for i, target in enumerate(x.tolist()):  # floats: a numpy scalar per frame is 10× slower
-        if target > y + step:
-            y += step
-        elif target < y - step:
-            y -= step
-        else:
-            y = target
-        out[i] = y
-    return out
+    out = np.array(x, dtype=float)  # on the target wherever it has kept up
+    values = out.tolist()  # floats: a numpy scalar per frame is 10× slower
+    # the frames a reading on the target one frame before cannot reach: only from these
+    # on does it fall behind, and the loop runs until it has caught up
+    behind = np.flatnonzero((out[1:] > out[:-1] + step) | (out[1:] < out[:-1] - step)) + 1
+    i, n = 0, len(values)
+    while True:
+        k = int(np.searchsorted(behind, i))
+        if k == len(behind):
+            return out
+        i = int(behind[k])
+        y = values[i - 1]
+        while i < n:
+            target = values[i]
+            if target > y + step:
+                y += step
+            elif target < y - step:
+                y -= step
+            else:  # caught up: on the target from here to the next frame out of reach
+                i += 1
+                break
+            out[i] = y
+            i += 1
 
 
 def apply_lag(x: np.ndarray, kind: str, value_s: float, rate_hz: float,
@@ -898,17 +910,25 @@ class Fit:
         return np.sqrt(np.nanmean(self.residual**2, axis=0))
 
 
-def _solve(gram: np.ndarray, rhs: np.ndarray, loading: np.ndarray) -> np.ndarray:
-    """Ridge solve with ``loading`` (..., P) added to the Gram matrix's diagonal (the columns
-    are scaled to unit norm for the solve, for conditioning); ``gram`` (..., P, P) and
-    ``rhs`` (..., P) may be stacks (one LAPACK call for all folds). A column that is zero on
-    every fitted frame (a rate limit no move reaches) gets coefficient 0."""
+def _equilibrate(gram: np.ndarray, loading: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``gram`` (..., P, P) with the loading (..., P) on its diagonal, its columns scaled
+    to unit norm (for conditioning), and the scale (..., P). A column that is zero on every
+    fitted frame (a rate limit no move reaches) gets 1 on the diagonal: coefficient 0."""
     diag = np.diagonal(gram, axis1=-2, axis2=-1)
     dead = diag <= 0
     scale = np.sqrt(np.where(dead, 1.0, diag))
     g = gram / (scale[..., :, None] * scale[..., None, :])
     on_diagonal = np.arange(gram.shape[-1])
     g[..., on_diagonal, on_diagonal] += loading / scale**2 + dead
+    return g, scale
+
+
+def _solve(gram: np.ndarray, rhs: np.ndarray, loading: np.ndarray) -> np.ndarray:
+    """Ridge solve with ``loading`` (..., P) added to the Gram matrix's diagonal
+    (:func:`_equilibrate`); ``gram`` (..., P, P) and ``rhs`` (..., P) may be stacks (one per
+    fold)."""
+    g, scale = _equilibrate(gram, loading)
     return np.linalg.solve(g, (rhs / scale)[..., None])[..., 0] / scale
 
 
@@ -1048,10 +1068,12 @@ class Reduced:
 class SharedGrams:
     """The per-block Gram matrices (N_BLOCKS, Ps, Ps) of a shared block's first ``ps``
     columns of the averaged design, kept for the last ``KEPT_GRAMS`` row selections:
-    every sensor of a fit asks for the same ones."""
+    every sensor of a fit asks for the same ones; and for as many row selections and
+    static ridges, each fold's static system factored (:meth:`factored`)."""
 
     ps: int
     by_rows: dict[bytes, np.ndarray] = field(default_factory=dict)
+    factors: dict[tuple, StaticFactors | None] = field(default_factory=dict)
 
     def of(self, xd: np.ndarray, ok: np.ndarray, bounds: np.ndarray) -> np.ndarray:
         """(N_BLOCKS, Ps, Ps) for the design's rows ``ok`` (M,), rows sorted by block
@@ -1067,6 +1089,44 @@ class SharedGrams:
                 grams[b] = xs.T @ xs
             self.by_rows[key] = grams
         return grams
+
+    def factored(self, xd: np.ndarray, ok: np.ndarray, bounds: np.ndarray, ridge: Ridge
+                 ) -> StaticFactors | None:
+        """Each fold's static system for the rows ``ok`` with ``ridge``'s static loading,
+        factored; None where one is not positive definite in floating point."""
+        key = (ok.tobytes(), ridge.static, ridge.local, ridge.local_ridge)
+        if key not in self.factors:
+            if len(self.factors) >= KEPT_GRAMS:
+                del self.factors[next(iter(self.factors))]
+            grams = self.of(xd, ok, bounds)
+            total = grams.sum(axis=0)
+            folds = np.concatenate([total - grams, total[None]])
+            diag = np.diagonal(folds, axis1=-2, axis2=-1)
+            g, scale = _equilibrate(folds, ridge.static_loading(diag))
+            try:
+                inverse = np.linalg.inv(np.linalg.cholesky(g))
+            except np.linalg.LinAlgError:
+                self.factors[key] = None
+            else:
+                self.factors[key] = StaticFactors(scale=scale, inverse_chol=inverse)
+        return self.factors[key]
+
+
+@dataclass(frozen=True)
+class StaticFactors:
+    """The static block A = L·Lᵀ of each fold's ridge system (:func:`_equilibrate`): its
+    scale (N_BLOCKS + 1, Ps) and the inverse of its Cholesky factor L⁻¹ (N_BLOCKS + 1,
+    Ps, Ps), the last the all-block fit's. (NumPy has no triangular solve; SciPy's LAPACK
+    runs on a second OpenBLAS whose threads contend with NumPy's: twice as slow on two
+    cores.)"""
+
+    scale: np.ndarray
+    inverse_chol: np.ndarray
+
+    def solve(self, f: int, rhs: np.ndarray) -> np.ndarray:
+        """Fold f's equilibrated static system solved for ``rhs`` (Ps, K): L⁻ᵀ(L⁻¹ rhs)."""
+        inverse = self.inverse_chol[f]
+        return inverse.T @ (inverse @ rhs)
 
 
 def fit_groups(trial: Trial) -> Groups:
@@ -1122,12 +1182,16 @@ def fit_coefs(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = None
 
 
 def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
-                target: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                target: np.ndarray | None = None, static: bool = True,
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Per-block Gram matrices (N_BLOCKS, P, P) and right-hand sides (N_BLOCKS, P) of the
-    rows ``ok`` (M,) of the averaged design, each row times ``weights`` (M,; default 1),
-    against ``target`` (M,; default the averaged measurement). The shared columns'
-    unweighted Gram matrices come formed (``red.shared_grams``, the same for every sensor
-    of a fit); only rows whose weight is not 1 (in a stop's knee) correct them."""
+    rows ``ok`` (M,) of the averaged design, each row times ``weights`` (M,; default 1; at
+    most 1: the slopes of a stop), against ``target`` (M,; default the averaged
+    measurement). The shared columns' unweighted Gram matrices come formed
+    (``red.shared_grams``, the same for every sensor of a fit); only rows whose weight is
+    not 1 (in a stop's knee) correct them. With
+    ``static`` False (unweighted only), the shared columns' block is left unset, for a
+    caller that has it factored."""
     p = red.xd.shape[1]
     y = red.yd if target is None else target
     grams = np.empty((N_BLOCKS, p, p))
@@ -1136,7 +1200,8 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
     ps = 0
     if red.shared_grams is not None:
         ps = red.shared_grams.ps
-        grams[:, :ps, :ps] = red.shared_grams.of(red.xd, ok, bounds)
+        if static:
+            grams[:, :ps, :ps] = red.shared_grams.of(red.xd, ok, bounds)
     for b in range(N_BLOCKS):
         rows = slice(bounds[b], bounds[b + 1])
         xb, yb, keep = red.xd[rows], y[rows], ok[rows]
@@ -1144,73 +1209,126 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
         if not keep.all():  # a view where every row counts (no copy)
             xb, yb = xb[keep], yb[keep]
             wb = None if wb is None else wb[keep]
+        own = xb[:, ps:]
         if wb is not None:
             bent = wb != 1.0
             if ps and bent.any():
-                xs = xb[bent, :ps]
-                grams[b, :ps, :ps] += (xs * (wb[bent] ** 2 - 1.0)[:, None]).T @ xs
-            xb = xb * wb[:, None]
-        grams[b, :, ps:] = xb.T @ xb[:, ps:]
+                # the rows' share 1 − w² taken out; zᵀz of one array is a symmetric
+                # rank-k update in BLAS, half the work of a general product
+                z = xb[bent, :ps] * np.sqrt(1.0 - wb[bent] ** 2)[:, None]
+                grams[b, :ps, :ps] -= z.T @ z
+            own, yb = own * (wb**2)[:, None], yb * wb  # the weights of both factors
+        grams[b, :, ps:] = xb.T @ own
         grams[b, ps:, :ps] = grams[b, :ps, ps:].T
         rhs[b] = xb.T @ yb
     return grams, rhs
 
 
 def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge, weights: np.ndarray | None = None,
-               target: np.ndarray | None = None) -> np.ndarray:
+               target: np.ndarray | None = None, folds: bool = True) -> np.ndarray:
     """(N_BLOCKS + 1, P) ridge coefficients: row b fitted without block b, the last row on
     every block (one Gram matrix per block, :func:`block_grams`; a fold's is the total
-    minus its block's)."""
+    minus its block's); with ``folds`` False, only the last row, (1, P). Without weights,
+    the shared static block's factors are reused (:func:`_fold_coefs_factored`)."""
+    shared = red.shared_grams
+    if weights is None and shared is not None and shared.ps == ridge.n_static:
+        bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))
+        factors = shared.factored(red.xd, ok, bounds, ridge)
+        if factors is not None:
+            return _fold_coefs_factored(red, ok, ridge, factors, target, folds)
     grams, rhs = block_grams(red, ok, weights, target)
     gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
     effect = ridge.effect_loading(gram_all)
     # fold b's Gram matrix is the total minus block b's; the last is the total
-    fold_grams = np.concatenate([gram_all - grams, gram_all[None]])
-    fold_rhs = np.concatenate([rhs_all - rhs, rhs_all[None]])
+    fold_grams = np.concatenate([gram_all - grams, gram_all[None]]) if folds else gram_all[None]
+    fold_rhs = np.concatenate([rhs_all - rhs, rhs_all[None]]) if folds else rhs_all[None]
     return _solve(fold_grams, fold_rhs, ridge.loading(fold_grams, effect))
+
+
+def _fold_coefs_factored(red: Reduced, ok: np.ndarray, ridge: Ridge, factors: StaticFactors,
+                         target: np.ndarray | None, folds: bool = True) -> np.ndarray:
+    """:func:`fold_coefs` by block elimination: each fold's static block is factored once
+    for every sensor and candidate that shares it (``factors``), so a fit solves only its
+    effect columns' Schur complement, of their count, instead of the whole system.
+
+    With the equilibrated system [[A, B], [Bᵀ, C]] [βs; βe] = [rs; re] (A the static
+    block): (C − Bᵀ A⁻¹ B) βe = re − Bᵀ A⁻¹ rs, then βs = A⁻¹ (rs − B βe). The effect
+    columns' ridge uses the all-block A as :meth:`Ridge.effect_loading` does.
+    """
+    ps = factors.scale.shape[1]
+    grams, rhs = block_grams(red, ok, target=target, static=False)
+    cross_all, rhs_all = grams[:, :, ps:].sum(axis=0), rhs.sum(axis=0)
+    cross = np.concatenate([cross_all - grams[:, :, ps:], cross_all[None]])  # (F, P, Pe)
+    fold_rhs = np.concatenate([rhs_all - rhs, rhs_all[None]])
+    n_folds, pe = cross.shape[0], cross.shape[2]
+    coefs = np.empty(fold_rhs.shape)
+    order = range(n_folds) if folds else [n_folds - 1]
+    effect = np.empty(0)
+    if pe:  # the effect columns' ridge: the energy each adds beyond the static map
+        scale_all = factors.scale[-1][:, None]
+        g_se = cross_all[:ps]
+        through = factors.solve(-1, g_se / scale_all) / scale_all  # A_all⁻¹ g_se, unscaled
+        diag_all = np.diagonal(cross_all[ps:])
+        added = diag_all - np.einsum("ij,ij->j", g_se, through)
+        effect = ridge.effect * np.maximum(added, 1e-12 * diag_all)
+    for f in order:
+        s_s = factors.scale[f]
+        r_s = fold_rhs[f, :ps] / s_s
+        if not pe:
+            coefs[f] = factors.solve(f, r_s[:, None])[:, 0] / s_s
+            continue
+        c, s_e = _equilibrate(cross[f, ps:], effect)
+        b = cross[f, :ps] / (s_s[:, None] * s_e[None, :])
+        z = factors.solve(f, np.column_stack([b, r_s]))  # A⁻¹ [B | rs]
+        schur = c - b.T @ z[:, :pe]
+        beta_e = np.linalg.solve(schur, fold_rhs[f, ps:] / s_e - b.T @ z[:, pe])
+        coefs[f, :ps] = (z[:, pe] - z[:, :pe] @ beta_e) / s_s
+        coefs[f, ps:] = beta_e / s_e
+    return coefs if folds else coefs[-1:]
+
+
+def block_runs(trial: Trial) -> tuple[np.ndarray, np.ndarray]:
+    """The trial's runs of consecutive frames held out by one block: (R + 1,) frame bounds
+    and (R,) the block of each run."""
+    kept = trial.cache.get("block_runs")
+    if kept is None:
+        bounds = np.concatenate([[0], np.flatnonzero(np.diff(trial.blocks)) + 1, [trial.n]])
+        kept = trial.cache["block_runs"] = (bounds, trial.blocks[bounds[:-1]])
+    return kept
 
 
 def fold_products(trial: Trial, designs: Sequence[Design], coefs: Sequence[np.ndarray],
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Each design times its fold coefficients (N_BLOCKS + 1, P): (held, full), each (N, K)
     for K designs: every frame times the row of the fold that held it out, and every frame
-    times the last row. All come from one pass over the frames sorted by block (a shared
-    block sorted once per design that shares it): each shared block is read once, in
-    N_BLOCKS products for every design that shares it (all sensors of one fit), instead of
-    once per sensor, per 2.5 s run of a block and once more for the full fit."""
-    kept = trial.cache.get("by_block")
-    if kept is None:
-        order = np.argsort(trial.blocks, kind="stable")
-        bounds = np.searchsorted(trial.blocks[order], np.arange(N_BLOCKS + 1))
-        kept = trial.cache["by_block"] = (order, bounds)
-    order, bounds = kept
-    out = np.empty((trial.n, 2, len(designs)))  # [:, 0]: held, [:, 1]: full; sorted by block
+    times the last row. A shared block is read once, a run of one held-out block at a time
+    (:func:`block_runs`, in place: no sorted copy), in one product for every design that
+    shares it (all sensors of one fit) and both rows, formed transposed (coefficients times
+    the run's transpose: the faster BLAS product for this narrow a result)."""
+    bounds, run_block = block_runs(trial)
+    out = np.empty((2, len(designs), trial.n))  # [0]: held, [1]: full
     sharing: dict[int, list[int]] = {}
     for k, x in enumerate(designs):
         sharing.setdefault(id(x.shared), []).append(k)
     for members in sharing.values():
-        sorted_shared = trial.cache.get("shared_by_block")
-        if sorted_shared is None or sorted_shared[0] is not designs[members[0]].shared:
-            basis = designs[members[0]].shared
-            sorted_shared = trial.cache["shared_by_block"] = (basis, basis[order])
-        shared = sorted_shared[1]
-        ps = shared.shape[1]
-        for b in range(N_BLOCKS):
-            rows = slice(bounds[b], bounds[b + 1])
-            # (Ps, 2·members): per design, the fold without block b and the full fit
-            pairs = np.stack([coefs[k][[b, -1], :ps].T for k in members], axis=-1)
-            out[rows][:, :, members] = (shared[rows] @ pairs.reshape(ps, -1)).reshape(
-                -1, 2, len(members))
+        ps = designs[members[0]].shared.shape[1]
+        run_t = designs[members[0]].shared.T  # (Ps, N), a view
+        # per block b, (2·members, Ps): the fold without block b, then the full fit, of each
+        full = [coefs[k][-1, :ps] for k in members]
+        pairs = [np.stack([coefs[k][b, :ps] for k in members] + full) for b in range(N_BLOCKS)]
+        for start, stop, b in zip(bounds[:-1], bounds[1:], run_block, strict=True):
+            product = (pairs[b] @ run_t[:, start:stop]).reshape(2, len(members), -1)
+            if len(members) == len(designs):  # members is 0 … K − 1
+                out[:, :, start:stop] = product
+            else:
+                out[:, members, start:stop] = product
+    frames = np.arange(trial.n)
     for k, x in enumerate(designs):
-        if not x.own.shape[1]:
-            continue
-        own, ps = x.own[order], x.shared.shape[1]
-        for b in range(N_BLOCKS):
-            rows = slice(bounds[b], bounds[b + 1])
-            out[rows, :, k] += own[rows] @ coefs[k][[b, -1], ps:].T
-    products = np.empty_like(out)
-    products[order] = out
-    return products[:, 0], products[:, 1]
+        if x.own.shape[1]:
+            own = x.own @ coefs[k][:, x.shared.shape[1]:].T  # (N, N_BLOCKS + 1), narrow
+            out[0, k] += own[frames, trial.blocks]
+            out[1, k] += own[:, -1]
+    return out[0].T, out[1].T
 
 
 def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
@@ -1224,7 +1342,8 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
     the knees too, where it would otherwise be extrapolated. The first ``shared`` iterations
     linearise every fold at the all-block fit's prediction (one Gram matrix per block, as in
     :func:`fold_coefs`); the last ``own`` linearise each fold at its own prediction, so that no
-    fold's fit depends on its held-out block.
+    fold's fit depends on its held-out block. Every shared iteration but the last needs only
+    the all-block fit (the next is linearised at it).
     """
     def linearised(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each row's weight h′(ŝ) and target y − h(ŝ) + h′(ŝ)·ŝ, at ŝ = x·coef."""
@@ -1232,9 +1351,10 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
         slope = stops.slope(pred)
         return slope, red.yd - stops.apply(pred) + slope * pred
 
-    coefs = coefs.copy()
-    for _ in range(shared):
-        coefs = fold_coefs(red, ok, ridge, *linearised(coefs[-1]))
+    full = coefs[-1]
+    for _ in range(shared - 1):
+        full = fold_coefs(red, ok, ridge, *linearised(full), folds=False)[-1]
+    coefs = fold_coefs(red, ok, ridge, *linearised(full)) if shared else coefs.copy()
     for _ in range(own):
         grams = np.empty(coefs.shape + coefs.shape[1:])
         rhs = np.empty(coefs.shape)
@@ -1275,14 +1395,16 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
     seen = y[trial.valid]
     extremes = float(np.min(seen)), float(np.max(seen))
     best: tuple[float, Stops] | None = None
-    # options are compared on the averaged groups (as the fits see them) of scored frames
-    scored = red.rows.usable(trial.scored)
-    rows = [np.flatnonzero(scored & (red.rows.bd == b)) for b in range(N_BLOCKS)]
+    # options are compared on the averaged groups (as the fits see them) of scored frames;
+    # rows are sorted by block, those of no block (−1) first
+    bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))
+    blocks = [red.xd[bounds[b]:bounds[b + 1]] for b in range(N_BLOCKS)]  # views
+    scored = red.rows.usable(trial.scored)[bounds[0]:]
+    measured = red.yd[bounds[0]:][scored]
 
     def heldout_mse(coefs: np.ndarray, stops: Stops) -> float:
-        r = np.concatenate([red.yd[i] - stops.apply(red.xd[i] @ coefs[b])
-                            for b, i in enumerate(rows)])
-        return float(np.mean(r**2))
+        held = np.concatenate([x @ coefs[b] for b, x in enumerate(blocks)])
+        return float(np.mean((measured - stops.apply(held[scored])) ** 2))
 
     def consider(options: list[Stops]) -> float:
         """Score every option; the best score. Hard stops: the map fitted between them (the
