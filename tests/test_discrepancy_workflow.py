@@ -438,7 +438,7 @@ def test_the_effect_ridge_shrinks_only_what_the_column_adds_beyond_the_static_ma
     one_frame_rows = Groups(m=1, n=n, weights=np.ones((n, 1)), split=np.empty(0, dtype=int),
                             order=np.arange(n), group=np.arange(n), frames=every[:, None],
                             bd=bd, whole=every)
-    red = Reduced(xd=x, yd=y, rows=one_frame_rows)
+    red = Reduced(xs=x[:, :0], xe=x, yd=y, rows=one_frame_rows)
     coefs = fold_coefs(red, every, Ridge(n_static=2))
     np.testing.assert_allclose(coefs[:, 2], 0.06, rtol=0.03)
     heldout = np.concatenate([y[bd == b] - x[bd == b] @ coefs[b]
@@ -446,7 +446,7 @@ def test_the_effect_ridge_shrinks_only_what_the_column_adds_beyond_the_static_ma
     assert np.sqrt(np.mean(heldout**2)) < 0.1 * np.std(0.06 * own)  # own part: 0.021
     # a column that adds nothing in a fold (constant there) gets no huge coefficient
     flat = np.where(bd == 0, own, 0.3)
-    coefs = fold_coefs(replace(red, xd=np.column_stack([x[:, :2], flat])), every,
+    coefs = fold_coefs(replace(red, xe=np.column_stack([x[:, :2], flat])), every,
                        Ridge(n_static=2))
     assert np.all(np.abs(coefs[1:, 2]) < 1.0), coefs[:, 2]
 

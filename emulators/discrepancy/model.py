@@ -36,6 +36,7 @@ held fixed as the *input* of the history-dependent terms) the model is
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Callable, Iterable, Sequence
@@ -1049,19 +1050,39 @@ class Groups:
 class Reduced:
     """A design and measurement averaged down to about ``FIT_RATE_HZ`` for the fits.
 
+    The design is kept as its two blocks, like :class:`Design`: the shared block's
+    average is the same array for every sensor of a fit (joining them copied it per sensor
+    per fit).
+
     Attributes:
-        xd: (M, P) design, mean of each row's valid frames.
+        xs: (M, Ps) the shared block of the design, mean of each row's valid frames.
+        xe: (M, Pe) the sensor's own columns, the same rows.
         yd: (M,) measurement, same rows.
         rows: how the rows were formed (:class:`Groups`).
-        shared_grams: the per-block Gram matrices of the first columns of ``xd``, a shared
-            block's average (the same array for every sensor of a fit), by the rows they
-            were formed on (:func:`block_grams`); None: every Gram matrix is formed anew.
+        shared_grams: the per-block Gram matrices of ``xs``, by the rows they were formed on
+            (:func:`block_grams`); None: every Gram matrix is formed anew.
     """
 
-    xd: np.ndarray
+    xs: np.ndarray
+    xe: np.ndarray
     yd: np.ndarray
     rows: Groups
     shared_grams: SharedGrams | None = None
+
+    @property
+    def n_columns(self) -> int:
+        """P = Ps + Pe."""
+        return self.xs.shape[1] + self.xe.shape[1]
+
+    @functools.cached_property
+    def xd(self) -> np.ndarray:
+        """(M, P) the whole design (joined once, on request)."""
+        return np.hstack([self.xs, self.xe])
+
+    def times(self, coef: np.ndarray, rows: slice = slice(None)) -> np.ndarray:
+        """The design's ``rows`` times ``coef`` (P,)."""
+        ps = self.xs.shape[1]
+        return self.xs[rows] @ coef[:ps] + self.xe[rows] @ coef[ps:]
 
 
 @dataclass
@@ -1165,9 +1186,9 @@ def reduce(trial: Trial, x: Design, y: np.ndarray) -> Reduced:
     if kept is None or kept[0] is not x.shared:
         kept = (x.shared, groups.mean(x.shared), SharedGrams(ps=x.shared.shape[1]))
         trial.cache["shared"] = kept
-    xd = np.hstack([kept[1], groups.mean(x.own)]) if x.own.shape[1] else kept[1]
     yd = groups.mean(np.where(trial.valid, y, 0.0)[:, None])[:, 0]
-    return Reduced(xd=xd, yd=yd, rows=groups, shared_grams=kept[2])
+    return Reduced(xs=kept[1], xe=groups.mean(x.own), yd=yd, rows=groups,
+                   shared_grams=kept[2])
 
 
 def fit_coefs(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = None,
@@ -1177,7 +1198,7 @@ def fit_coefs(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = None
     column): the (N_BLOCKS + 1, P) fold coefficients (:func:`fold_coefs`), whose held-out
     and full-data predictions :func:`fold_products` forms."""
     red = reduce(trial, x, y)
-    ridge = Ridge(n_static=red.xd.shape[1]) if ridge is None else ridge
+    ridge = Ridge(n_static=red.n_columns) if ridge is None else ridge
     return fold_coefs(red, red.rows.usable(trial.valid), ridge)
 
 
@@ -1189,38 +1210,40 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
     most 1: the slopes of a stop), against ``target`` (M,; default the averaged
     measurement). The shared columns' unweighted Gram matrices come formed
     (``red.shared_grams``, the same for every sensor of a fit); only rows whose weight is
-    not 1 (in a stop's knee) correct them. With
-    ``static`` False (unweighted only), the shared columns' block is left unset, for a
-    caller that has it factored."""
-    p = red.xd.shape[1]
+    not 1 (in a stop's knee) correct them. With ``static`` False (unweighted only), the
+    shared columns' block is left unset, for a caller that has it factored."""
+    ps = red.xs.shape[1]
+    p = red.n_columns
     y = red.yd if target is None else target
     grams = np.empty((N_BLOCKS, p, p))
     rhs = np.empty((N_BLOCKS, p))
     bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))  # rows sorted by block
-    ps = 0
-    if red.shared_grams is not None:
-        ps = red.shared_grams.ps
-        if static:
-            grams[:, :ps, :ps] = red.shared_grams.of(red.xd, ok, bounds)
+    if static and red.shared_grams is not None:
+        grams[:, :ps, :ps] = red.shared_grams.of(red.xs, ok, bounds)
     for b in range(N_BLOCKS):
         rows = slice(bounds[b], bounds[b + 1])
-        xb, yb, keep = red.xd[rows], y[rows], ok[rows]
+        xs, xe, yb, keep = red.xs[rows], red.xe[rows], y[rows], ok[rows]
         wb = None if weights is None else weights[rows]
-        if not keep.all():  # a view where every row counts (no copy)
-            xb, yb = xb[keep], yb[keep]
+        if not keep.all():  # views where every row counts (no copy)
+            xs, xe, yb = xs[keep], xe[keep], yb[keep]
             wb = None if wb is None else wb[keep]
-        own = xb[:, ps:]
-        if wb is not None:
+        if static and red.shared_grams is None:
+            xw = xs if wb is None else xs * wb[:, None]
+            grams[b, :ps, :ps] = xw.T @ xw
+        elif static and wb is not None:
             bent = wb != 1.0
             if ps and bent.any():
                 # the rows' share 1 − w² taken out; zᵀz of one array is a symmetric
                 # rank-k update in BLAS, half the work of a general product
-                z = xb[bent, :ps] * np.sqrt(1.0 - wb[bent] ** 2)[:, None]
+                z = xs[bent] * np.sqrt(1.0 - wb[bent] ** 2)[:, None]
                 grams[b, :ps, :ps] -= z.T @ z
-            own, yb = own * (wb**2)[:, None], yb * wb  # the weights of both factors
-        grams[b, :, ps:] = xb.T @ own
+        own = xe if wb is None else xe * (wb**2)[:, None]  # Σ w²·x·xₑᵀ
+        yw = yb if wb is None else yb * wb  # Σ w·x·t: the rows times w, not the target
+        grams[b, :ps, ps:] = xs.T @ own
+        grams[b, ps:, ps:] = xe.T @ own
         grams[b, ps:, :ps] = grams[b, :ps, ps:].T
-        rhs[b] = xb.T @ yb
+        rhs[b, :ps] = xs.T @ yw
+        rhs[b, ps:] = xe.T @ yw
     return grams, rhs
 
 
@@ -1233,7 +1256,7 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge, weights: np.ndarray |
     shared = red.shared_grams
     if weights is None and shared is not None and shared.ps == ridge.n_static:
         bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))
-        factors = shared.factored(red.xd, ok, bounds, ridge)
+        factors = shared.factored(red.xs, ok, bounds, ridge)
         if factors is not None:
             return _fold_coefs_factored(red, ok, ridge, factors, target, folds)
     grams, rhs = block_grams(red, ok, weights, target)
@@ -1347,7 +1370,7 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
     """
     def linearised(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each row's weight h′(ŝ) and target y − h(ŝ) + h′(ŝ)·ŝ, at ŝ = x·coef."""
-        pred = red.xd @ coef
+        pred = red.times(coef)
         slope = stops.slope(pred)
         return slope, red.yd - stops.apply(pred) + slope * pred
 
@@ -1398,12 +1421,12 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
     # options are compared on the averaged groups (as the fits see them) of scored frames;
     # rows are sorted by block, those of no block (−1) first
     bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))
-    blocks = [red.xd[bounds[b]:bounds[b + 1]] for b in range(N_BLOCKS)]  # views
+    blocks = [slice(bounds[b], bounds[b + 1]) for b in range(N_BLOCKS)]
     scored = red.rows.usable(trial.scored)[bounds[0]:]
     measured = red.yd[bounds[0]:][scored]
 
     def heldout_mse(coefs: np.ndarray, stops: Stops) -> float:
-        held = np.concatenate([x @ coefs[b] for b, x in enumerate(blocks)])
+        held = np.concatenate([red.times(coefs[b], rows) for b, rows in enumerate(blocks)])
         return float(np.mean((measured - stops.apply(held[scored])) ** 2))
 
     def consider(options: list[Stops]) -> float:
