@@ -6,7 +6,8 @@
    matrix (rows: hidden, columns: first named effect) per family, the rate of right first
    effects, the share of named cases whose held-out gap shrank by ≥ 50 %, and clean → nothing.
 2. Timing: the workflow on a four-minute 250 Hz recording (the paper protocol fixture, every
-   effect on), p50/p99/max over ``--repeats`` runs, with the machine. Target: ≤ 60 s.
+   effect on; ``--time-on FILE`` times another recording instead), p50/p99/max over
+   ``--repeats`` runs, with the machine. Target: ≤ 60 s.
 
 Run from the repository root: ``python -m benchmarks.bench_discrepancy [--seeds 10]
 [--duration 90] [--repeats 3] [--families lib,alt] [--first-seed 1000]``. ``--families other``
@@ -86,18 +87,19 @@ def print_rates(rows: list[tuple[str, str, float]]) -> None:
           f"({quiet / max(len(clean_rows), 1):.1%}; required ≥ 90 %)")
 
 
-def timing(repeats: int) -> None:
-    rec = read_recording(FIXTURE)
-    print(f"\ntiming: {FIXTURE.name}, {len(rec.sensors)} sensor frames "
-          f"({rec.sensors.t[-1]:.1f} s at 250 Hz) x {len(rec.sensor_names)} sensors")
+def timing(repeats: int, path: Path = FIXTURE) -> None:
+    rec = read_recording(path)
+    span = rec.sensors.t[-1] - rec.sensors.t[0]
+    print(f"\ntiming: {path.name}, {len(rec.sensors)} sensor frames ({span:.1f} s) x "
+          f"{len(rec.sensor_names)} sensors")
     seconds = []
     for _ in range(repeats):
         start = time.perf_counter()
-        summary = run(rec, FIXTURE.name).summary
+        summary = run(rec, path.name).summary
         seconds.append(time.perf_counter() - start)
     s = np.asarray(seconds)
     print(f"named {summary['effects']}, gap {summary['gap_before']:.3f} -> "
-          f"{summary['gap_after']:.3f} mm")
+          f"{summary['gap_after']:.3f} {summary['units']}")
     print(f"workflow (without file output)     p50 {np.percentile(s, 50):7.2f} s   "
           f"p99 {np.percentile(s, 99):7.2f} s   max {s.max():7.2f} s   (target ≤ 60 s)")
 
@@ -112,6 +114,8 @@ def main() -> None:
                         help=f"comma-separated, of {', '.join(FAMILIES)}")
     parser.add_argument("--repeats", type=int, default=3, help="timing repeats (0: none)")
     parser.add_argument("--no-sweep", action="store_true", help="timing only")
+    parser.add_argument("--time-on", type=Path, default=FIXTURE, metavar="FILE",
+                        help="the recording to time (default: the paper protocol fixture)")
     parser.add_argument("--motion", type=Path, metavar="DIR",
                         help="drive the suits with the real motion of DIR/*.mot (OpenSim "
                              "inverse kinematics), joined in name order")
@@ -120,6 +124,8 @@ def main() -> None:
                              "always runs alone, after it)")
     args = parser.parse_args()
     families = tuple(args.families.split(","))
+    if args.repeats > 0 and not args.time_on.is_file():  # before the sweep, not after it
+        parser.error(f"--time-on: no such file: {args.time_on}")
     if not set(families) <= set(FAMILIES):
         parser.error(f"--families: choose from {', '.join(FAMILIES)}")
     motion: tuple[str, ...] = ()
@@ -136,7 +142,7 @@ def main() -> None:
         sweep(range(args.first_seed, args.first_seed + args.seeds), args.duration, families,
               args.workers, motion)
     if args.repeats > 0:
-        timing(args.repeats)
+        timing(args.repeats, args.time_on)
 
 
 if __name__ == "__main__":
