@@ -1087,8 +1087,8 @@ class Reduced:
 
 @dataclass
 class SharedGrams:
-    """The per-block Gram matrices (N_BLOCKS, Ps, Ps) of a shared block's first ``ps``
-    columns of the averaged design, kept for the last ``KEPT_GRAMS`` row selections:
+    """The per-block Gram matrices (N_BLOCKS, Ps, Ps) of the averaged shared block
+    (:attr:`Reduced.xs`, ``ps`` columns), kept for the last ``KEPT_GRAMS`` row selections:
     every sensor of a fit asks for the same ones; and for as many row selections and
     static ridges, each fold's static system factored (:meth:`factored`)."""
 
@@ -1096,9 +1096,9 @@ class SharedGrams:
     by_rows: dict[bytes, np.ndarray] = field(default_factory=dict)
     factors: dict[tuple, StaticFactors | None] = field(default_factory=dict)
 
-    def of(self, xd: np.ndarray, ok: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-        """(N_BLOCKS, Ps, Ps) for the design's rows ``ok`` (M,), rows sorted by block
-        between ``bounds``."""
+    def of(self, xs: np.ndarray, ok: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+        """(N_BLOCKS, Ps, Ps) for the rows ``ok`` (M,) of the averaged shared block ``xs``
+        (M, Ps), rows sorted by block between ``bounds``."""
         key = ok.tobytes()
         grams = self.by_rows.get(key)
         if grams is None:
@@ -1106,12 +1106,12 @@ class SharedGrams:
                 del self.by_rows[next(iter(self.by_rows))]
             grams = np.empty((N_BLOCKS, self.ps, self.ps))
             for b in range(N_BLOCKS):
-                xs = xd[bounds[b]:bounds[b + 1], :self.ps][ok[bounds[b]:bounds[b + 1]]]
-                grams[b] = xs.T @ xs
+                rows = xs[bounds[b]:bounds[b + 1]][ok[bounds[b]:bounds[b + 1]]]
+                grams[b] = rows.T @ rows
             self.by_rows[key] = grams
         return grams
 
-    def factored(self, xd: np.ndarray, ok: np.ndarray, bounds: np.ndarray, ridge: Ridge
+    def factored(self, xs: np.ndarray, ok: np.ndarray, bounds: np.ndarray, ridge: Ridge
                  ) -> StaticFactors | None:
         """Each fold's static system for the rows ``ok`` with ``ridge``'s static loading,
         factored; None where one is not positive definite in floating point."""
@@ -1119,7 +1119,7 @@ class SharedGrams:
         if key not in self.factors:
             if len(self.factors) >= KEPT_GRAMS:
                 del self.factors[next(iter(self.factors))]
-            grams = self.of(xd, ok, bounds)
+            grams = self.of(xs, ok, bounds)
             total = grams.sum(axis=0)
             folds = np.concatenate([total - grams, total[None]])
             diag = np.diagonal(folds, axis1=-2, axis2=-1)
