@@ -151,7 +151,7 @@ def test_frames_dropped_at_random_leave_the_fits_their_data():
     used = np.flatnonzero(use)
     frames = rows.group[used, None] * rows.m + np.arange(rows.m)
     averaged = rows.frames[used]
-    np.testing.assert_allclose(red.xd[used, 0], np.sum(trial.t[frames] * averaged, axis=1)
+    np.testing.assert_allclose(red.xs[used, 0], np.sum(trial.t[frames] * averaged, axis=1)
                                / averaged.sum(axis=1))
     assert np.all((trial.blocks[frames] == rows.bd[used, None]) | ~averaged)
     # every valid frame is averaged in exactly one row (a group across blocks: one per block)
@@ -1300,7 +1300,7 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
     rng = np.random.default_rng(1)
     for j in range(trial.n_sensors):  # the later sensors reuse the first one's matrices
         red = model.reduce(trial, model.design(trial.rate_hz, inputs, spec, j), trial.y[:, j])
-        assert red.shared_grams is not None and red.shared_grams.ps < red.xd.shape[1]
+        assert red.shared_grams is not None and red.shared_grams.ps < red.n_columns
         m = red.yd.size
         usable = red.rows.usable(trial.valid)
         knees = np.where(rng.random(m) < 0.05, rng.random(m), 1.0)
@@ -1309,7 +1309,8 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
                 got = model.fold_coefs(red, ok, ridge, weights, target)
                 np.testing.assert_array_equal(
                     model.fold_coefs(red, ok, ridge, weights, target, folds=False), got[-1:])
-                xw = red.xd * (np.ones(m) if weights is None else weights)[:, None]
+                xd = np.hstack([red.xs, red.xe])
+                xw = xd * (np.ones(m) if weights is None else weights)[:, None]
                 t = red.yd if target is None else target
                 effect = ridge.effect_loading(xw[ok].T @ xw[ok])
                 for b in range(N_BLOCKS + 1):  # the last: every block
@@ -1317,7 +1318,7 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
                     gram, rhs = xw[rows].T @ xw[rows], xw[rows].T @ t[rows]
                     want = model._solve(gram, rhs, ridge.loading(gram, effect))
                     # the basis is nearly collinear: compared where it matters, as fits
-                    np.testing.assert_allclose(red.xd @ got[b], red.xd @ want, rtol=0,
+                    np.testing.assert_allclose(xd @ got[b], xd @ want, rtol=0,
                                                atol=1e-9 * np.abs(red.yd).max())
         assert red.shared_grams.factors  # the unweighted fits took the factored path
 

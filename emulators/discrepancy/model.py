@@ -985,8 +985,16 @@ class Ridge:
         diag_all = np.diag(gram_all)
         g_ss = gram_all[:n, :n] + np.diag(self.static_loading(diag_all[:n]))
         g_se = gram_all[:n, n:]
-        added = diag_all[n:] - np.einsum("ij,ij->j", g_se, np.linalg.solve(g_ss, g_se))
-        return self.effect * np.maximum(added, 1e-12 * diag_all[n:])
+        return self.added_loading(g_se, diag_all[n:], np.linalg.solve(g_ss, g_se))
+
+    def added_loading(self, g_se: np.ndarray, diag_e: np.ndarray, through: np.ndarray
+                      ) -> np.ndarray:
+        """(Pe,) the effect columns' loading from their products with the static columns
+        over every block ``g_se`` (n_static, Pe), their energies ``diag_e`` (Pe,) and
+        ``through`` = (G_ss + static loading)⁻¹ g_se: ``effect`` times the energy each adds
+        beyond the static map."""
+        added = diag_e - np.einsum("ij,ij->j", g_se, through)
+        return self.effect * np.maximum(added, 1e-12 * diag_e)
 
     def loading(self, gram: np.ndarray, effect: np.ndarray) -> np.ndarray:
         """(..., P) diagonal loading for a fold's ``gram`` (..., P, P), or a stack of folds':
@@ -1032,6 +1040,12 @@ class Groups:
     bd: np.ndarray
     whole: np.ndarray
 
+    @functools.cached_property
+    def bounds(self) -> np.ndarray:
+        """(N_BLOCKS + 1,) block b's rows are ``bounds[b]:bounds[b + 1]`` (rows of no
+        block, −1, come first)."""
+        return np.searchsorted(self.bd, np.arange(N_BLOCKS + 1))
+
     def mean(self, a: np.ndarray) -> np.ndarray:
         """(M, P) each row's mean of ``a`` (N, P), finite on every valid frame."""
         g = self.n // self.m
@@ -1073,11 +1087,6 @@ class Reduced:
     def n_columns(self) -> int:
         """P = Ps + Pe."""
         return self.xs.shape[1] + self.xe.shape[1]
-
-    @functools.cached_property
-    def xd(self) -> np.ndarray:
-        """(M, P) the whole design (joined once, on request)."""
-        return np.hstack([self.xs, self.xe])
 
     def times(self, coef: np.ndarray, rows: slice = slice(None)) -> np.ndarray:
         """The design's ``rows`` times ``coef`` (P,)."""
@@ -1217,7 +1226,7 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
     y = red.yd if target is None else target
     grams = np.empty((N_BLOCKS, p, p))
     rhs = np.empty((N_BLOCKS, p))
-    bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))  # rows sorted by block
+    bounds = red.rows.bounds
     if static and red.shared_grams is not None:
         grams[:, :ps, :ps] = red.shared_grams.of(red.xs, ok, bounds)
     for b in range(N_BLOCKS):
@@ -1255,8 +1264,7 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge, weights: np.ndarray |
     the shared static block's factors are reused (:func:`_fold_coefs_factored`)."""
     shared = red.shared_grams
     if weights is None and shared is not None and shared.ps == ridge.n_static:
-        bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))
-        factors = shared.factored(red.xs, ok, bounds, ridge)
+        factors = shared.factored(red.xs, ok, red.rows.bounds, ridge)
         if factors is not None:
             return _fold_coefs_factored(red, ok, ridge, factors, target, folds)
     grams, rhs = block_grams(red, ok, weights, target)
@@ -1291,9 +1299,7 @@ def _fold_coefs_factored(red: Reduced, ok: np.ndarray, ridge: Ridge, factors: St
         scale_all = factors.scale[-1][:, None]
         g_se = cross_all[:ps]
         through = factors.solve(-1, g_se / scale_all) / scale_all  # A_all⁻¹ g_se, unscaled
-        diag_all = np.diagonal(cross_all[ps:])
-        added = diag_all - np.einsum("ij,ij->j", g_se, through)
-        effect = ridge.effect * np.maximum(added, 1e-12 * diag_all)
+        effect = ridge.added_loading(g_se, np.diagonal(cross_all[ps:]), through)
     for f in order:
         s_s = factors.scale[f]
         r_s = fold_rhs[f, :ps] / s_s
@@ -1418,9 +1424,8 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
     seen = y[trial.valid]
     extremes = float(np.min(seen)), float(np.max(seen))
     best: tuple[float, Stops] | None = None
-    # options are compared on the averaged groups (as the fits see them) of scored frames;
-    # rows are sorted by block, those of no block (−1) first
-    bounds = np.searchsorted(red.rows.bd, np.arange(N_BLOCKS + 1))
+    # options are compared on the averaged groups (as the fits see them) of scored frames
+    bounds = red.rows.bounds
     blocks = [slice(bounds[b], bounds[b + 1]) for b in range(N_BLOCKS)]
     scored = red.rows.usable(trial.scored)[bounds[0]:]
     measured = red.yd[bounds[0]:][scored]
