@@ -41,8 +41,12 @@ like a stop there.
 
 3. A stop must bend more than a smooth curve: a significant saturation is fitted again on
    top of a cubic transfer curve of each sensor's static prediction and must clear rules 1
-   and 2 over that curve alone (:func:`_against_curve`). Knees at both ends of a sensor
-   can imitate a reading that curves gently over its whole range, which is calibration.
+   and 2 over that curve alone (:func:`_against_curve`), unless it explains everything the
+   curve would: the curve added to the stops does not clear rule 1 over them, and the stops
+   alone predict the held-out blocks better than the curve alone. Knees at both ends of a
+   sensor can imitate a reading that curves gently over its whole range, which is
+   calibration; a stop approached gently is a bend that both follow, and the better one
+   that leaves the other nothing to add is the explanation.
 
 Held-out error already charges a candidate for its extra parameters (fitting noise makes
 held-out error worse, not better), so no parameter-count penalty is added. Among significant
@@ -747,15 +751,25 @@ def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence
                    floor: float) -> dict:
     """``evidence`` of the stops ``cand`` over ``spec`` with rule 3: added to a smooth
     transfer curve of each sensor (``Spec.output_curve``), they must still clear rules 1
-    and 2 over it, pooled or on the sensors held at hard stops. A reading that bends gently
-    over its whole range (a nonlinear transfer, a misfit spread over the poses) is
-    calibration that soft knees at both ends can imitate; a stop is a bend at an end that
-    no smooth curve follows."""
+    and 2 over it, pooled or on the sensors held at hard stops, or else explain everything
+    the curve does (``stops_leave_curve_nothing``): the curve added to the stops does not
+    clear rule 1 over them (``curve_over_stops``) and the stops alone leave a lower held-out
+    gap than the curve alone. A reading that bends gently over its whole range (a nonlinear
+    transfer, a misfit spread over the poses) is calibration that soft knees at both ends
+    can imitate, and the curve follows it better; a stop is a bend at an end that no smooth
+    curve follows, or one approached so gently that a curve follows part of it and adds
+    nothing to the stops."""
     curve = fit(trial, inputs, replace(spec, output_curve=True))
-    over = _evidence(trial, curve, fit(trial, inputs, replace(cand.spec, output_curve=True)),
-                     floor)
-    return {**evidence, "significant": over["significant"],
-            "against_smooth_curve": {"curve_gap": round(curve.gap, 6), **over}}
+    both = fit(trial, inputs, replace(cand.spec, output_curve=True))
+    over = _evidence(trial, curve, both, floor)
+    curve_adds = _rules(cand.block_mse, both.block_mse, floor)
+    encompassed = bool(not curve_adds["beyond_noise"] and cand.gap < curve.gap)
+    return {**evidence, "significant": over["significant"] or encompassed,
+            "against_smooth_curve": {
+                "curve_gap": round(curve.gap, 6), **over,
+                "curve_over_stops": {k: curve_adds[k] for k in (
+                    "delta_mse", "removed_rms", "blocks_improved", "beyond_noise")},
+                "stops_leave_curve_nothing": encompassed}}
 
 
 def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
