@@ -31,6 +31,7 @@ from exohil.emulators.discrepancy.localise import (
 )
 from exohil.emulators.discrepancy.model import (
     Design,
+    Fit,
     Groups,
     Reduced,
     Ridge,
@@ -771,17 +772,15 @@ def test_a_candidate_must_improve_most_blocks(improved, significant):
     assert rules["significant"] is significant
 
 
-@pytest.mark.parametrize("bend, stop", [
-    (lambda z: z + 0.2 * z**2 - 0.15 * z**3, False),  # a transfer curving over its range
-    (lambda z: np.minimum(z, 0.7), True),  # a hard stop over the top 10 % or so
-    (lambda z: z - 0.08 * np.logaddexp(0.0, (z - 0.6) / 0.1), True),  # a soft knee at 0.6
-])
-def test_a_stop_must_bend_more_than_a_smooth_transfer_curve(bend, stop):
-    """Rule 3: soft knees at both ends of every sensor also follow a reading that curves
-    gently over its whole range (a nonlinear transfer: calibration, not a stop), and beat a
-    quadratic map, which cannot follow the cubic bend, by far more than the noise (39 noise
-    variances when written). Added to a smooth cubic transfer curve per sensor, such knees
-    no longer clear the bar (−2.4); a hard stop (58) and a soft knee (7.5) still do."""
+def _cubic_transfer(z: np.ndarray) -> np.ndarray:
+    """A transfer curving over its whole range (calibration, not a stop)."""
+    return z + 0.2 * z**2 - 0.15 * z**3
+
+
+def _stops_against_curve(bend: Callable[[np.ndarray], np.ndarray]) -> tuple[Fit, dict, float]:
+    """The stops found on :func:`_bent_recording` of ``bend`` over a quadratic map, which
+    must clear rules 1 and 2 over it, then judged by rule 3: (the stops' fit, their judged
+    evidence, the noise floor)."""
     trial = prepare_trial(_bent_recording(bend))
     quadratic = Spec(degree=2)
     inputs = make_inputs(trial, quadratic)
@@ -791,8 +790,60 @@ def test_a_stop_must_bend_more_than_a_smooth_transfer_curve(bend, stop):
     evidence = _evidence(trial, base, cand, floor)
     assert evidence["significant"], evidence  # each bends the map by more than the noise
     judged = _against_curve(trial, inputs, quadratic, cand, evidence, floor)
-    assert judged["significant"] is stop, judged
     assert judged["against_smooth_curve"]["curve_gap"] < base.gap
+    return cand, judged, floor
+
+
+@pytest.mark.parametrize("bend, stop", [
+    (_cubic_transfer, False),
+    (lambda z: np.minimum(z, 0.7), True),  # a hard stop over the top 10 % or so
+    (lambda z: z - 0.08 * np.logaddexp(0.0, (z - 0.6) / 0.1), True),  # a soft knee at 0.6
+])
+def test_a_stop_must_bend_more_than_a_smooth_transfer_curve(bend, stop):
+    """Rule 3: soft knees at both ends of every sensor also follow a reading that curves
+    gently over its whole range (a nonlinear transfer: calibration, not a stop), and beat a
+    quadratic map, which cannot follow the cubic bend, by far more than the noise (39 noise
+    variances when written). Added to a smooth cubic transfer curve per sensor, such knees
+    no longer clear the bar (−2.4), and the curve alone leaves a lower gap than they do
+    (0.069 against 0.109 mm), so they do not pass the other branch either although,
+    over-fitted on top of the curve, they leave it only 0.66 to add; a hard stop (58) and a
+    soft knee (7.5) still clear the bar."""
+    _, judged, _ = _stops_against_curve(bend)
+    assert judged["significant"] is stop, judged
+
+
+def test_a_stop_approached_gently_is_named_when_the_curve_adds_nothing_to_it():
+    """Rule 3's other branch: readings that bend above 0.6 of their stretch toward an
+    asymptote approached over 0.4 (the ``other`` family's upper stop, gentler). The cubic
+    curve follows part of that bend, so over it the stops remove under a noise variance
+    (0.34 when written); but the curve adds nothing to the stops (0.07) and the stops alone
+    leave the lower gap: they explain everything the curve would, and are named."""
+    def bend(z: np.ndarray) -> np.ndarray:
+        excess = np.maximum(z - 0.6, 0.0)
+        return z - 0.2 * (excess - 0.4 * (1.0 - np.exp(-excess / 0.4)))
+
+    cand, judged, floor = _stops_against_curve(bend)
+    curve = judged["against_smooth_curve"]
+    assert not curve["significant"], curve  # the first branch alone: not a stop
+    assert curve["curve_over_stops"]["delta_mse"] < floor**2, curve
+    assert cand.gap < curve["curve_gap"], curve
+    assert curve["stops_leave_curve_nothing"] and judged["significant"], judged
+
+
+def test_the_report_says_why_stops_were_left_to_the_curve(hysteresis_outcome):
+    """A saturation not added for rule 3 is listed with the curve's gap, the stops' own,
+    and what each removes over the other."""
+    cand, judged, _ = _stops_against_curve(_cubic_transfer)
+    assert not judged["significant"], judged
+    summary = {**hysteresis_outcome[1].summary,
+               "not_added": [{"effect": "saturation", "gap": cand.gap, "evidence": judged}]}
+    line = next(row for row in markdown(summary).splitlines()
+                if row.startswith("- saturation:"))
+    curve = judged["against_smooth_curve"]
+    for figure in (curve["curve_gap"], cand.gap, curve["removed_rms"],
+                   curve["curve_over_stops"]["removed_rms"]):
+        assert f"{figure:.4g}" in line, (figure, line)
+    assert line.endswith("a gentle bend, not a stop"), line
 
 
 def test_soft_knees_at_both_ends_are_both_found(clean_101):
