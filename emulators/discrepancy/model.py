@@ -1129,8 +1129,7 @@ class SharedGrams:
             if len(self.factors) >= KEPT_GRAMS:
                 del self.factors[next(iter(self.factors))]
             grams = self.of(xs, ok, bounds)
-            total = grams.sum(axis=0)
-            folds = np.concatenate([total - grams, total[None]])
+            folds = fold_sums(grams, grams.sum(axis=0))
             diag = np.diagonal(folds, axis1=-2, axis2=-1)
             g, scale = _equilibrate(folds, ridge.static_loading(diag))
             try:
@@ -1157,6 +1156,12 @@ class StaticFactors:
         """Fold f's equilibrated static system solved for ``rhs`` (Ps, K): L⁻ᵀ(L⁻¹ rhs)."""
         inverse = self.inverse_chol[f]
         return inverse.T @ (inverse @ rhs)
+
+
+def fold_sums(per_block: np.ndarray, total: np.ndarray) -> np.ndarray:
+    """(N_BLOCKS + 1, ...) each fold's sum of ``per_block`` (N_BLOCKS, ...), whose sum over
+    the blocks is ``total``: fold b's without block b, the last every block's (``total``)."""
+    return np.concatenate([total - per_block, total[None]])
 
 
 def fit_groups(trial: Trial) -> Groups:
@@ -1271,8 +1276,8 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge, weights: np.ndarray |
     gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
     effect = ridge.effect_loading(gram_all)
     # fold b's Gram matrix is the total minus block b's; the last is the total
-    fold_grams = np.concatenate([gram_all - grams, gram_all[None]]) if folds else gram_all[None]
-    fold_rhs = np.concatenate([rhs_all - rhs, rhs_all[None]]) if folds else rhs_all[None]
+    fold_grams = fold_sums(grams, gram_all) if folds else gram_all[None]
+    fold_rhs = fold_sums(rhs, rhs_all) if folds else rhs_all[None]
     return _solve(fold_grams, fold_rhs, ridge.loading(fold_grams, effect))
 
 
@@ -1289,8 +1294,8 @@ def _fold_coefs_factored(red: Reduced, ok: np.ndarray, ridge: Ridge, factors: St
     ps = factors.scale.shape[1]
     grams, rhs = block_grams(red, ok, target=target, static=False)
     cross_all, rhs_all = grams[:, :, ps:].sum(axis=0), rhs.sum(axis=0)
-    cross = np.concatenate([cross_all - grams[:, :, ps:], cross_all[None]])  # (F, P, Pe)
-    fold_rhs = np.concatenate([rhs_all - rhs, rhs_all[None]])
+    cross = fold_sums(grams[:, :, ps:], cross_all)  # (N_BLOCKS + 1, P, Pe)
+    fold_rhs = fold_sums(rhs, rhs_all)
     n_folds, pe = cross.shape[0], cross.shape[2]
     coefs = np.empty(fold_rhs.shape)
     order = range(n_folds) if folds else [n_folds - 1]

@@ -171,9 +171,8 @@ def markdown(summary: dict) -> str:
                          + ("" if curve is None else
                             f"; over a smooth transfer curve of each sensor (held-out gap "
                             f"{curve['curve_gap']:.4g}, the stops' {item['gap']:.4g}) the "
-                            f"stops remove "
-                            f"{curve['removed_rms']:.4g}, and the curve over them "
-                            f"{curve['curve_over_stops']['removed_rms']:.4g}: a gentle "
+                            f"stops remove {curve['removed_rms']:.4g}, and the curve over "
+                            f"them {curve['curve_over_stops']['removed_rms']:.4g}: a gentle "
                             f"bend, not a stop"))
     lb, la = summary["localisation_before"], summary["localisation_after"]
     lines += ["", "## Where the residual was (before → after, RMS)", "",
