@@ -13,9 +13,11 @@ Run from the repository root: ``python -m benchmarks.bench_discrepancy [--seeds 
 [--duration 90] [--repeats 3] [--families lib,alt] [--first-seed 1000]``. ``--families other``
 runs the third family (hidden.py), which probes effects written yet another way;
 ``--repeats 0`` skips the timing; ``--workers`` sets how many processes run the sweep's
-cases (default one per CPU). ``--motion DIR`` drives the suits with the real shoulder motion
-of every ``.mot`` file in DIR, joined in name order (e.g. ``../shared/realdata/shoulder-ik``),
-instead of the seeded random movement; ``--duration`` is then the motion's own length.
+cases (default one per CPU), ``--time-workers`` how many try each step's candidates in the
+timed runs (default one per CPU, as ``exohil discrepancy`` does). ``--motion DIR`` drives
+the suits with the real shoulder motion of every ``.mot`` file in DIR, joined in name order
+(e.g. ``../shared/realdata/shoulder-ik``), instead of the seeded random movement;
+``--duration`` is then the motion's own length.
 """
 
 from __future__ import annotations
@@ -33,10 +35,10 @@ from exohil.emulators.discrepancy.hidden import (
     KINDS,
     SENSOR_RATE_HZ,
     cases,
-    default_workers,
     first_effect,
     run_cases,
 )
+from exohil.emulators.discrepancy.workers import default_workers, workers_for
 from exohil.emulators.protocols import mot_trajectory
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.machine import machine
@@ -87,15 +89,17 @@ def print_rates(rows: list[tuple[str, str, float]]) -> None:
           f"({quiet / max(len(clean_rows), 1):.1%}; required ≥ 90 %)")
 
 
-def timing(repeats: int, path: Path = FIXTURE) -> None:
+def timing(repeats: int, path: Path = FIXTURE, workers: int | None = None) -> None:
     rec = read_recording(path)
     span = rec.sensors.t[-1] - rec.sensors.t[0]
+    processes = workers_for(workers)
     print(f"\ntiming: {path.name}, {len(rec.sensors)} sensor frames ({span:.1f} s) x "
-          f"{len(rec.sensor_names)} sensors")
+          f"{len(rec.sensor_names)} sensors; candidates on {processes} "
+          f"process{'es' if processes > 1 else ''}")
     seconds = []
     for _ in range(repeats):
         start = time.perf_counter()
-        summary = run(rec, path.name).summary
+        summary = run(rec, path.name, workers=processes).summary
         seconds.append(time.perf_counter() - start)
     s = np.asarray(seconds)
     print(f"named {summary['effects']}, gap {summary['gap_before']:.3f} -> "
@@ -122,6 +126,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=default_workers(),
                         help="processes for the sweep (default: one per CPU; the timing "
                              "always runs alone, after it)")
+    parser.add_argument("--time-workers", type=int, default=None, metavar="N",
+                        help="processes trying each step's candidates in the timed runs "
+                             "(default: one per CPU, as `exohil discrepancy`)")
     args = parser.parse_args()
     families = tuple(args.families.split(","))
     if args.repeats > 0 and not args.time_on.is_file():  # before the sweep, not after it
@@ -142,7 +149,7 @@ def main() -> None:
         sweep(range(args.first_seed, args.first_seed + args.seeds), args.duration, families,
               args.workers, motion)
     if args.repeats > 0:
-        timing(args.repeats, args.time_on)
+        timing(args.repeats, args.time_on, args.time_workers)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,8 @@ from pathlib import Path
 
 from benchmarks.bench_discrepancy import print_confusion, print_rates
 from exohil.emulators.discrepancy import run
-from exohil.emulators.discrepancy.hidden import KINDS, default_workers, first_effect, parallel_map
+from exohil.emulators.discrepancy.hidden import KINDS, first_effect
+from exohil.emulators.discrepancy.workers import default_workers, parallel_map
 from exohil.formats.atomic import write_text
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.machine import machine

@@ -42,7 +42,8 @@ import numpy as np
 from scipy.signal import butter, fftconvolve, lfilter
 
 from exohil.emulators.discrepancy import run
-from exohil.emulators.discrepancy.hidden import first_effect, parallel_map
+from exohil.emulators.discrepancy.hidden import first_effect
+from exohil.emulators.discrepancy.workers import parallel_map
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.machine import machine

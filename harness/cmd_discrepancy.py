@@ -7,7 +7,11 @@ from pathlib import Path
 
 import click
 
-from exohil.harness.cli_types import InputFile, OutputDir, refuse_overwriting_inputs
+from exohil.harness.cli_types import Count, InputFile, OutputDir, refuse_overwriting_inputs
+
+#: Most processes ``--workers`` takes: a bound that refuses nonsense (a step has five
+#: candidates at most, so more than five would idle).
+MAX_WORKERS = 64
 
 
 def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
@@ -46,7 +50,12 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
                    "assumed; the static map is calibrated to the measurement.")
 @click.option("--out", "out_dir", type=OutputDir(), default=Path("discrepancy"), show_default=True,
               help="Output folder: discrepancy.json, report.md, plots, suit_profile.toml.")
-def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> None:
+@click.option("--workers", type=Count(1, MAX_WORKERS), default=None,
+              help="Processes that try each step's candidate effects at once (one per "
+                   "candidate at most)  [default: one per CPU]. The result is the same for any "
+                   "number.")
+def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
+                workers: int | None) -> None:
     """Find what the simulated suit gets wrong on MEASURED (sensors + motion capture), name
     the missing effect, add it, and show the held-out gap shrink, step by step.
 
@@ -65,7 +74,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path) -> Non
     try:
         rec = read_recording(measured)
         outcome = run(rec, measured.name, in_model=in_model,
-                      progress=lambda line: click.echo(line, err=True))
+                      progress=lambda line: click.echo(line, err=True), workers=workers)
     except (RecordingError, DiscrepancyError) as exc:
         raise click.ClickException(str(exc)) from exc
     written = write_outputs(outcome, out_dir, f"{name}+{measured.stem}")

@@ -85,7 +85,15 @@ FOREIGN = Path(__file__).resolve().parents[2] / "shared" / "samples" / "foreign-
 @pytest.fixture(scope="module")
 def hysteresis_outcome():
     rec = make_recording(Case("hysteresis", "lib", 2, seed=11, duration_s=40.0))
-    return rec, run(rec, "hyst")
+    return rec, run(rec, "hyst", workers=2)  # each step's candidates in two processes
+
+
+def test_the_outcome_does_not_depend_on_how_many_processes_computed_it(hysteresis_outcome):
+    rec, outcome = hysteresis_outcome
+    alone = run(rec, "hyst", workers=1)
+    assert json.dumps(alone.summary) == json.dumps(outcome.summary)
+    # the first step tried all five candidates: four beside the one it named
+    assert len(alone.summary["steps"][0]["evidence"]["alternatives"]) == 4
 
 
 def test_sequence_gaps_become_invalid_grid_frames():

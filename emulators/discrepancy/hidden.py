@@ -16,17 +16,13 @@ asymptote exponentially, a low-pass behind a transport delay, and a random-walk 
 
 from __future__ import annotations
 
-import multiprocessing
-import os
-from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from typing import TypeVar
 
 import numpy as np
 from scipy.signal import fftconvolve, lfilter
 
+from exohil.emulators.discrepancy.workers import parallel_map
 from exohil.emulators.discrepancy.workflow import run
 from exohil.emulators.effects import Creep, Drift, Hysteresis, Lag, Noise, Saturation, Signal
 from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory, mot_trajectory
@@ -38,7 +34,6 @@ SENSOR_RATE_HZ = 250.0
 NOISE_MM = 0.15
 KINDS = ("clean", "hysteresis", "creep", "saturation", "lag", "drift")
 FAMILIES = ("lib", "alt", "other")
-T = TypeVar("T")
 
 
 def random_trajectory(seed: int, duration_s: float, axial_deg: float = 0.0) -> Trajectory:
@@ -334,53 +329,7 @@ def run_case(case: Case) -> dict:
     return run(make_recording(case), case.label).summary
 
 
-def default_workers() -> int:
-    """One worker per CPU this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-        os.cpu_count() or 1)
-
-
 def run_cases(selected: Iterable[Case], workers: int | None = None
               ) -> Iterator[tuple[Case, dict]]:
     """``(case, summary)`` for every case, in order, as each completes (:func:`parallel_map`)."""
     return parallel_map(run_case, selected, workers)
-
-
-def parallel_map(job: Callable[[T], dict], items: Iterable[T], workers: int | None = None
-                 ) -> Iterator[tuple[T, dict]]:
-    """``(item, job(item))`` for every item, in order, as each completes.
-
-    Items are independent, so they run in ``workers`` processes (default: one per CPU; 1 runs
-    them here); ``job`` must be a module-level function. Workers are spawned with one BLAS
-    thread each: two processes with a BLAS pool each on two cores took longer than one
-    process alone (184 s against 130 s for the CI suite's 48 cases; 73 s with one thread
-    each).
-    """
-    items = list(items)
-    workers = default_workers() if workers is None else workers
-    if workers <= 1 or len(items) <= 1:
-        for item in items:
-            yield item, job(item)
-        return
-    context = multiprocessing.get_context("spawn")
-    with _one_blas_thread_in_children(), \
-            ProcessPoolExecutor(min(workers, len(items)), mp_context=context) as pool:
-        yield from zip(items, pool.map(job, items), strict=True)
-
-
-@contextmanager
-def _one_blas_thread_in_children() -> Iterator[None]:
-    """Processes spawned inside the block read one BLAS/OpenMP thread from their environment
-    (a spawned child's BLAS reads it when numpy loads); this process's environment is
-    restored after."""
-    names = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-    saved = {name: os.environ.get(name) for name in names}
-    os.environ.update(dict.fromkeys(names, "1"))
-    try:
-        yield
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value

@@ -55,6 +55,7 @@ candidates the largest ΔMSE is named; the workflow stops when none is significa
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -89,9 +90,14 @@ from exohil.emulators.discrepancy.model import (
     restrict_to_coverage,
     static_basis,
 )
+from exohil.emulators.discrepancy.workers import forked_map, one_blas_thread, workers_for
 from exohil.formats.recording import Recording
 
 VOCABULARY = ("hysteresis", "creep", "saturation", "lag", "drift")
+#: The vocabulary by how long a candidate usually takes to fit (stops are chosen per sensor
+#: on held-out blocks, lags refined on three grids): the order a step hands them to its
+#: processes, so that the longest do not start last.
+COSTLIEST_FIRST = ("saturation", "lag", "creep", "drift", "hysteresis")
 LAG_TAU_S = (0.01, 0.02, 0.04, 0.08, 0.2)
 LAG_DELAY_S = (0.01, 0.025, 0.06, 0.15)
 #: Relative precision of the refined lag (log seconds).
@@ -854,8 +860,22 @@ def _conclusion(steps: list[dict], spec: Spec) -> str:
     return "no candidate effect beats the noise; nothing added"
 
 
+def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float, kind: str
+               ) -> tuple[str, Fit, dict]:
+    """The best configuration of effect ``kind`` added to ``spec`` and its evidence against
+    ``base`` (the model without it): one candidate of a step, on its own."""
+    cand = _best(trial, inputs, kind, spec)
+    evidence = _evidence(trial, base, cand, floor)
+    if kind == "drift" and _beyond_noise(evidence) and not evidence["significant"]:
+        evidence = _counted_refined(trial, inputs, base, cand, evidence, floor)
+    if kind == "saturation" and evidence["significant"]:
+        evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
+    return kind, cand, evidence
+
+
 def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
-        progress: Callable[[str], None] = lambda line: None) -> Outcome:
+        progress: Callable[[str], None] = lambda line: None, workers: int | None = None,
+        ) -> Outcome:
     """Run the whole workflow on a recording.
 
     Args:
@@ -864,10 +884,21 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         in_model: effects the current suit model already has (from its profile): they are
             fitted from the start and never proposed as missing.
         progress: called with one line per step.
+        workers: processes that try a step's candidate effects at once (default: one per
+            CPU, one inside a worker process; :func:`~.workers.workers_for`). The result
+            does not depend on it: every process runs one BLAS thread.
 
     Raises:
         DiscrepancyError: the recording cannot be used (no mocap, too short, ...).
     """
+    processes = workers_for(workers)
+    with one_blas_thread():
+        return _run(rec, name, in_model, progress, processes)
+
+
+def _run(rec: Recording, name: str, in_model: tuple[str, ...],
+         progress: Callable[[str], None], workers: int) -> Outcome:
+    """:func:`run` with ``workers`` processes for a step's candidates."""
     trial = prepare_trial(rec, name)
     floors = trial.noise
     floor = pooled_noise(trial)
@@ -913,15 +944,11 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
             break
         sig = signatures(trial, base.residual, mot, floor)
         inputs.cache["without_lag"] = base  # the lag candidates' model without the lag
-        scored = []
-        for kind in missing:
-            cand = _best(trial, inputs, kind, spec)
-            evidence = _evidence(trial, base, cand, floor)
-            if kind == "drift" and _beyond_noise(evidence) and not evidence["significant"]:
-                evidence = _counted_refined(trial, inputs, base, cand, evidence, floor)
-            if kind == "saturation" and evidence["significant"]:
-                evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
-            scored.append((kind, cand, evidence))
+        # the candidates are independent: tried at once, the costliest first
+        order = sorted(missing, key=COSTLIEST_FIRST.index)
+        tried = forked_map(functools.partial(_candidate, trial, inputs, spec, base, floor),
+                           order, workers)
+        scored = sorted(tried, key=lambda item: missing.index(item[0]))
         if not any(e["significant"] for _, _, e in scored):
             scored = [(k, c, _last_count(trial, inputs, base, c, e, floor) if k == "drift"
                        else e) for k, c, e in scored]
