@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -60,3 +63,39 @@ def test_a_worker_runs_its_own_jobs_in_turn_with_one_blas_thread():
     assert _blas_threads() == before  # restored
     if sys.platform == "linux":
         assert inside == [(1, [1] * len(before))] * 2
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="only Linux forks the workers")
+def test_forked_workers_end_with_a_killed_parent(tmp_path):
+    script = f"""
+import os, sys, time
+from exohil.emulators.discrepancy.workers import forked_map
+def job(k):
+    (__import__("pathlib").Path({str(tmp_path)!r}) / f"{{k}}.pid").write_text(str(os.getpid()))
+    time.sleep(60)
+forked_map(job, [0, 1], workers=2)
+"""
+    parent = subprocess.Popen([sys.executable, "-c", script])
+    try:
+        pid_files = [tmp_path / "0.pid", tmp_path / "1.pid"]
+        deadline = time.monotonic() + 30
+        while not all(f.exists() and f.read_text() for f in pid_files):
+            assert time.monotonic() < deadline, "the workers did not start"
+            time.sleep(0.05)
+        workers = [int(f.read_text()) for f in pid_files]
+    finally:
+        parent.kill()  # SIGKILL: nothing of the parent's runs after it
+        parent.wait()
+    deadline = time.monotonic() + 10
+    while any(_running(pid) for pid in workers):
+        assert time.monotonic() < deadline, "a worker outlived its parent"
+        time.sleep(0.05)
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` is a process that is neither gone nor a zombie awaiting its reaper."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+    return "State:\tZ" not in status

@@ -16,8 +16,10 @@ cores took longer than one process alone (184 s against 130 s for the CI suite's
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import os
+import signal
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -28,6 +30,9 @@ from threadpoolctl import threadpool_limits
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+#: prctl option: the signal a process gets when its parent ends (linux/prctl.h).
+PR_SET_PDEATHSIG = 1
 
 #: The job of the forked pool now running (:func:`forked_map`): a fork inherits it, so it
 #: may be any callable (a closure over the step's state), never pickled.
@@ -77,10 +82,24 @@ def forked_map(job: Callable[[T], R], items: Sequence[T], workers: int) -> list[
     _FORKED_JOB = job
     try:
         context = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(min(workers, len(items)), mp_context=context) as pool:
+        with ProcessPoolExecutor(min(workers, len(items)), mp_context=context,
+                                 initializer=_die_with, initargs=(os.getpid(),)) as pool:
             return list(pool.map(_run_forked_job, items))
     finally:
         _FORKED_JOB = None
+
+
+def _die_with(parent: int) -> None:
+    """Have the kernel kill this forked worker when ``parent`` ends, however it ends.
+
+    A fork inherits both ends of the pool's pipes, so a worker whose parent was killed
+    (SIGTERM, SIGKILL, out of memory) never reads the end of its queue and would wait
+    forever; the parent-death signal ends it instead (Linux, ``PR_SET_PDEATHSIG``)."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL) != 0:
+        raise OSError(ctypes.get_errno(), "prctl(PR_SET_PDEATHSIG) failed")
+    if os.getppid() != parent:  # the parent ended before the signal was set
+        os._exit(1)
 
 
 def _run_forked_job(item: Any) -> Any:
