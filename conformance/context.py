@@ -277,24 +277,40 @@ class ConformanceRun:
                                                                  inclusive=True))
         out.append(Measurement.judge("regression.latency_p99_ratio", mine_p99 / base_p99, "x",
                                      limit, f"estimator p99 {mine_p99:.3f} ms vs baseline "
-                                            f"{base_p99:.3f} ms, interleaved on one machine"))
+                                            f"{base_p99:.3f} ms, interleaved on one machine, each "
+                                            "frame the least of its passes"))
         return out
 
 
-def _paced_p99_ms(a: LoadedModel, b: LoadedModel, values: np.ndarray,
-                  frames: int = 3000) -> tuple[float, float]:
-    """Estimator p99 (ms) of two models timed frame by frame, interleaved, on the same frames,
-    so machine noise hits both alike."""
-    ea, eb = a.engine(), b.engine()
-    ta, tb = np.empty(frames), np.empty(frames)
-    for i in range(frames):
-        row = values[i % values.shape[0]]
-        t0 = time.perf_counter_ns()
-        ea.push(row)
-        t1 = time.perf_counter_ns()
-        eb.push(row)
-        t2 = time.perf_counter_ns()
-        ta[i], tb[i] = (t1 - t0) / 1e6, (t2 - t1) / 1e6
-    pa = distribution("a", ta[100:], "ms")[1].value
-    pb = distribution("b", tb[100:], "ms")[1].value
+def _paced_p99_ms(a: LoadedModel, b: LoadedModel, values: np.ndarray, frames: int = 2000,
+                  passes: int = 5, warm_up: int = 100) -> tuple[float, float]:
+    """Estimator p99 (ms) of two models over the same frames, each frame's time the least of
+    ``passes`` passes from fresh engines.
+
+    A push takes some 0.03 ms, so about 1 % of pushes meet a kernel timer tick (every 4 ms at
+    250 Hz) and take three times as long: a p99 of single passes sits on that cliff, and a
+    model compared with itself scattered from 0.53× to 1.65× (docs/conformance.md).
+    Interrupts and other processes only ever add time, and a fresh engine fed the same
+    frames does the same work, so the least over passes is the model's own cost of each
+    frame, whatever it depends on.
+    The models are interleaved frame by frame, in alternating order, so a slow moment of the
+    machine meets both and neither is always second.
+    """
+    ta, tb = np.full(frames, np.inf), np.full(frames, np.inf)
+    clock = time.perf_counter_ns
+    for k in range(passes):
+        ea, eb = a.engine(), b.engine()
+        for i in range(frames):
+            row = values[i % values.shape[0]]
+            a_first = (i + k) % 2 == 1
+            first, second = (ea, eb) if a_first else (eb, ea)
+            t0 = clock()
+            first.push(row)
+            t1 = clock()
+            second.push(row)
+            t2 = clock()
+            da, db = (t1 - t0, t2 - t1) if a_first else (t2 - t1, t1 - t0)
+            ta[i], tb[i] = min(ta[i], da / 1e6), min(tb[i], db / 1e6)
+    pa = distribution("a", ta[warm_up:], "ms")[1].value
+    pb = distribution("b", tb[warm_up:], "ms")[1].value
     return pa, pb
