@@ -260,9 +260,11 @@ def test_a_slow_estimator_fails_latency(tmp_path, fast_profile, monkeypatch):
 
     monkeypatch.setattr(StreamingEstimator, "push", slow_push)
     profile = tmp_path / "latency.toml"
-    profile.write_text(FAST_PROFILE.replace("[checks.latency]",
-                                            '[checks.latency]\n"latency.end_to_end.max" = '
-                                            '"< 12 ms"'), encoding="utf-8")
+    # 1 s of device time: 250 frames at 20 ms each drain in 5 s (the fast profile's 3 s: 15 s)
+    profile.write_text(FAST_PROFILE.replace("realtime_seconds = 3", "realtime_seconds = 1")
+                       .replace("[checks.latency]",
+                                '[checks.latency]\n"latency.end_to_end.max" = "< 12 ms"'),
+                       encoding="utf-8")
     code, output, report = conform(tmp_path / "out", profile, "-k", "latency")
     assert code != 0 and verdicts(report)["latency"] == "fail"
     assert last_line(output).startswith("FAIL: latency: latency.end_to_end.max")
