@@ -835,7 +835,32 @@ def test_a_stop_approached_gently_is_named_when_the_curve_adds_nothing_to_it():
     assert not curve["significant"], curve  # the first branch alone: not a stop
     assert curve["curve_over_stops"]["delta_mse"] < floor**2, curve
     assert cand.gap < curve["curve_gap"], curve
+    alone = curve["stops_alone_over_curve_alone"]
+    assert alone["blocks_improved"] >= alone["blocks_needed"], curve
     assert curve["stops_leave_curve_nothing"] and judged["significant"], judged
+
+
+def test_stops_that_tie_with_the_curve_leave_it_something():
+    """Rule 3's other branch asks the stops alone to beat the curve alone in as many blocks
+    as rule 2's sign test (7 of 8), not on the mean only: stops better by a lot in five
+    blocks and worse in three explain the bend no better than the curve. (The third blind
+    generator's rec 16 took a saturation second this way: 0.008658 V against the curve's
+    0.008805, where its hidden effect is a sample-and-hold lag.)"""
+    from types import SimpleNamespace
+
+    from exohil.emulators.discrepancy.workflow import _stops_leave_curve_nothing
+
+    curve_blocks = np.full(8, 2.0)
+    curve = SimpleNamespace(block_mse=curve_blocks, gap=float(np.sqrt(curve_blocks.mean())))
+    nothing_added = {"beyond_noise": False}
+    for blocks, leaves_nothing in ((np.array([1.0] * 5 + [2.2] * 3), False),
+                                   (np.array([1.0] * 7 + [2.2]), True),
+                                   (np.full(8, 1.9), True)):
+        stops = SimpleNamespace(block_mse=blocks, gap=float(np.sqrt(blocks.mean())))
+        assert stops.gap < curve.gap
+        encompassed, rules = _stops_leave_curve_nothing(stops, curve, nothing_added, 0.1)
+        assert encompassed is leaves_nothing, rules
+    assert not _stops_leave_curve_nothing(stops, curve, {"beyond_noise": True}, 0.1)[0]
 
 
 def test_the_report_says_why_stops_were_left_to_the_curve(hysteresis_outcome):

@@ -769,13 +769,28 @@ def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence
     both = fit(trial, inputs, replace(cand.spec, output_curve=True))
     over = _evidence(trial, curve, both, floor)
     curve_adds = _rules(cand.block_mse, both.block_mse, floor)
-    encompassed = bool(not curve_adds["beyond_noise"] and cand.gap < curve.gap)
+    encompassed, stops_vs_curve = _stops_leave_curve_nothing(cand, curve, curve_adds, floor)
     return {**evidence, "significant": over["significant"] or encompassed,
             "against_smooth_curve": {
                 "curve_gap": round(curve.gap, 6), **over,
                 "curve_over_stops": {k: curve_adds[k] for k in (
                     "delta_mse", "removed_rms", "blocks_improved", "beyond_noise")},
+                "stops_alone_over_curve_alone": {k: stops_vs_curve[k] for k in (
+                    "delta_mse", "blocks_improved", "blocks_needed")},
                 "stops_leave_curve_nothing": encompassed}}
+
+
+def _stops_leave_curve_nothing(stops: Fit, curve: Fit, curve_adds: dict, floor: float
+                               ) -> tuple[bool, dict]:
+    """Rule 3's other branch: the curve added to the stops does not clear rule 1 over them
+    (``curve_adds``), and the stops alone predict the held-out blocks better than the curve
+    alone, on the whole and in as many blocks as rule 2's sign test asks: two explanations
+    of one bend that each win some blocks are a tie, and a tie names nothing. Also the
+    rules of the stops alone against the curve alone."""
+    stops_vs_curve = _rules(curve.block_mse, stops.block_mse, floor)
+    return (bool(not curve_adds["beyond_noise"] and stops.gap < curve.gap
+                 and stops_vs_curve["blocks_improved"] >= stops_vs_curve["blocks_needed"]),
+            stops_vs_curve)
 
 
 def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
