@@ -7,10 +7,21 @@ DIR holds recordings and ``truth.json``: a list of ``{"file", "effect", "family"
 prints one line per recording, the confusion matrix (rows hidden, columns first named) and the
 issue's three rates. ``--out RUNS`` also keeps each recording's ``discrepancy.json`` summary.
 
+``--twins TWIN_RUNS`` scores by what the data can show: TWIN_RUNS holds the summaries of each
+recording's clean twin (the same recording written without its effect, e.g. by
+``benchmarks/blind3/generate.py --without-effect``, run through this benchmark with
+``--out``). Each effect's line then says what it adds to the gap before any effect is
+fitted, in noise variances, (gap² − twin gap²) / floor², and the rate of right first names
+is printed apart for the effects that add at least one: what the static map takes in of an
+effect, or what is left under the noise, no model can name.
+
 Run from the repository root::
 
     python -m benchmarks.blind3.generate --out /tmp/blind3
     python -m benchmarks.bench_discrepancy_blind /tmp/blind3 [--workers N] [--out RUNS]
+    python -m benchmarks.blind3.generate --out /tmp/blind3-twins --without-effect
+    python -m benchmarks.bench_discrepancy_blind /tmp/blind3-twins --out /tmp/twin-runs
+    python -m benchmarks.bench_discrepancy_blind /tmp/blind3 --twins /tmp/twin-runs
 """
 
 from __future__ import annotations
@@ -54,33 +65,79 @@ def load_truth(folder: Path) -> list[dict]:
     return truth
 
 
+def load_twins(folder: Path, truth: list[dict]) -> dict[str, dict]:
+    """The clean twins' summaries, by recording file, for every recording with an effect;
+    refused with one line, before any recording is run, when one is missing or unreadable."""
+    twins = {}
+    for entry in truth:
+        if entry["effect"] == "clean":
+            continue
+        path = folder / f"{Path(entry['file']).stem}.json"
+        try:
+            twin = json.loads(path.read_text())
+            twins[entry["file"]] = {"gap_before": float(twin["gap_before"])}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise SystemExit(f"error: {path}: no twin summary with a gap_before ({exc}); "
+                             f"run the twins with --out {folder} first") from None
+    return twins
+
+
+def added_over_twin(summary: dict, twin: dict) -> float:
+    """What a hidden effect adds to the gap before any effect is fitted, in noise variances:
+    (gap² − twin gap²) / floor², the twin being the same recording without the effect.
+    Below zero where the two recordings' static maps differ by more than the effect."""
+    return (summary["gap_before"] ** 2 - twin["gap_before"] ** 2) / summary["noise_floor"] ** 2
+
+
+def print_shown_rates(rows: list[tuple[str, str, float]]) -> None:
+    """Right first names over ``(hidden, first named, added over twin)`` effect rows, apart
+    for the effects that add at least one noise variance to their twin and those that add
+    less."""
+    for label, part in (("add ≥ 1 noise variance to their twin", [r for r in rows if r[2] >= 1]),
+                        ("add less", [r for r in rows if r[2] < 1])):
+        right = sum(named == hidden for hidden, named, _ in part)
+        print(f"effects that {label}: named right first {right}/{len(part)} "
+              f"({right / max(len(part), 1):.1%})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path, help="recordings and their truth.json")
     parser.add_argument("--workers", type=int, default=default_workers(),
                         help="processes running recordings side by side (default: one per CPU)")
     parser.add_argument("--out", type=Path, help="folder for each recording's summary JSON")
+    parser.add_argument("--twins", type=Path, metavar="TWIN_RUNS",
+                        help="the clean twins' summary JSON (an earlier --out): also score "
+                             "by what each effect adds to its twin's gap")
     args = parser.parse_args()
     truth = load_truth(args.folder)
+    twins = load_twins(args.twins, truth) if args.twins else {}
     print(f"machine: {machine()}")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
-    rows = []
+    rows, shown = [], []
     paths = [args.folder / entry["file"] for entry in truth]
     for (path, summary), entry in zip(parallel_map(run_file, paths, args.workers), truth,
                                       strict=True):
         named = first_effect(summary)
         shrink = 1.0 - summary["gap_after"] / summary["gap_before"]
         rows.append((entry["effect"], named, shrink))
+        added = ""
+        if entry["file"] in twins:
+            over = added_over_twin(summary, twins[entry["file"]])
+            shown.append((entry["effect"], named, over))
+            added = f" +{over:.2f} σ²" if over >= 0 else f" {over:.2f} σ²"
         print(f"  {path.stem:<8} {entry['effect']:<11} {entry.get('family', ''):<26} "
               f"{entry.get('magnitude_x_noise', 0):5.2f}× -> "
               f"{','.join(summary['effects']) or 'clean':<24} gap {summary['gap_before']:.4g} -> "
               f"{summary['gap_after']:.4g} {summary['units']} (floor "
-              f"{summary['noise_floor']:.4g}) {summary['seconds']} s", flush=True)
+              f"{summary['noise_floor']:.4g}) {summary['seconds']} s{added}", flush=True)
         if args.out:
             write_text(args.out / f"{path.stem}.json", json.dumps(summary, indent=1))
     print_confusion("", rows)
     print_rates(rows)
+    if args.twins:
+        print_shown_rates(shown)
 
 
 if __name__ == "__main__":

@@ -118,6 +118,37 @@ def test_the_blind_scorer_refuses_an_answer_key_it_cannot_score(tmp_path, entry,
         out.stderr)
 
 
+def test_the_blind_scorer_refuses_twins_it_cannot_read_before_running_anything(tmp_path):
+    """--twins needs every effect recording's twin summary; a clean recording needs none."""
+    (tmp_path / "rec_00.mcap").write_bytes(b"")  # not a recording: it must never be run
+    (tmp_path / "rec_01.mcap").write_bytes(b"")
+    (tmp_path / "truth.json").write_text(json.dumps([{"file": "rec_01.mcap", "effect": "clean"},
+                                                     {"file": "rec_00.mcap", "effect": "lag"}]))
+    twins = tmp_path / "twins"
+    twins.mkdir()
+    out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path), "--twins", str(twins))
+    assert out.returncode != 0 and "rec_00.json" in out.stderr, out.stderr
+    assert "rec_01" not in out.stderr and "Traceback" not in out.stderr, out.stderr
+    (twins / "rec_00.json").write_text(json.dumps({"gap_after": 1.0}))
+    out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path), "--twins", str(twins))
+    assert out.returncode != 0 and "gap_before" in out.stderr, out.stderr
+
+
+def test_what_an_effect_adds_over_its_twin_is_in_noise_variances(monkeypatch, capsys):
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks.bench_discrepancy_blind import added_over_twin, print_shown_rates
+
+    assert added_over_twin({"gap_before": 0.5, "noise_floor": 0.1},
+                           {"gap_before": 0.3}) == pytest.approx(16.0)
+    assert added_over_twin({"gap_before": 0.3, "noise_floor": 0.1},
+                           {"gap_before": 0.5}) == pytest.approx(-16.0)
+    print_shown_rates([("lag", "lag", 16.0), ("creep", "clean", 1.0), ("drift", "drift", 0.99),
+                       ("saturation", "clean", -3.0), ("hysteresis", "hysteresis", 2.0)])
+    shown, rest = capsys.readouterr().out.splitlines()
+    assert "≥ 1 noise variance" in shown and shown.endswith("2/3 (66.7%)")
+    assert "add less" in rest and rest.endswith("1/2 (50.0%)")
+
+
 @pytest.mark.parametrize("text, error", [
     ("[{", "not JSON"),
     ('{"file": "rec_00.mcap", "effect": "lag"}', "must be a list of objects"),
