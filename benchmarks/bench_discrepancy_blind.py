@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 
@@ -85,8 +86,13 @@ def load_twins(folder: Path, truth: list[dict]) -> dict[str, dict]:
 def added_over_twin(summary: dict, twin: dict) -> float:
     """What a hidden effect adds to the gap before any effect is fitted, in noise variances:
     (gap² − twin gap²) / floor², the twin being the same recording without the effect.
-    Below zero where the two recordings' static maps differ by more than the effect."""
-    return (summary["gap_before"] ** 2 - twin["gap_before"] ** 2) / summary["noise_floor"] ** 2
+    Below zero where the two recordings' static maps differ by more than the effect; ±inf
+    for a recording without noise (a floor of 0) whose gap differs from its twin's."""
+    added = summary["gap_before"] ** 2 - twin["gap_before"] ** 2
+    floor = summary["noise_floor"] ** 2
+    if floor > 0:
+        return added / floor
+    return math.copysign(math.inf, added) if added else 0.0
 
 
 def print_shown_rates(rows: list[tuple[str, str, float]]) -> None:

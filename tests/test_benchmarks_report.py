@@ -142,6 +142,8 @@ def test_what_an_effect_adds_over_its_twin_is_in_noise_variances(monkeypatch, ca
                            {"gap_before": 0.3}) == pytest.approx(16.0)
     assert added_over_twin({"gap_before": 0.3, "noise_floor": 0.1},
                            {"gap_before": 0.5}) == pytest.approx(-16.0)
+    assert added_over_twin({"gap_before": 0.5, "noise_floor": 0.0},
+                           {"gap_before": 0.3}) == float("inf")  # noiseless: no crash
     print_shown_rates([("lag", "lag", 16.0), ("creep", "clean", 1.0), ("drift", "drift", 0.99),
                        ("saturation", "clean", -3.0), ("hysteresis", "hysteresis", 2.0)])
     shown, rest = capsys.readouterr().out.splitlines()
