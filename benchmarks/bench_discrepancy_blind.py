@@ -66,9 +66,10 @@ def load_truth(folder: Path) -> list[dict]:
     return truth
 
 
-def load_twins(folder: Path, truth: list[dict]) -> dict[str, dict]:
-    """The clean twins' summaries, by recording file, for every recording with an effect;
-    refused with one line, before any recording is run, when one is missing or unreadable."""
+def load_twins(folder: Path, truth: list[dict]) -> dict[str, float]:
+    """The clean twins' gaps before any effect, by recording file, for every recording with
+    an effect (from their summaries in ``folder``); refused with one line, before any
+    recording is run, when one is missing or unreadable."""
     twins = {}
     for entry in truth:
         if entry["effect"] == "clean":
@@ -76,19 +77,20 @@ def load_twins(folder: Path, truth: list[dict]) -> dict[str, dict]:
         path = folder / f"{Path(entry['file']).stem}.json"
         try:
             twin = json.loads(path.read_text())
-            twins[entry["file"]] = {"gap_before": float(twin["gap_before"])}
+            twins[entry["file"]] = float(twin["gap_before"])
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise SystemExit(f"error: {path}: no twin summary with a gap_before ({exc}); "
                              f"run the twins with --out {folder} first") from None
     return twins
 
 
-def added_over_twin(summary: dict, twin: dict) -> float:
+def added_over_twin(summary: dict, twin_gap: float) -> float:
     """What a hidden effect adds to the gap before any effect is fitted, in noise variances:
-    (gap² − twin gap²) / floor², the twin being the same recording without the effect.
+    (gap² − twin gap²) / floor², ``twin_gap`` being that gap on the same recording without
+    the effect.
     Below zero where the two recordings' static maps differ by more than the effect; ±inf
     for a recording without noise (a floor of 0) whose gap differs from its twin's."""
-    added = summary["gap_before"] ** 2 - twin["gap_before"] ** 2
+    added = summary["gap_before"] ** 2 - twin_gap**2
     floor = summary["noise_floor"] ** 2
     if floor > 0:
         return added / floor
@@ -132,7 +134,7 @@ def main() -> None:
         if entry["file"] in twins:
             over = added_over_twin(summary, twins[entry["file"]])
             shown.append((entry["effect"], named, over))
-            added = f" +{over:.2f} σ²" if over >= 0 else f" {over:.2f} σ²"
+            added = f" {over:+.2f} σ²"
         print(f"  {path.stem:<8} {entry['effect']:<11} {entry.get('family', ''):<26} "
               f"{entry.get('magnitude_x_noise', 0):5.2f}× -> "
               f"{','.join(summary['effects']) or 'clean':<24} gap {summary['gap_before']:.4g} -> "

@@ -138,12 +138,9 @@ def test_what_an_effect_adds_over_its_twin_is_in_noise_variances(monkeypatch, ca
     monkeypatch.syspath_prepend(str(ROOT))
     from benchmarks.bench_discrepancy_blind import added_over_twin, print_shown_rates
 
-    assert added_over_twin({"gap_before": 0.5, "noise_floor": 0.1},
-                           {"gap_before": 0.3}) == pytest.approx(16.0)
-    assert added_over_twin({"gap_before": 0.3, "noise_floor": 0.1},
-                           {"gap_before": 0.5}) == pytest.approx(-16.0)
-    assert added_over_twin({"gap_before": 0.5, "noise_floor": 0.0},
-                           {"gap_before": 0.3}) == float("inf")  # noiseless: no crash
+    assert added_over_twin({"gap_before": 0.5, "noise_floor": 0.1}, 0.3) == pytest.approx(16.0)
+    assert added_over_twin({"gap_before": 0.3, "noise_floor": 0.1}, 0.5) == pytest.approx(-16.0)
+    assert added_over_twin({"gap_before": 0.5, "noise_floor": 0.0}, 0.3) == float("inf")
     print_shown_rates([("lag", "lag", 16.0), ("creep", "clean", 1.0), ("drift", "drift", 0.99),
                        ("saturation", "clean", -3.0), ("hysteresis", "hysteresis", 2.0)])
     shown, rest = capsys.readouterr().out.splitlines()
