@@ -4,7 +4,10 @@
    ``lib`` = exohil.emulators.effects, ``alt`` = independent implementations — two
    magnitudes, perturbed 3–5-tendon suits, seeds) and clean controls; prints the confusion
    matrix (rows: hidden, columns: first named effect) per family, the rate of right first
-   effects, the share of named cases whose held-out gap shrank by ≥ 50 %, and clean → nothing.
+   effects, the share of named cases whose held-out gap shrank by ≥ 50 %, and clean → nothing;
+   then each named case that did not halve, beside its clean control (the same suit and
+   movement without the effect) and its noise floor: where half the gap before is under the
+   floor, no model can halve it (a held-out gap keeps the noise).
 2. Timing: the workflow on a four-minute 250 Hz recording (the paper protocol fixture, every
    effect on; ``--time-on FILE`` times another recording instead), p50/p99/max over
    ``--repeats`` runs, with the machine. Target: ≤ 60 s.
@@ -25,6 +28,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +38,7 @@ from exohil.emulators.discrepancy.hidden import (
     FAMILIES,
     KINDS,
     SENSOR_RATE_HZ,
+    Case,
     cases,
     first_effect,
     run_cases,
@@ -48,12 +53,13 @@ FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "paper_protocol.mca
 
 def sweep(seeds: range, duration_s: float, families: tuple[str, ...], workers: int,
           motion: tuple[str, ...] = ()) -> None:
-    results = []
+    results, summaries = [], {}
     for case, summary in run_cases(cases(seeds, duration_s=duration_s, families=families,
                                          motion=motion), workers):
         named = first_effect(summary)
         shrink = 1.0 - summary["gap_after"] / summary["gap_before"]
         results.append((case, named, shrink))
+        summaries[case] = summary
         print(f"  {case.label:<30} -> {named:<11} gap {summary['gap_before']:.3f} -> "
               f"{summary['gap_after']:.3f} ({shrink:.0%})", flush=True)
     for family in families + ("all",) if len(families) > 1 else families:
@@ -61,6 +67,28 @@ def sweep(seeds: range, duration_s: float, families: tuple[str, ...], workers: i
                 if family == "all" or case.family == family]
         print_confusion(f"{family}; ", rows)
     print_rates([(case.kind, named, shrink) for case, named, shrink in results])
+    print_short_of_half(summaries)
+
+
+def print_short_of_half(summaries: dict[Case, dict]) -> None:
+    """Each named case whose held-out gap did not halve, with its clean control's gap before
+    and its noise floor, and how many of them no model could halve: those whose gap before
+    is under twice the floor."""
+    short = [(case, s) for case, s in summaries.items()
+             if first_effect(s) != "clean" and s["gap_after"] > 0.5 * s["gap_before"]]
+    if not short:
+        return
+    print("\nnamed but not halved (gap before -> after; its clean control; half the gap "
+          "before against the noise floor):")
+    for case, s in short:
+        control = summaries.get(replace(case, kind="clean"))
+        control_gap = ("(it is one)" if case.kind == "clean" else
+                       f"{control['gap_before']:.3f}" if control else "not run")
+        print(f"  {case.label:<30} {s['gap_before']:.3f} -> {s['gap_after']:.3f}; clean control "
+              f"{control_gap}; half {0.5 * s['gap_before']:.3f} against {s['noise_floor']:.3f}")
+    hopeless = sum(s["gap_before"] < 2.0 * s["noise_floor"] for _, s in short)
+    print(f"of these {len(short)}, {hopeless} have a gap before under twice the noise floor: "
+          f"no model can halve them")
 
 
 def print_confusion(title: str, rows: list[tuple[str, str, float]]) -> None:

@@ -148,6 +148,30 @@ def test_what_an_effect_adds_over_its_twin_is_in_noise_variances(monkeypatch, ca
     assert "add less" in rest and rest.endswith("1/2 (50.0%)")
 
 
+def test_the_sweep_lists_what_did_not_halve_beside_its_control_and_floor(monkeypatch, capsys):
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks.bench_discrepancy import print_short_of_half
+    from exohil.emulators.discrepancy.hidden import Case
+
+    def summary(named, before, after, floor=0.15):
+        return {"effects": [named] if named else [], "gap_before": before, "gap_after": after,
+                "noise_floor": floor}
+
+    stop, creep = Case("saturation", "alt", 1, 7), Case("creep", "lib", 2, 7)
+    print_short_of_half({
+        stop: summary("saturation", 0.29, 0.18),  # half 0.145 under the floor: hopeless
+        creep: summary("creep", 0.50, 0.30),  # could have halved
+        Case("drift", "alt", 2, 7): summary("drift", 0.25, 0.20),  # hopeless, no control run
+        Case("lag", "lib", 1, 7): summary("lag", 0.80, 0.20),  # halved: not listed
+        Case("clean", "alt", 1, 7): summary("", 0.17, 0.17),  # stop's control
+    })
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [line.split()[0] for line in lines[1:4]] == [stop.label, creep.label,
+                                                        "drift/alt/m2/s7"]
+    assert "clean control 0.170" in lines[1] and "clean control not run" in lines[2]
+    assert lines[-1].startswith("of these 3, 2 have a gap before under twice the noise floor")
+
+
 @pytest.mark.parametrize("text, error", [
     ("[{", "not JSON"),
     ('{"file": "rec_00.mcap", "effect": "lag"}', "must be a list of objects"),
