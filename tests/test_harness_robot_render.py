@@ -51,6 +51,19 @@ def test_animation_is_a_gif_with_one_frame_per_sample(samples, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["arm.gif"]  # no partial file left
 
 
+def test_each_animation_frame_shows_its_own_sample_alone(samples, tmp_path):
+    # the moving lines are drawn over a saved background: a frame must not keep the lines of
+    # the frame before it, so the same sample draws the same picture wherever it falls
+    path = write_arm_animation([samples[0], samples[2], samples[0]], tmp_path / "arm.gif")
+    with Image.open(path) as image:
+        frames = []
+        for k in range(image.n_frames):
+            image.seek(k)
+            frames.append(np.asarray(image.convert("RGB")))
+    assert not np.array_equal(frames[0], frames[1])
+    np.testing.assert_array_equal(frames[2], frames[0])
+
+
 def test_bad_input_is_a_clear_error(samples, tmp_path):
     with pytest.raises(ValueError, match="no samples"):
         render_arm_frames([], tmp_path)
