@@ -180,6 +180,36 @@ def test_frames_dropped_at_random_leave_the_fits_their_data():
     assert outcome.after.gap < 2.0 * outcome.summary["noise_floor"]
 
 
+def test_a_link_that_drops_three_of_every_five_frames_still_measures_and_fits():
+    """Frames never arrive three in a row and every ~25 Hz group holds 4 of its 10 frames:
+    the noise floor was NaN (second differences of three frames in a row only) and no group
+    held the half of its frames a fit row needed, so a clean suit was left at 195 mm. The
+    floor now also takes triples across the gaps, and a row needs the recording's share."""
+    lossy = []
+    for kind in ("clean", "creep"):
+        rec = make_recording(Case(kind, "lib", 2, seed=3, duration_s=60.0))
+        keep = np.arange(len(rec.sensors)) % 5 < 2
+        lossy.append(replace(rec, sensors=SensorStream(
+            seq=rec.sensors.seq[keep], t=rec.sensors.t[keep], values=rec.sensors.values[keep])))
+    trial = prepare_trial(lossy[0])
+    assert trial.valid.mean() == pytest.approx(0.4, abs=0.01)
+    np.testing.assert_allclose(noise_floor(trial), 0.15, rtol=0.1)
+    clean, creep = run(lossy[0], "clean"), run(lossy[1], "creep")
+    assert clean.summary["effects"] == []
+    assert clean.after.gap < 1.5 * clean.summary["noise_floor"]
+    assert creep.summary["effects"][:1] == ["creep"]
+    assert creep.after.gap < 0.5 * creep.before.gap
+
+
+def test_too_few_frames_close_together_for_the_noise_floor_is_one_clear_error():
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=60.0))
+    keep = np.arange(len(rec.sensors)) % 10 < 2  # two of every ten: no three within 6
+    sparse = replace(rec, sensors=SensorStream(
+        seq=rec.sensors.seq[keep], t=rec.sensors.t[keep], values=rec.sensors.values[keep]))
+    with pytest.raises(DiscrepancyError, match="x.mcap: too few frames received close together"):
+        prepare_trial(sparse, "x.mcap")
+
+
 def test_a_grid_mostly_empty_is_one_clear_error():
     rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
     seq = rec.sensors.seq.copy()

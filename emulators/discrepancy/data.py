@@ -53,6 +53,14 @@ QUANTISED_SHARE = 0.3
 #: out of the clipped estimate (movement onsets, glitches); ``D2_CLIP_VARIANCE`` is the share
 #: of a normal variable's variance kept inside ±``D2_CLIP_SIGMAS``, divided out.
 D2_CLIP_SIGMAS = 4.0
+#: The noise floor is measured on runs of three frames received in a row; with fewer than
+#: ``MIN_NOISE_TRIPLES`` of them (frames seldom arrive three in a row: a link that drops
+#: three of every five) triples of successive received frames that span at most
+#: ``MAX_NOISE_SPAN`` frame times count too, and fewer than ``NOISE_TRIPLES_NEEDED`` in all
+#: is an error.
+MIN_NOISE_TRIPLES = 500
+MAX_NOISE_SPAN = 6
+NOISE_TRIPLES_NEEDED = 50
 D2_CLIP_VARIANCE = 1.0 - 2.0 * D2_CLIP_SIGMAS * math.exp(-D2_CLIP_SIGMAS ** 2 / 2.0) / (
     math.sqrt(2.0 * math.pi) * math.erf(D2_CLIP_SIGMAS / math.sqrt(2.0)))
 
@@ -182,7 +190,11 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} never moves")
     angles = np.column_stack([np.interp(t, t_mocap, raw[:, k]) for k in moving])
     valid = present & inside & np.all(np.isfinite(y), axis=1)
-    spiked = spikes(y, valid, sensor_noise(y, valid))
+    try:
+        floor = sensor_noise(y, valid)
+    except DiscrepancyError as err:
+        raise DiscrepancyError(f"{name}: {err}") from None
+    spiked = spikes(y, valid, floor)
     valid &= ~spiked.any(axis=1)
     span = np.diff(t[[0, -1]])[0] if n > 1 else 0.0
     rate = (n - 1) / span if span > 0 else 0.0
@@ -336,10 +348,11 @@ def noise_floor(trial: Trial) -> np.ndarray:
 
 
 def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """(S,) the noise floor (:func:`noise_floor`) of readings y (N, S) over the valid frames."""
-    ok = valid[2:] & valid[1:-1] & valid[:-2]
-    y0 = np.where(valid[:, None], y, 0.0)  # invalid frames may hold NaN or inf
-    d2 = (y0[2:] - 2.0 * y0[1:-1] + y0[:-2])[ok]
+    """(S,) the noise floor (:func:`noise_floor`) of readings y (N, S) over the valid frames.
+
+    Raises DiscrepancyError when too few frames were received close enough together to
+    measure it (``NOISE_TRIPLES_NEEDED``)."""
+    d2 = _second_differences(y, valid)
     centred = d2 - np.median(d2, axis=0)
     sigma = D2_MAD_TO_SIGMA * np.median(np.abs(centred), axis=0)
     step = np.array([quantisation_step(y[valid, j]) for j in range(y.shape[1])])
@@ -347,6 +360,35 @@ def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
     for j in np.flatnonzero(step > QUANTISED_SHARE * sigma):
         sigma[j] = _clipped_sd(centred[:, j], max(sigma[j], rounding[j]))
     return np.maximum(sigma, rounding)
+
+
+def _second_differences(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(K, S) second differences Δ²y of runs of three valid frames; where there are fewer
+    than ``MIN_NOISE_TRIPLES``, also those of successive valid frames i < j < k spanning at
+    most ``MAX_NOISE_SPAN`` frame times, on the same scale: the residual of the line through
+    frames i and k at j, r = y_j − (a·y_i + b·y_k) with a = (k − j)/(k − i) and b = 1 − a,
+    has variance (1 + a² + b²)σ² for white noise, so r·√(6 / (1 + a² + b²)) has Δ²y's 6σ²
+    (and is −Δ²y for three frames in a row)."""
+    ok = valid[2:] & valid[1:-1] & valid[:-2]
+    y0 = np.where(valid[:, None], y, 0.0)  # invalid frames may hold NaN or inf
+    d2 = (y0[2:] - 2.0 * y0[1:-1] + y0[:-2])[ok]
+    if len(d2) >= MIN_NOISE_TRIPLES:
+        return d2
+    frames = np.flatnonzero(valid)
+    i, j, k = frames[:-2], frames[1:-1], frames[2:]
+    spread = (k - j > 1) | (j - i > 1)
+    near = spread & (k - i <= MAX_NOISE_SPAN)
+    i, j, k = i[near], j[near], k[near]
+    a = ((k - j) / (k - i))[:, None]
+    r = y[j] - a * y[i] - (1.0 - a) * y[k]
+    spanned = r * np.sqrt(6.0 / (1.0 + a ** 2 + (1.0 - a) ** 2))
+    d2 = np.concatenate([d2, spanned])
+    if len(d2) < NOISE_TRIPLES_NEEDED:
+        raise DiscrepancyError(
+            f"too few frames received close together to measure the sensors' noise: "
+            f"{len(d2)} runs of three within {MAX_NOISE_SPAN} frame times, need "
+            f"{NOISE_TRIPLES_NEEDED}")
+    return d2
 
 
 def _clipped_sd(centred: np.ndarray, sigma: float, iterations: int = 5) -> float:

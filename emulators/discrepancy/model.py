@@ -1014,7 +1014,9 @@ class Groups:
     Rows average the valid frames of a group of ``m`` consecutive grid frames in one
     held-out block: a group that straddles a block boundary gives one row per block, or
     the fit that predicts a block would hold some of its frames. A row is fit to use
-    (``whole``) when at least half of its frames are valid. Rows are sorted by block.
+    (``whole``) when at least half of its frames are valid, or, in a recording that holds
+    fewer than half of its frames, 90 % of the recording's share of valid frames (else a
+    link that drops three of five frames leaves no row). Rows are sorted by block.
 
     Attributes:
         m: frames per group.
@@ -1184,7 +1186,11 @@ def fit_groups(trial: Trial) -> Groups:
     count = frames.sum(axis=1)
     weights = frames / np.maximum(count, 1)[:, None]  # each row's mean over its valid frames
     order = np.argsort(bd, kind="stable")  # each block's rows contiguous (fold_coefs)
-    whole = (count > 0) & (2 * count >= in_block.sum(axis=1))
+    # at least half its frames; where the recording holds fewer than half of them (a link
+    # that drops most frames), 90 % of the recording's share, which a typical group holds
+    held = float(trial.valid.mean()) if trial.n else 1.0
+    share = 0.5 if held >= 0.5 else 0.9 * held
+    whole = (count > 0) & (count >= share * in_block.sum(axis=1))
     groups = Groups(m=m, n=n, weights=weights, split=split, order=order, group=group[order],
                     frames=frames[order], bd=bd[order], whole=whole[order])
     trial.cache["groups"] = groups
