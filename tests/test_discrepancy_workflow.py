@@ -60,6 +60,7 @@ from exohil.emulators.discrepancy.workflow import (
     SIGN_TEST_LEVEL,
     _against_curve,
     _best,
+    _clock_offset,
     _counted_refined,
     _creep_families,
     _evidence,
@@ -505,6 +506,60 @@ def clean_101():
     effect: what the same suit and movement leave when an effect is hidden in it."""
     rec = make_recording(Case("clean", "lib", 1, seed=101))
     return rec, run(rec, "clean").summary["gap_before"]
+
+
+def test_readings_ahead_of_the_motion_capture_are_a_clock_offset_not_an_effect(clean_101):
+    """Motion capture stamped 15 ms late: the readings run ahead of the pose, which no suit
+    can do. It was called clean with 4× the noise left (a lag cannot run ahead); the
+    offset is now calibrated away with the static map, and nothing is named."""
+    rec, gap_on_time = clean_101
+    stream = rec.mocap["shoulder"]
+    late = replace(rec, mocap={"shoulder": replace(stream, t=stream.t + 0.015)})
+    outcome = run(late, "late")
+    clock = outcome.summary["clock_offset"]
+    assert clock["applied"] and clock["mocap_late_s"] == pytest.approx(0.015, abs=0.001)
+    assert clock["gap_without"] > 2.0 * gap_on_time
+    assert outcome.summary["effects"] == []
+    assert outcome.before.gap < 1.02 * gap_on_time
+    assert "ahead of the motion capture, which no suit can do" in markdown(outcome.summary)
+
+
+def test_a_relaxation_that_reads_ahead_is_left_to_the_effects(clean_101):
+    """Readings that overshoot a move and relax back over 1 s (y + 0.1·(y − its 1 s
+    low-pass)) run 20 ms ahead of the pose to first order, and reading the motion capture
+    17 ms later clears rules 1 and 2 (7 of 8 blocks); but it removes only 27 % of what the
+    static map leaves above the noise, where a clock offset removes nearly all: an
+    effect's, not a clock's."""
+    rec, _ = clean_101
+    y = rec.sensors.values
+    relaxing = replace(rec, sensors=replace(rec.sensors, values=y + 0.1 * (y - low_pass(
+        y, 1.0, 250.0))))
+    trial = prepare_trial(relaxing)
+    floor = pooled_noise(trial)
+    scaled = make_inputs(trial)
+    restrict_to_coverage(trial, scaled.u)
+    static = _static_map(trial, scaled, floor)
+    kept, _, fitted, clock = _clock_offset(relaxing, "relaxing", trial, scaled, static, floor)
+    assert clock is not None and clock["mocap_late_s"] > 0.01 and clock["significant"]
+    assert not clock["applied"] and clock["share_of_excess"] < 0.4
+    assert kept is trial and fitted is static
+
+
+def test_a_clock_offset_under_a_larger_effect_is_found_once_the_effect_is_added():
+    """A creep 6× the noise and motion capture stamped 15 ms late: the static map's residual
+    is mostly the creep's, so the offset is found in the final model's residual, and the
+    workflow runs again with it."""
+    rec = make_recording(Case("creep", "lib", 2, seed=101, duration_s=30.0))
+    stream = rec.mocap["shoulder"]
+    late = replace(rec, mocap={"shoulder": replace(stream, t=stream.t + 0.015)})
+    lines: list[str] = []
+    outcome = run(late, "late", progress=lines.append)
+    clock = outcome.summary["clock_offset"]
+    assert clock["applied"] and clock["mocap_late_s"] == pytest.approx(0.015, abs=0.001)
+    assert clock["after_effects"]["significant"]
+    assert outcome.summary["effects"] == ["creep"]
+    assert outcome.after.gap < 1.15 * outcome.summary["noise_floor"]
+    assert any("again from the start" in line for line in lines)
 
 
 def test_a_creep_whose_load_stiffens_with_the_stretch_takes_a_quadratic_driver(clean_101, tmp_path):

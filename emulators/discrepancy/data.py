@@ -93,6 +93,8 @@ class Trial:
         spikes: (S,) int, frames per sensor holding an isolated spike (:func:`spikes`),
             which are invalid.
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
+        mocap_late_s: s, how much later than the sensors' clock the motion capture stamps
+            its samples (a clock offset); ``angles`` are read that much later.
         cache: what the fits derive from this trial (its fit rows, from ``valid`` and
             ``blocks``; the average of the last shared design block). Not an argument: a
             copy made with ``dataclasses.replace`` starts with an empty one.
@@ -113,6 +115,7 @@ class Trial:
     ignored: tuple[tuple[str, str], ...] = ()
     spikes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     placed_by: str = FRAME_COUNTER
+    mocap_late_s: float = 0.0
     cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
@@ -131,8 +134,12 @@ def _joint(rec: Recording) -> str:
     return max(rec.mocap, key=lambda name: len(rec.mocap[name]))
 
 
-def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
+def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float = 0.0
+                  ) -> Trial:
     """Put a recording on its uniform frame grid and split it into held-out blocks.
+
+    ``mocap_late_s``: a clock offset, s: the pose at sensor time t is the mocap's at
+    t + ``mocap_late_s``.
 
     Sensors without usable readings (:func:`unusable_sensors`) are left out and listed in
     ``Trial.ignored``: one dead channel should not hide what the others show.
@@ -184,11 +191,12 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
             f"{name}: motion capture ({t_mocap[0]:.6g}–{t_mocap[-1]:.6g} s) and sensors "
             f"({t[0]:.6g}–{t[-1]:.6g} s) do not overlap in time; the workflow needs both on "
             "one clock")
-    inside = (t >= t_mocap[0]) & (t <= t_mocap[-1]) & ~in_mocap_gap(t, t_mocap)
+    read = t + mocap_late_s  # the mocap's clock
+    inside = (read >= t_mocap[0]) & (read <= t_mocap[-1]) & ~in_mocap_gap(read, t_mocap)
     moving = [k for k in range(raw.shape[1]) if np.ptp(raw[:, k]) > 1e-6]
     if not moving:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} never moves")
-    angles = np.column_stack([np.interp(t, t_mocap, raw[:, k]) for k in moving])
+    angles = np.column_stack([np.interp(read, t_mocap, raw[:, k]) for k in moving])
     valid = present & inside & np.all(np.isfinite(y), axis=1)
     try:
         floor = sensor_noise(y, valid)
@@ -216,7 +224,7 @@ def prepare_trial(rec: Recording, name: str = "recording") -> Trial:
                   sensor_names=tuple(rec.sensor_names[j] for j in keep),
                   units=rec.sensor_units, rate_hz=rate, blocks=blocks.astype(np.int64),
                   scored=valid.copy(), ignored=ignored, spikes=spiked.sum(axis=0),
-                  placed_by=placed_by)
+                  placed_by=placed_by, mocap_late_s=mocap_late_s)
     trial.noise = noise_floor(trial)
     return trial
 

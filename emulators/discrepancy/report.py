@@ -14,7 +14,7 @@ import numpy as np
 from exohil.emulators.discrepancy.data import spike_counts
 from exohil.emulators.discrepancy.localise import motion
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
-from exohil.emulators.discrepancy.workflow import Outcome
+from exohil.emulators.discrepancy.workflow import Outcome, clock_words
 from exohil.formats.atomic import write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
@@ -100,6 +100,15 @@ def _refined_count(refined: dict, units: str) -> str:
             f"{refined['blocks_needed']}){alone}.")
 
 
+def _clock_lines(clock: dict | None, u: str) -> list[str]:
+    """The clock offset found with the static map, as a paragraph (none when the readings
+    do not run ahead of the motion capture)."""
+    if clock is None:
+        return []
+    words = clock_words(clock, u)
+    return [words[0].upper() + words[1:] + ".", ""]
+
+
 def markdown(summary: dict) -> str:
     """The human-readable report."""
     u = summary["units"]
@@ -115,6 +124,7 @@ def markdown(summary: dict) -> str:
              f"{summary['heldout_blocks']}-fold blocked cross-validation): "
              f"{summary['gap_before']:.4g} {u} before, {summary['gap_after']:.4g} {u} after; "
              f"noise floor {summary['noise_floor']:.4g} {u}.", "",
+             *_clock_lines(summary.get("clock_offset"), u),
              "| step | effect | held-out gap | removed RMS | blocks improved | parameters |",
              "|---|---|---|---|---|---|",
              f"| 0 | calibrated static map (degree {summary['static_map']['degree']}"
