@@ -209,6 +209,44 @@ def _lead_s(trial: Trial, static: Fit) -> float:
     return num / den if den > 0 else 0.0
 
 
+def _first_order_clears(trial: Trial, model: Fit, lead: float, floor: float) -> bool:
+    """Whether removing a lead of ``lead`` s from ``model``'s held-out residual to first
+    order (:func:`_lead_s`) clears rules 1 and 2."""
+    slope = np.gradient(model.prediction, axis=0) * trial.rate_hz
+    shifted = block_mse(trial, model.residual - lead * slope)
+    return bool(lead > 0.0 and _rules(model.block_mse, shifted, floor)["significant"])
+
+
+def _read_later(rec: Recording, name: str, late: float, lead: float, spec: Spec | None,
+                refit: Callable[[Trial, Inputs], Fit]) -> tuple[Trial, Inputs, Fit]:
+    """The recording read with the motion capture ``late`` + ``lead`` s late and refitted
+    (``refit``, on inputs scaled for ``spec``), up to ``CLOCK_STEPS`` times, each adding the
+    lead that remains, until it is within a tenth of a frame."""
+    for _ in range(CLOCK_STEPS):
+        late += lead
+        shifted = prepare_trial(rec, name, late)
+        inputs = make_inputs(shifted, spec)
+        restrict_to_coverage(shifted, inputs.u)
+        model = refit(shifted, inputs)
+        lead = _lead_s(shifted, model)
+        if abs(lead) * shifted.rate_hz < 0.1:
+            break
+    return shifted, inputs, model
+
+
+def _offset_evidence(late: float, without: Fit, read_later: Fit, floor: float) -> dict:
+    """Rules 1 and 2 for the motion capture read ``late`` s late (``read_later``) over
+    ``without``, the share of ``without``'s residual above the noise it explains, and
+    whether the offset is kept (``applied``: both rules and at least ``CLOCK_SHARE``)."""
+    rules = _rules(without.block_mse, read_later.block_mse, floor)
+    excess = without.gap**2 - floor**2
+    share = (without.gap**2 - read_later.gap**2) / excess if excess > 0 else 0.0
+    return {"mocap_late_s": round(late, 6),
+            "applied": bool(late > 0.0 and rules["significant"] and share >= CLOCK_SHARE),
+            "gap_without": round(without.gap, 6), "gap_with": round(read_later.gap, 6),
+            "share_of_excess": round(share, 4), **rules}
+
+
 def _clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
                   floor: float) -> tuple[Trial, Inputs, Fit, dict | None]:
     """The trial read with the motion capture's clock offset where the readings run ahead
@@ -219,81 +257,41 @@ def _clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, stati
     of the suit. (Readings behind it are a lag or a clock offset the other way, which the
     data cannot tell apart: ``lag`` is the candidate for both.) The lead is estimated from
     the static map's residual (:func:`_lead_s`); where removing it to first order clears
-    rules 1 and 2, the motion capture is read that much later and the map refitted, up to
-    ``CLOCK_STEPS`` times, each step adding the lead that remains. The offset is kept
-    where the refitted map clears rules 1 and 2 over the first and the offset explains at
-    least ``CLOCK_SHARE`` of what the first map left above the noise: an offset moves
-    every sensor by its own speed alike and, where it is the cause, explains nearly all of
-    it, while an effect whose loop reads a little ahead (a Bouc–Wen loop on the hidden
-    suite reads 7 ms ahead) keeps most of its residual after the shift.
+    rules 1 and 2, the motion capture is read that much later and the map refitted
+    (:func:`_read_later`). The offset is kept where the refitted map clears rules 1 and 2
+    over the first and explains at least ``CLOCK_SHARE`` of what the first map left above
+    the noise: an offset moves every sensor by its own speed alike and, where it is the
+    cause, explains nearly all of it, while an effect whose loop reads a little ahead (a
+    Bouc–Wen loop on the hidden suite reads 7 ms ahead) keeps most of its residual.
     """
     lead = _lead_s(trial, static)
-    if lead <= 0.0:
+    if not _first_order_clears(trial, static, lead, floor):
         return trial, scaled, static, None
-    slope = np.gradient(static.prediction, axis=0) * trial.rate_hz
-    first_order = _rules(static.block_mse, block_mse(trial, static.residual - lead * slope),
-                         floor)
-    if not first_order["significant"]:
-        return trial, scaled, static, None
-    late, shifted, inputs, refit = trial.mocap_late_s, trial, scaled, static
-    for _ in range(CLOCK_STEPS):
-        late += lead
-        shifted = prepare_trial(rec, name, late)
-        inputs = make_inputs(shifted)
-        restrict_to_coverage(shifted, inputs.u)
-        refit = _static_map(shifted, inputs, floor)
-        lead = _lead_s(shifted, refit)
-        if abs(lead) * trial.rate_hz < 0.1:  # within a tenth of a frame
-            break
-    rules = _rules(static.block_mse, refit.block_mse, floor)
-    excess = static.gap**2 - floor**2
-    share = (static.gap**2 - refit.gap**2) / excess if excess > 0 else 0.0
-    applied = bool(late > 0.0 and rules["significant"] and share >= CLOCK_SHARE)
-    evidence = {"mocap_late_s": round(late, 6), "applied": applied,
-                "gap_without": round(static.gap, 6), "gap_with": round(refit.gap, 6),
-                "share_of_excess": round(share, 4), **rules}
-    if applied:
+    shifted, inputs, refit = _read_later(
+        rec, name, trial.mocap_late_s, lead, None,
+        lambda tr, inp: _static_map(tr, inp, floor))
+    evidence = _offset_evidence(shifted.mocap_late_s, static, refit, floor)
+    if evidence["applied"]:
         return shifted, inputs, refit, evidence
     return trial, scaled, static, evidence
 
 
 def _lead_after_effects(rec: Recording, name: str, outcome: Outcome) -> dict | None:
     """Where the readings still run ahead of the motion capture once the effects are added,
-    the clock offset (``mocap_late_s``, s) and its evidence; None where they do not.
+    the clock offset and its evidence (:func:`_offset_evidence`); None where they do not.
 
     A lead that a larger effect hid from the static map's residual (:func:`_clock_offset`)
-    shows in the final model's. As there: where removing it to first order clears rules 1
-    and 2, the final model is refitted with the motion capture read that much later, up to
-    ``CLOCK_STEPS`` times, each adding the lead that remains; the evidence is the last
-    refit's over the final model (``significant``: rules 1 and 2 hold and the offset
-    explains at least ``CLOCK_SHARE`` of what the final model leaves above the noise). The
-    first-order share alone undersells it: the effects were fitted against the lead."""
+    shows in the final model's, and is found the same way, the final model refitted with
+    the motion capture read later (its effects' shapes kept, the coefficients refitted).
+    Judged on that refit, not to first order: the effects were fitted against the lead."""
     trial, final = outcome.trial, outcome.after
     floor = pooled_noise(trial)
     lead = _lead_s(trial, final)
-    if lead <= 0.0:
+    if not _first_order_clears(trial, final, lead, floor):
         return None
-    slope = np.gradient(final.prediction, axis=0) * trial.rate_hz
-    if not _rules(final.block_mse, block_mse(trial, final.residual - lead * slope),
-                  floor)["significant"]:
-        return None
-    late, refit = trial.mocap_late_s, final
-    for _ in range(CLOCK_STEPS):
-        late += lead
-        shifted = prepare_trial(rec, name, late)
-        inputs = make_inputs(shifted, final.spec)
-        restrict_to_coverage(shifted, inputs.u)
-        refit = fit(shifted, inputs, final.spec)
-        lead = _lead_s(shifted, refit)
-        if abs(lead) * shifted.rate_hz < 0.1:  # within a tenth of a frame
-            break
-    rules = _rules(final.block_mse, refit.block_mse, floor)
-    excess = final.gap**2 - floor**2
-    share = (final.gap**2 - refit.gap**2) / excess if excess > 0 else 0.0
-    return {"mocap_late_s": round(late, 6), "gap_without": round(final.gap, 6),
-            "gap_with": round(refit.gap, 6), "share_of_excess": round(share, 4),
-            **rules, "significant": bool(late > 0.0 and rules["significant"]
-                                         and share >= CLOCK_SHARE)}
+    shifted, _, refit = _read_later(rec, name, trial.mocap_late_s, lead, final.spec,
+                                    lambda tr, inp: fit(tr, inp, final.spec))
+    return _offset_evidence(shifted.mocap_late_s, final, refit, floor)
 
 
 def clock_words(clock: dict, units: str) -> str:
@@ -1043,7 +1041,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
             return first
         effects = ", ".join(first.summary["effects"]) or "nothing"
         late = 1000.0 * found["mocap_late_s"]
-        if not found["significant"]:
+        if not found["applied"]:
             progress(f"    with {effects} added the readings run {late:.3g} ms ahead of the "
                      f"motion capture to first order, but read so late the model explains "
                      f"{found['share_of_excess']:.0%} of what it left above the noise "
