@@ -53,6 +53,8 @@ QUANTISED_SHARE = 0.3
 #: out of the clipped estimate (movement onsets, glitches); ``D2_CLIP_VARIANCE`` is the share
 #: of a normal variable's variance kept inside ±``D2_CLIP_SIGMAS``, divided out.
 D2_CLIP_SIGMAS = 4.0
+D2_CLIP_VARIANCE = 1.0 - 2.0 * D2_CLIP_SIGMAS * math.exp(-D2_CLIP_SIGMAS ** 2 / 2.0) / (
+    math.sqrt(2.0 * math.pi) * math.erf(D2_CLIP_SIGMAS / math.sqrt(2.0)))
 #: The noise floor is measured on runs of three frames received in a row; with fewer than
 #: ``MIN_NOISE_TRIPLES`` of them (frames seldom arrive three in a row: a link that drops
 #: three of every five) triples of successive received frames that span at most
@@ -61,8 +63,6 @@ D2_CLIP_SIGMAS = 4.0
 MIN_NOISE_TRIPLES = 500
 MAX_NOISE_SPAN = 6
 NOISE_TRIPLES_NEEDED = 50
-D2_CLIP_VARIANCE = 1.0 - 2.0 * D2_CLIP_SIGMAS * math.exp(-D2_CLIP_SIGMAS ** 2 / 2.0) / (
-    math.sqrt(2.0 * math.pi) * math.erf(D2_CLIP_SIGMAS / math.sqrt(2.0)))
 
 
 class DiscrepancyError(InputError, ValueError):

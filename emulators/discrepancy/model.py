@@ -1188,7 +1188,7 @@ def fit_groups(trial: Trial) -> Groups:
     order = np.argsort(bd, kind="stable")  # each block's rows contiguous (fold_coefs)
     # at least half its frames; where the recording holds fewer than half of them (a link
     # that drops most frames), 90 % of the recording's share, which a typical group holds
-    held = float(trial.valid.mean()) if trial.n else 1.0
+    held = float(trial.valid.mean())
     share = 0.5 if held >= 0.5 else 0.9 * held
     whole = (count > 0) & (count >= share * in_block.sum(axis=1))
     groups = Groups(m=m, n=n, weights=weights, split=split, order=order, group=group[order],

@@ -101,8 +101,8 @@ def _refined_count(refined: dict, units: str) -> str:
 
 
 def _clock_lines(clock: dict | None, u: str) -> list[str]:
-    """The clock offset found with the static map, as a paragraph (none when the readings
-    do not run ahead of the motion capture)."""
+    """The clock offset's evidence (``clock_offset`` of the JSON) as a paragraph; none where
+    the readings do not run ahead of the motion capture."""
     if clock is None:
         return []
     words = clock_words(clock, u)

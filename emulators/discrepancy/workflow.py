@@ -1088,10 +1088,10 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                                      floor)
     if clock is not None:
         progress(f"    {clock_words(clock, trial.units)}")
-    if after_effects is not None and not (clock and clock["applied"]):
-        clock = {"mocap_late_s": round(trial.mocap_late_s, 6), "applied": True}
-    if clock is not None and after_effects is not None:
-        clock["after_effects"] = after_effects
+    if after_effects is not None:  # read late from the start: found after the effects
+        here = clock if clock is not None and clock["applied"] else {
+            "mocap_late_s": round(trial.mocap_late_s, 6), "applied": True}
+        clock = {**here, "after_effects": after_effects}
     spec = static_fit.spec
     inputs = make_inputs(trial, spec)
     for kind in in_model:
