@@ -25,7 +25,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from exohil.formats.atomic import replacing, write_with
+from exohil.formats.atomic import write_with
 from exohil.kinematics import humerus_direction
 from exohil.kinematics.robot import NAO_FROM_ISB
 
@@ -196,7 +196,6 @@ def write_arm_animation(samples: Sequence[ArmSample], path_gif: str | Path, *,
     palette = Image.fromarray(np.concatenate([frames[k] for k in shown], axis=1)).quantize(256)
     images = [Image.fromarray(frame).quantize(palette=palette, dither=Image.Dither.NONE)
               for frame in frames]
-    with replacing(path) as tmp:
-        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
-                       duration=1000.0 / fps, loop=0)
-    return path
+    return write_with(path, lambda tmp: images[0].save(
+        tmp, format="GIF", save_all=True, append_images=images[1:], duration=1000.0 / fps,
+        loop=0))

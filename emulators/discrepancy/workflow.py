@@ -196,25 +196,28 @@ def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
     return best if _rules(bent.block_mse, best.block_mse, floor)["beyond_noise"] else polynomial
 
 
-def _lead_s(trial: Trial, static: Fit) -> float:
-    """How far the readings run ahead of the motion capture, s (negative: behind): the
-    least-squares d of the held-out residual on d·dŝ/dt over the scored frames, ŝ the full
-    prediction, each sensor weighted by the inverse of its noise variance. A reading ahead
-    by d is ŝ(t + d) ≈ ŝ + d·dŝ/dt."""
-    slope = np.gradient(static.prediction, axis=0) * trial.rate_hz
-    scored = np.isfinite(static.residual)
-    weight = 1.0 / np.maximum(trial.noise, np.finfo(float).tiny) ** 2
-    num = float(np.sum(np.where(scored, static.residual * slope, 0.0) * weight))
-    den = float(np.sum(np.where(scored, slope**2, 0.0) * weight))
-    return num / den if den > 0 else 0.0
-
-
-def _first_order_clears(trial: Trial, model: Fit, lead: float, floor: float) -> bool:
-    """Whether removing a lead of ``lead`` s from ``model``'s held-out residual to first
-    order (:func:`_lead_s`) clears rules 1 and 2."""
+def _lead_s(trial: Trial, model: Fit) -> tuple[float, np.ndarray]:
+    """How far the readings run ahead of the motion capture, s (negative: behind), and the
+    rate of change dŝ/dt (N, S) of ``model``'s full prediction ŝ, per second: the lead is
+    the least-squares d of the held-out residual on d·dŝ/dt over the scored frames, each
+    sensor weighted by the inverse of its noise variance. A reading ahead by d is
+    ŝ(t + d) ≈ ŝ + d·dŝ/dt."""
     slope = np.gradient(model.prediction, axis=0) * trial.rate_hz
+    scored = np.isfinite(model.residual)
+    weight = 1.0 / np.maximum(trial.noise, np.finfo(float).tiny) ** 2
+    num = float(np.sum(np.where(scored, model.residual * slope, 0.0) * weight))
+    den = float(np.sum(np.where(scored, slope**2, 0.0) * weight))
+    return (num / den if den > 0 else 0.0), slope
+
+
+def _first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
+    """The lead of ``model``'s readings (:func:`_lead_s`) where it is positive and removing
+    it from the held-out residual to first order clears rules 1 and 2; else None."""
+    lead, slope = _lead_s(trial, model)
+    if lead <= 0.0:
+        return None
     shifted = block_mse(trial, model.residual - lead * slope)
-    return bool(lead > 0.0 and _rules(model.block_mse, shifted, floor)["significant"])
+    return lead if _rules(model.block_mse, shifted, floor)["significant"] else None
 
 
 def _read_later(rec: Recording, name: str, late: float, lead: float, spec: Spec | None,
@@ -228,7 +231,7 @@ def _read_later(rec: Recording, name: str, late: float, lead: float, spec: Spec 
         inputs = make_inputs(shifted, spec)
         restrict_to_coverage(shifted, inputs.u)
         model = refit(shifted, inputs)
-        lead = _lead_s(shifted, model)
+        lead, _ = _lead_s(shifted, model)
         if abs(lead) * shifted.rate_hz < 0.1:
             break
     return shifted, inputs, model
@@ -264,8 +267,8 @@ def _clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, stati
     cause, explains nearly all of it, while an effect whose loop reads a little ahead (a
     Bouc–Wen loop on the hidden suite reads 7 ms ahead) keeps most of its residual.
     """
-    lead = _lead_s(trial, static)
-    if not _first_order_clears(trial, static, lead, floor):
+    lead = _first_order_lead(trial, static, floor)
+    if lead is None:
         return trial, scaled, static, None
     shifted, inputs, refit = _read_later(
         rec, name, trial.mocap_late_s, lead, None,
@@ -286,8 +289,8 @@ def _lead_after_effects(rec: Recording, name: str, outcome: Outcome) -> dict | N
     Judged on that refit, not to first order: the effects were fitted against the lead."""
     trial, final = outcome.trial, outcome.after
     floor = pooled_noise(trial)
-    lead = _lead_s(trial, final)
-    if not _first_order_clears(trial, final, lead, floor):
+    lead = _first_order_lead(trial, final, floor)
+    if lead is None:
         return None
     shifted, _, refit = _read_later(rec, name, trial.mocap_late_s, lead, final.spec,
                                     lambda tr, inp: fit(tr, inp, final.spec))
