@@ -97,15 +97,19 @@ def test_the_outcome_does_not_depend_on_how_many_processes_computed_it(hysteresi
     assert len(alone.summary["steps"][0]["evidence"]["alternatives"]) == 4
 
 
+def frames_kept(rec: Recording, keep: np.ndarray) -> Recording:
+    """``rec`` with only the sensor frames ``keep`` (N,) bool marks, as a link that lost
+    the others would deliver them (their seq kept)."""
+    return replace(rec, sensors=SensorStream(seq=rec.sensors.seq[keep], t=rec.sensors.t[keep],
+                                             values=rec.sensors.values[keep]))
+
+
 def test_sequence_gaps_become_invalid_grid_frames():
     rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
     keep = np.ones(len(rec.sensors), dtype=bool)
     keep[100:110] = False
     keep[5000] = False
-    gappy = Recording(sensor_names=rec.sensor_names,
-                      sensors=SensorStream(seq=rec.sensors.seq[keep], t=rec.sensors.t[keep],
-                                           values=rec.sensors.values[keep]),
-                      mocap=rec.mocap)
+    gappy = frames_kept(rec, keep)
     trial = prepare_trial(gappy)
     assert trial.n == len(rec.sensors)
     assert not trial.valid[100:110].any() and not trial.valid[5000]
@@ -151,8 +155,7 @@ def test_frames_dropped_at_random_leave_the_fits_their_data():
     blocks is one row per block."""
     rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
     keep = np.random.default_rng(1).random(len(rec.sensors)) >= 0.3
-    lossy = replace(rec, sensors=SensorStream(seq=rec.sensors.seq[keep], t=rec.sensors.t[keep],
-                                              values=rec.sensors.values[keep]))
+    lossy = frames_kept(rec, keep)
     trial = prepare_trial(lossy)
     red = reduce(trial, Design.of(trial.t[:, None]), trial.y[:, 0])
     rows = red.rows
@@ -190,8 +193,7 @@ def test_a_link_that_drops_three_of_every_five_frames_still_measures_and_fits():
     for kind in ("clean", "creep"):
         rec = make_recording(Case(kind, "lib", 2, seed=3, duration_s=60.0))
         keep = np.arange(len(rec.sensors)) % 5 < 2
-        lossy.append(replace(rec, sensors=SensorStream(
-            seq=rec.sensors.seq[keep], t=rec.sensors.t[keep], values=rec.sensors.values[keep])))
+        lossy.append(frames_kept(rec, keep))
     trial = prepare_trial(lossy[0])
     assert trial.valid.mean() == pytest.approx(0.4, abs=0.01)
     np.testing.assert_allclose(noise_floor(trial), 0.15, rtol=0.1)
@@ -205,8 +207,7 @@ def test_a_link_that_drops_three_of_every_five_frames_still_measures_and_fits():
 def test_too_few_frames_close_together_for_the_noise_floor_is_one_clear_error():
     rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=60.0))
     keep = np.arange(len(rec.sensors)) % 10 < 2  # two of every ten: no three within 6
-    sparse = replace(rec, sensors=SensorStream(
-        seq=rec.sensors.seq[keep], t=rec.sensors.t[keep], values=rec.sensors.values[keep]))
+    sparse = frames_kept(rec, keep)
     with pytest.raises(DiscrepancyError, match="x.mcap: too few frames received close together"):
         prepare_trial(sparse, "x.mcap")
 
