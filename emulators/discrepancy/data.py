@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import median_filter
+from scipy.signal import butter, sosfiltfilt
 
 from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
@@ -26,6 +27,17 @@ BLOCK_S = 2.5
 MIN_BLOCK_S = BLOCK_S
 #: Motion-capture samples further apart than this many median intervals are a dropout.
 MOCAP_GAP_INTERVALS = 4.0
+#: The motion capture's angles are low-passed at this cutoff, Hz, with a Butterworth filter of
+#: order ``MOCAP_FILTER_ORDER`` run forward and back (zero phase: no lag is added to the
+#: pose). Arm movement holds little above 5 Hz, where the filter passes 99.9 % of the
+#: amplitude; above the cutoff a tracker's white noise is all that remains, and the static
+#: map would read it as sensor motion the suit never made (0.3° of it on a clean suit
+#: was named hysteresis: the play operator smoothed it away).
+MOCAP_CUTOFF_HZ = 12.0
+MOCAP_FILTER_ORDER = 4
+#: Motion capture sampled so slowly that the cutoff is above this share of its Nyquist
+#: frequency is used as it is (the filter would remove next to nothing).
+MOCAP_FILTER_MAX_NYQUIST = 0.8
 #: A sensor frame grid may hold at most this many points per frame received (90 % dropped).
 MAX_GRID_PER_FRAME = 10
 #: ``Trial.placed_by`` when seq is a plain frame counter (one per frame).
@@ -186,6 +198,7 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     if len(t_mocap) < 2:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} has fewer than two samples "
                                "with finite angles")
+    raw = smooth_angles(t_mocap, continuous_angles(raw))
     if t_mocap[0] > t[-1] or t_mocap[-1] < t[0]:
         raise DiscrepancyError(
             f"{name}: motion capture ({t_mocap[0]:.6g}–{t_mocap[-1]:.6g} s) and sensors "
@@ -253,6 +266,44 @@ def frame_grid(seq: np.ndarray) -> tuple[np.ndarray, str]:
     return index, f"seq counting {step} per frame" + ("" if exact else ", rounded")
 
 
+def continuous_angles(raw: np.ndarray) -> np.ndarray:
+    """(M, A) angles (degrees) without wraps: a step of more than 180° between samples is
+    the angle crossing ±180° (or 0°/360°), so whole turns are added to keep it continuous;
+    each column is then shifted by whole turns so that its median lies in [−180°, 180°).
+    Interpolating across a wrap would sweep the arm through the other way round."""
+    unwrapped = np.unwrap(raw, period=360.0, axis=0)
+    return unwrapped - 360.0 * np.round(np.median(unwrapped, axis=0) / 360.0)
+
+
+def smooth_angles(t_mocap: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    """(M, A) the angles ``raw`` low-passed at ``MOCAP_CUTOFF_HZ`` with zero phase, each
+    stretch between dropouts (:func:`in_mocap_gap`) on its own; unchanged where the
+    motion capture samples too slowly for the cutoff (``MOCAP_FILTER_MAX_NYQUIST``).
+
+    Args:
+        t_mocap: (M,) s, sorted sample times; raw: (M, A) degrees.
+    """
+    step = _mocap_step(t_mocap)
+    if not np.isfinite(step) or MOCAP_CUTOFF_HZ * 2.0 * step >= MOCAP_FILTER_MAX_NYQUIST:
+        return raw
+    sos = butter(MOCAP_FILTER_ORDER, MOCAP_CUTOFF_HZ * 2.0 * step, output="sos")
+    breaks = np.flatnonzero(np.diff(t_mocap) > MOCAP_GAP_INTERVALS * step) + 1
+    smooth = raw.copy()
+    pad = 3 * (2 * len(sos) + 1)  # scipy's default padding, at most
+    for run in np.split(np.arange(len(t_mocap)), breaks):
+        if len(run) > 2 * MOCAP_FILTER_ORDER:  # too short to filter: kept as sampled
+            smooth[run] = sosfiltfilt(sos, raw[run], axis=0, padlen=min(len(run) - 1, pad))
+    return smooth
+
+
+def _mocap_step(t_mocap: np.ndarray) -> float:
+    """The motion capture's sampling interval, s: the median spacing of its distinct
+    times (inf with fewer than two)."""
+    spacing = np.diff(t_mocap)
+    steps = spacing[spacing > 0]  # repeated timestamps are not the sampling interval
+    return float(np.median(steps)) if len(steps) else np.inf
+
+
 def in_mocap_gap(t: np.ndarray, t_mocap: np.ndarray) -> np.ndarray:
     """(N,) bool: grid times that fall in a motion-capture dropout.
 
@@ -265,8 +316,7 @@ def in_mocap_gap(t: np.ndarray, t_mocap: np.ndarray) -> np.ndarray:
         t: (N,) s, grid times; t_mocap: (M,) s, sorted mocap times, M ≥ 2.
     """
     spacing = np.diff(t_mocap)
-    steps = spacing[spacing > 0]  # repeated timestamps are not the sampling interval
-    limit = MOCAP_GAP_INTERVALS * float(np.median(steps)) if len(steps) else np.inf
+    limit = MOCAP_GAP_INTERVALS * _mocap_step(t_mocap)
     after = np.clip(np.searchsorted(t_mocap, t, side="right"), 1, len(t_mocap) - 1)
     return (spacing[after - 1] > limit) & (t > t_mocap[after - 1]) & (t < t_mocap[after])
 
