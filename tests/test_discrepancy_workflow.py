@@ -271,17 +271,19 @@ def test_smoothing_the_motion_capture_keeps_the_movement_and_each_dropout():
     across a dropout stays a step (each stretch is filtered on its own)."""
     rec = make_recording(Case("clean", "lib", 1, seed=4, duration_s=60.0))
     stream = rec.mocap["shoulder"]
-    moved = smooth_angles(stream.t, stream.angles) - stream.angles
+    smooth, cutoff = smooth_angles(stream.t, stream.angles)
+    assert cutoff == 12.0
+    moved = smooth - stream.angles
     assert np.abs(moved).max() < 0.03
     noise = np.random.default_rng(0).normal(0.0, 0.3, stream.angles.shape)
-    left = smooth_angles(stream.t, stream.angles + noise) - stream.angles
+    left = smooth_angles(stream.t, stream.angles + noise)[0] - stream.angles
     assert left.std() < 0.5 * noise.std()
     t = np.concatenate([np.arange(200), 220 + np.arange(200)]) / 120.0
     step = np.concatenate([np.zeros(200), np.full(200, 10.0)])[:, None]
-    np.testing.assert_allclose(smooth_angles(t, step), step, atol=1e-9)
+    np.testing.assert_allclose(smooth_angles(t, step)[0], step, atol=1e-9)
     slow = np.arange(400) / 25.0  # 25 Hz: the cutoff is near Nyquist, nothing to remove
-    np.testing.assert_array_equal(smooth_angles(slow, stream.angles[:400]),
-                                  stream.angles[:400])
+    kept, cutoff = smooth_angles(slow, stream.angles[:400])
+    assert cutoff is None and np.array_equal(kept, stream.angles[:400])
 
 
 def test_white_noise_in_the_motion_capture_is_no_effect_of_the_suit():
@@ -1408,7 +1410,10 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "[1] calibrating" in result.stderr and "added hysteresis" in result.stderr
+    assert "(shoulder, low-passed at 12 Hz)" in result.stderr
     summary = json.loads((out / "discrepancy.json").read_text())
+    assert summary["mocap_low_pass_hz"] == 12.0
+    assert "(shoulder, low-passed at 12 Hz, zero phase)" in (out / "report.md").read_text()
     assert set(summary) >= {"effects", "gap_before", "gap_after", "units", "sensors", "steps"}
     assert summary["units"] == "mm" and summary["sensors"] == list(rec.sensor_names)
     assert summary["effects"] == [s["effect"] for s in summary["steps"]]

@@ -107,6 +107,8 @@ class Trial:
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
         mocap_late_s: s, how much later than the sensors' clock the motion capture stamps
             its samples (a clock offset); ``angles`` are read that much later.
+        mocap_low_pass_hz: the cutoff the motion capture's angles were low-passed at
+            (:func:`smooth_angles`), Hz; None: used as sampled.
         cache: what the fits derive from this trial (its fit rows, from ``valid`` and
             ``blocks``; the average of the last shared design block). Not an argument: a
             copy made with ``dataclasses.replace`` starts with an empty one.
@@ -128,6 +130,7 @@ class Trial:
     spikes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     placed_by: str = FRAME_COUNTER
     mocap_late_s: float = 0.0
+    mocap_low_pass_hz: float | None = None
     cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
@@ -198,7 +201,7 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     if len(t_mocap) < 2:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} has fewer than two samples "
                                "with finite angles")
-    raw = smooth_angles(t_mocap, continuous_angles(raw))
+    raw, low_pass_hz = smooth_angles(t_mocap, continuous_angles(raw))
     if t_mocap[0] > t[-1] or t_mocap[-1] < t[0]:
         raise DiscrepancyError(
             f"{name}: motion capture ({t_mocap[0]:.6g}–{t_mocap[-1]:.6g} s) and sensors "
@@ -237,7 +240,8 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
                   sensor_names=tuple(rec.sensor_names[j] for j in keep),
                   units=rec.sensor_units, rate_hz=rate, blocks=blocks.astype(np.int64),
                   scored=valid.copy(), ignored=ignored, spikes=spiked.sum(axis=0),
-                  placed_by=placed_by, mocap_late_s=mocap_late_s)
+                  placed_by=placed_by, mocap_late_s=mocap_late_s,
+                  mocap_low_pass_hz=low_pass_hz)
     trial.noise = noise_floor(trial)
     return trial
 
@@ -275,17 +279,18 @@ def continuous_angles(raw: np.ndarray) -> np.ndarray:
     return unwrapped - 360.0 * np.round(np.median(unwrapped, axis=0) / 360.0)
 
 
-def smooth_angles(t_mocap: np.ndarray, raw: np.ndarray) -> np.ndarray:
+def smooth_angles(t_mocap: np.ndarray, raw: np.ndarray) -> tuple[np.ndarray, float | None]:
     """(M, A) the angles ``raw`` low-passed at ``MOCAP_CUTOFF_HZ`` with zero phase, each
-    stretch between dropouts (:func:`in_mocap_gap`) on its own; unchanged where the
-    motion capture samples too slowly for the cutoff (``MOCAP_FILTER_MAX_NYQUIST``).
+    stretch between dropouts (:func:`in_mocap_gap`) on its own, and that cutoff, Hz; the
+    angles unchanged and None where the motion capture samples too slowly for the cutoff
+    (``MOCAP_FILTER_MAX_NYQUIST``).
 
     Args:
         t_mocap: (M,) s, sorted sample times; raw: (M, A) degrees.
     """
     step = _mocap_step(t_mocap)
     if not np.isfinite(step) or MOCAP_CUTOFF_HZ * 2.0 * step >= MOCAP_FILTER_MAX_NYQUIST:
-        return raw
+        return raw, None
     sos = butter(MOCAP_FILTER_ORDER, MOCAP_CUTOFF_HZ * 2.0 * step, output="sos")
     breaks = np.flatnonzero(np.diff(t_mocap) > MOCAP_GAP_INTERVALS * step) + 1
     smooth = raw.copy()
@@ -293,7 +298,7 @@ def smooth_angles(t_mocap: np.ndarray, raw: np.ndarray) -> np.ndarray:
     for run in np.split(np.arange(len(t_mocap)), breaks):
         if len(run) > 2 * MOCAP_FILTER_ORDER:  # too short to filter: kept as sampled
             smooth[run] = sosfiltfilt(sos, raw[run], axis=0, padlen=min(len(run) - 1, pad))
-    return smooth
+    return smooth, MOCAP_CUTOFF_HZ
 
 
 def _mocap_step(t_mocap: np.ndarray) -> float:

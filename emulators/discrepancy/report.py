@@ -109,12 +109,21 @@ def _clock_lines(clock: dict | None, u: str) -> list[str]:
     return [words[0].upper() + words[1:] + ".", ""]
 
 
+def _low_pass(summary: dict) -> str:
+    """How the motion capture's angles were filtered, in words."""
+    cutoff = summary.get("mocap_low_pass_hz")
+    if cutoff is None:
+        return "as sampled"
+    return f"low-passed at {cutoff:g} Hz, zero phase"
+
+
 def markdown(summary: dict) -> str:
     """The human-readable report."""
     u = summary["units"]
     lines = [f"# Discrepancy report: {summary['recording']}", "",
              f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
-             f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
+             f"{', '.join(summary['angles'])} ({summary['joint']}, {_low_pass(summary)}), "
+             f"{summary['frames']} frames "
              f"at {summary['rate_hz']} Hz, {summary['invalid_frames']} invalid (dropped, "
              "outside motion capture or in its dropouts, or holding an isolated spike: "
              f"{spike_counts(summary['sensors'], summary['spikes'])})." + "".join(

@@ -1072,8 +1072,10 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     floors = trial.noise
     floor = pooled_noise(trial)
     placed = "" if trial.placed_by == FRAME_COUNTER else f" (placed by {trial.placed_by})"
+    filtered = ("as sampled" if trial.mocap_low_pass_hz is None
+                else f"low-passed at {trial.mocap_low_pass_hz:g} Hz")
     progress(f"[1] calibrating the static map: {trial.n_sensors} sensors ({trial.units}) from "
-             f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
+             f"{', '.join(trial.angle_names)} ({trial.joint}, {filtered}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
     for sensor, reason in trial.ignored:
@@ -1194,6 +1196,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "noise_floor_per_sensor": np.round(floors, 6).tolist(),
         "joint": trial.joint,
         "angles": list(trial.angle_names),
+        "mocap_low_pass_hz": trial.mocap_low_pass_hz,
         "rate_hz": round(trial.rate_hz, 4),
         "frames": trial.n,
         "frames_placed_by": trial.placed_by,
