@@ -2,8 +2,9 @@
 
 The grid is the device's frame counter: frame ``seq`` sits at index ``seq − seq₀``, so dropped
 frames (sequence gaps) are grid points marked invalid instead of a silently shorter series.
-Their times are interpolated from the neighbouring frames; the mocap angles are interpolated
-at every grid time. Filters and history-dependent effects then run on a uniform clock.
+Their times are interpolated from the neighbouring frames; the mocap angles, made continuous
+across wraps and low-passed (:func:`smooth_angles`), are interpolated at every grid time.
+Filters and history-dependent effects then run on a uniform clock.
 """
 
 from __future__ import annotations
