@@ -75,9 +75,11 @@ from exohil.emulators.discrepancy.workflow import (
     _static_map,
     blocks_needed,
     drift_options,
+    filter_words,
     pooled_noise,
 )
 from exohil.emulators.effects import Signal
+from exohil.emulators.protocols import Trajectory
 from exohil.emulators.suit_profile import ProfileError
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
@@ -271,31 +273,64 @@ def test_smoothing_the_motion_capture_keeps_the_movement_and_each_dropout():
     across a dropout stays a step (each stretch is filtered on its own)."""
     rec = make_recording(Case("clean", "lib", 1, seed=4, duration_s=60.0))
     stream = rec.mocap["shoulder"]
-    smooth, cutoff = smooth_angles(stream.t, stream.angles)
+    smooth, cutoff = smooth_angles(stream.t, stream.angles, 12.0)
     assert cutoff == 12.0
     moved = smooth - stream.angles
     assert np.abs(moved).max() < 0.03
     noise = np.random.default_rng(0).normal(0.0, 0.3, stream.angles.shape)
-    left = smooth_angles(stream.t, stream.angles + noise)[0] - stream.angles
+    left = smooth_angles(stream.t, stream.angles + noise, 12.0)[0] - stream.angles
     assert left.std() < 0.5 * noise.std()
     t = np.concatenate([np.arange(200), 220 + np.arange(200)]) / 120.0
     step = np.concatenate([np.zeros(200), np.full(200, 10.0)])[:, None]
-    np.testing.assert_allclose(smooth_angles(t, step)[0], step, atol=1e-9)
+    np.testing.assert_allclose(smooth_angles(t, step, 12.0)[0], step, atol=1e-9)
     slow = np.arange(400) / 25.0  # 25 Hz: the cutoff is near Nyquist, nothing to remove
-    kept, cutoff = smooth_angles(slow, stream.angles[:400])
+    kept, cutoff = smooth_angles(slow, stream.angles[:400], 12.0)
     assert cutoff is None and np.array_equal(kept, stream.angles[:400])
 
 
 def test_white_noise_in_the_motion_capture_is_no_effect_of_the_suit():
     """0.3° of white noise on a clean suit's θ and φ (a tracker at 120 Hz): the play
-    operator of a hysteresis smoothed it and was named (gap 0.33 → 0.30 mm); the angles are
-    low-passed first, and nothing is named."""
+    operator of a hysteresis smoothed it and was named (gap 0.33 → 0.30 mm). The readings
+    do not follow the noise, so the low-passed angles predict them better, are kept, and
+    nothing is named."""
     rec = make_recording(Case("clean", "lib", 1, seed=100, duration_s=60.0))
     stream = rec.mocap["shoulder"]
     noisy = stream.angles.copy()
     noisy[:, :2] += np.random.default_rng(1).normal(0.0, 0.3, (len(noisy), 2))
     outcome = run(replace(rec, mocap={"shoulder": replace(stream, angles=noisy)}), "noisy")
+    chosen = outcome.summary["mocap_filter"]
+    assert chosen["applied"] and outcome.summary["mocap_low_pass_hz"] == 12.0
+    assert chosen["gap_low_passed"] < 0.8 * chosen["gap_as_sampled"]
     assert outcome.summary["effects"] == []
+
+
+class _Tremor(Trajectory):
+    """A trajectory with a 0.4° tremor of θ and φ at 17 Hz and 23 Hz on top."""
+
+    def sample(self, t: np.ndarray) -> np.ndarray:
+        angles = super().sample(t)
+        angles[:, 0] += 0.4 * np.sin(2.0 * np.pi * 17.0 * np.asarray(t))
+        angles[:, 1] += 0.4 * np.sin(2.0 * np.pi * 23.0 * np.asarray(t) + 1.0)
+        return angles
+
+
+def test_movement_above_the_cutoff_that_the_readings_follow_is_read_as_sampled():
+    """The arm trembles at 17–23 Hz, the tendons follow, the motion capture sees it: the
+    angles low-passed at 12 Hz would lose what the readings show (as low-passed angles
+    left real human motion replayed from IK at 0.19 mm against 0.16 mm as sampled), so they
+    are read as sampled and the gap stays at the noise."""
+    base = random_trajectory(100, 60.0)
+    tremor = _Tremor(base.knot_t, base.knot_deg, base.interpolation, base.duration_s)
+    geometry, gains, offsets = random_geometry(100)
+    signal = suit_lengths(tremor, geometry, gains, offsets)
+    rng = np.random.default_rng(0)
+    signal = replace(signal, values=signal.values + rng.normal(0.0, 0.15, signal.values.shape))
+    outcome = run(suit_recording(tremor, geometry, signal, {}), "tremor")
+    chosen = outcome.summary["mocap_filter"]
+    assert not chosen["applied"] and outcome.summary["mocap_low_pass_hz"] is None
+    assert chosen["gap_as_sampled"] < 0.8 * chosen["gap_low_passed"]
+    assert outcome.summary["effects"] == []
+    assert outcome.summary["gap_after"] < 1.2 * outcome.summary["noise_floor"]
 
 
 def test_no_mocap_and_too_short_are_one_clear_error():
@@ -1410,10 +1445,12 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "[1] calibrating" in result.stderr and "added hysteresis" in result.stderr
-    assert "(shoulder, low-passed at 12 Hz)" in result.stderr
     summary = json.loads((out / "discrepancy.json").read_text())
-    assert summary["mocap_low_pass_hz"] == 12.0
-    assert "(shoulder, low-passed at 12 Hz, zero phase)" in (out / "report.md").read_text()
+    chosen = summary["mocap_filter"]
+    assert summary["mocap_low_pass_hz"] == (12.0 if chosen["applied"] else None)
+    said = filter_words(chosen, "mm")
+    assert f"    {said}\n" in result.stderr
+    assert said[1:] in (out / "report.md").read_text()
     assert set(summary) >= {"effects", "gap_before", "gap_after", "units", "sensors", "steps"}
     assert summary["units"] == "mm" and summary["sensors"] == list(rec.sensor_names)
     assert summary["effects"] == [s["effect"] for s in summary["steps"]]

@@ -28,12 +28,13 @@ BLOCK_S = 2.5
 MIN_BLOCK_S = BLOCK_S
 #: Motion-capture samples further apart than this many median intervals are a dropout.
 MOCAP_GAP_INTERVALS = 4.0
-#: The motion capture's angles are low-passed at this cutoff, Hz, with a Butterworth filter of
-#: order ``MOCAP_FILTER_ORDER`` run forward and back (zero phase: no lag is added to the
-#: pose). Arm movement holds little above 5 Hz, where the filter passes 99.9 % of the
-#: amplitude; above the cutoff a tracker's white noise is all that remains, and the static
-#: map would read it as sensor motion the suit never made (0.3° of it on a clean suit
-#: was named hysteresis: the play operator smoothed it away).
+#: The motion capture's angles may be low-passed at this cutoff, Hz, with a Butterworth
+#: filter of order ``MOCAP_FILTER_ORDER`` run forward and back (zero phase: no lag is added
+#: to the pose). Arm movement holds little above 5 Hz, where the filter passes 99.9 % of the
+#: amplitude; above the cutoff a tracker's white noise may be all there is, which the static
+#: map would read as sensor motion the suit never made (0.3° of it on a clean suit was named
+#: hysteresis: the play operator smoothed it away). The workflow chooses (see
+#: :func:`exohil.emulators.discrepancy.workflow._mocap_filter`).
 MOCAP_CUTOFF_HZ = 12.0
 MOCAP_FILTER_ORDER = 4
 #: Motion capture sampled so slowly that the cutoff is above this share of its Nyquist
@@ -109,7 +110,7 @@ class Trial:
         mocap_late_s: s, how much later than the sensors' clock the motion capture stamps
             its samples (a clock offset); ``angles`` are read that much later.
         mocap_low_pass_hz: the cutoff the motion capture's angles were low-passed at
-            (:func:`smooth_angles`), Hz; None: used as sampled.
+            (:func:`smooth_angles`), Hz; None: read as sampled.
         cache: what the fits derive from this trial (its fit rows, from ``valid`` and
             ``blocks``; the average of the last shared design block). Not an argument: a
             copy made with ``dataclasses.replace`` starts with an empty one.
@@ -150,12 +151,14 @@ def _joint(rec: Recording) -> str:
     return max(rec.mocap, key=lambda name: len(rec.mocap[name]))
 
 
-def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float = 0.0
-                  ) -> Trial:
+def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float = 0.0,
+                  mocap_low_pass_hz: float | None = None) -> Trial:
     """Put a recording on its uniform frame grid and split it into held-out blocks.
 
     ``mocap_late_s``: a clock offset, s: the pose at sensor time t is the mocap's at
-    t + ``mocap_late_s``.
+    t + ``mocap_late_s``. ``mocap_low_pass_hz``: low-pass the mocap's angles at this
+    cutoff (:func:`smooth_angles`); None: as sampled. Either way they are made continuous
+    across wraps (:func:`continuous_angles`).
 
     Sensors without usable readings (:func:`unusable_sensors`) are left out and listed in
     ``Trial.ignored``: one dead channel should not hide what the others show.
@@ -202,7 +205,7 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     if len(t_mocap) < 2:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} has fewer than two samples "
                                "with finite angles")
-    raw, low_pass_hz = smooth_angles(t_mocap, continuous_angles(raw))
+    raw, low_pass_hz = smooth_angles(t_mocap, continuous_angles(raw), mocap_low_pass_hz)
     if t_mocap[0] > t[-1] or t_mocap[-1] < t[0]:
         raise DiscrepancyError(
             f"{name}: motion capture ({t_mocap[0]:.6g}–{t_mocap[-1]:.6g} s) and sensors "
@@ -280,26 +283,28 @@ def continuous_angles(raw: np.ndarray) -> np.ndarray:
     return unwrapped - 360.0 * np.round(np.median(unwrapped, axis=0) / 360.0)
 
 
-def smooth_angles(t_mocap: np.ndarray, raw: np.ndarray) -> tuple[np.ndarray, float | None]:
-    """(M, A) the angles ``raw`` low-passed at ``MOCAP_CUTOFF_HZ`` with zero phase, each
-    stretch between dropouts (:func:`in_mocap_gap`) on its own, and that cutoff, Hz; the
-    angles unchanged and None where the motion capture samples too slowly for the cutoff
-    (``MOCAP_FILTER_MAX_NYQUIST``).
+def smooth_angles(t_mocap: np.ndarray, raw: np.ndarray, cutoff_hz: float | None
+                  ) -> tuple[np.ndarray, float | None]:
+    """(M, A) the angles ``raw`` low-passed at ``cutoff_hz`` with zero phase, each stretch
+    between dropouts (:func:`in_mocap_gap`) on its own, and that cutoff, Hz; the angles
+    unchanged and None where ``cutoff_hz`` is None or the motion capture samples too slowly
+    for it (``MOCAP_FILTER_MAX_NYQUIST``).
 
     Args:
         t_mocap: (M,) s, sorted sample times; raw: (M, A) degrees.
     """
     step = _mocap_step(t_mocap)
-    if not np.isfinite(step) or MOCAP_CUTOFF_HZ * 2.0 * step >= MOCAP_FILTER_MAX_NYQUIST:
+    if (cutoff_hz is None or not np.isfinite(step)
+            or cutoff_hz * 2.0 * step >= MOCAP_FILTER_MAX_NYQUIST):
         return raw, None
-    sos = butter(MOCAP_FILTER_ORDER, MOCAP_CUTOFF_HZ * 2.0 * step, output="sos")
+    sos = butter(MOCAP_FILTER_ORDER, cutoff_hz * 2.0 * step, output="sos")
     breaks = np.flatnonzero(np.diff(t_mocap) > MOCAP_GAP_INTERVALS * step) + 1
     smooth = raw.copy()
     pad = 3 * (2 * len(sos) + 1)  # scipy's default padding, at most
     for run in np.split(np.arange(len(t_mocap)), breaks):
         if len(run) > 2 * MOCAP_FILTER_ORDER:  # too short to filter: kept as sampled
             smooth[run] = sosfiltfilt(sos, raw[run], axis=0, padlen=min(len(run) - 1, pad))
-    return smooth, MOCAP_CUTOFF_HZ
+    return smooth, cutoff_hz
 
 
 def _mocap_step(t_mocap: np.ndarray) -> float:

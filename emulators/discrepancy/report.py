@@ -14,7 +14,7 @@ import numpy as np
 from exohil.emulators.discrepancy.data import spike_counts
 from exohil.emulators.discrepancy.localise import motion
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
-from exohil.emulators.discrepancy.workflow import Outcome, clock_words
+from exohil.emulators.discrepancy.workflow import Outcome, clock_words, filter_words
 from exohil.formats.atomic import write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
@@ -109,12 +109,10 @@ def _clock_lines(clock: dict | None, u: str) -> list[str]:
     return [words[0].upper() + words[1:] + ".", ""]
 
 
-def _low_pass(summary: dict) -> str:
-    """How the motion capture's angles were filtered, in words."""
-    cutoff = summary.get("mocap_low_pass_hz")
-    if cutoff is None:
-        return "as sampled"
-    return f"low-passed at {cutoff:g} Hz, zero phase"
+def _filter_sentence(summary: dict, units: str) -> str:
+    """How the motion capture was read, as a sentence of its own."""
+    words = filter_words(summary["mocap_filter"], units)
+    return f" {words[0].upper()}{words[1:]}."
 
 
 def markdown(summary: dict) -> str:
@@ -122,13 +120,12 @@ def markdown(summary: dict) -> str:
     u = summary["units"]
     lines = [f"# Discrepancy report: {summary['recording']}", "",
              f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
-             f"{', '.join(summary['angles'])} ({summary['joint']}, {_low_pass(summary)}), "
-             f"{summary['frames']} frames "
+             f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
              f"at {summary['rate_hz']} Hz, {summary['invalid_frames']} invalid (dropped, "
              "outside motion capture or in its dropouts, or holding an isolated spike: "
              f"{spike_counts(summary['sensors'], summary['spikes'])})." + "".join(
                  f" Left out: {item['sensor']} {item['reason']}."
-                 for item in summary["sensors_ignored"]), "",
+                 for item in summary["sensors_ignored"]) + _filter_sentence(summary, u), "",
              f"**{summary['conclusion']}.** Held-out gap (sensor-space RMSE on "
              f"{summary['heldout_blocks']}-fold blocked cross-validation): "
              f"{summary['gap_before']:.4g} {u} before, {summary['gap_after']:.4g} {u} after; "

@@ -67,6 +67,7 @@ from scipy.optimize import minimize, minimize_scalar
 from exohil.emulators.discrepancy.data import (
     BLOCK_S,
     FRAME_COUNTER,
+    MOCAP_CUTOFF_HZ,
     SPIKE_SIGMAS,
     SPIKE_WINDOW,
     Trial,
@@ -220,14 +221,15 @@ def _first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
     return lead if _rules(model.block_mse, shifted, floor)["significant"] else None
 
 
-def _read_later(rec: Recording, name: str, late: float, lead: float, spec: Spec | None,
+def _read_later(rec: Recording, name: str, trial: Trial, lead: float, spec: Spec | None,
                 refit: Callable[[Trial, Inputs], Fit]) -> tuple[Trial, Inputs, Fit]:
-    """The recording read with the motion capture ``late`` + ``lead`` s late and refitted
-    (``refit``, on inputs scaled for ``spec``), up to ``CLOCK_STEPS`` times, each adding the
-    lead that remains, until it is within a tenth of a frame."""
+    """The recording read as ``trial`` was (its motion capture filtered alike) but ``lead``
+    s later, and refitted (``refit``, on inputs scaled for ``spec``), up to ``CLOCK_STEPS``
+    times, each adding the lead that remains, until it is within a tenth of a frame."""
+    late = trial.mocap_late_s
     for _ in range(CLOCK_STEPS):
         late += lead
-        shifted = prepare_trial(rec, name, late)
+        shifted = prepare_trial(rec, name, late, trial.mocap_low_pass_hz)
         inputs = make_inputs(shifted, spec)
         restrict_to_coverage(shifted, inputs.u)
         model = refit(shifted, inputs)
@@ -235,6 +237,46 @@ def _read_later(rec: Recording, name: str, late: float, lead: float, spec: Spec 
         if abs(lead) * shifted.rate_hz < 0.1:
             break
     return shifted, inputs, model
+
+
+def _mocap_filter(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
+                  floor: float) -> tuple[Trial, Inputs, Fit, dict | None]:
+    """The trial with its motion capture low-passed at ``MOCAP_CUTOFF_HZ`` where that
+    predicts the held-out readings better, with its scaled inputs and static map; the
+    evidence (None: the motion capture samples too slowly to filter).
+
+    What the motion capture holds above the cutoff is either a tracker's noise, which the
+    suit never felt, or movement the tendons followed (a tremor; joint angles solved from
+    markers frame by frame and replayed). Only the sensors can tell: the map of
+    ``trial`` (read as sampled) is refitted on the low-passed angles, and whichever leaves
+    the smaller held-out gap is kept; the filtered trial then gets its static map chosen
+    again (:func:`_static_map`).
+    """
+    filtered = prepare_trial(rec, name, trial.mocap_late_s, MOCAP_CUTOFF_HZ)
+    if filtered.mocap_low_pass_hz is None:
+        return trial, scaled, static, None
+    inputs = make_inputs(filtered)
+    restrict_to_coverage(filtered, inputs.u)
+    same_map = fit(filtered, inputs, static.spec)
+    applied = same_map.gap < static.gap
+    evidence = {"low_pass_hz": filtered.mocap_low_pass_hz, "applied": applied,
+                "gap_as_sampled": round(static.gap, 6), "gap_low_passed": round(same_map.gap, 6)}
+    if not applied:
+        return trial, scaled, static, evidence
+    return filtered, inputs, _static_map(filtered, inputs, floor), evidence
+
+
+def filter_words(evidence: dict | None, units: str) -> str:
+    """How the motion capture was read (:func:`_mocap_filter`), in words."""
+    if evidence is None:
+        return "motion capture read as sampled (too slow to low-pass)"
+    gaps = (f"the static map's held-out gap {evidence['gap_low_passed']:.4g} against "
+            f"{evidence['gap_as_sampled']:.4g} {units} as sampled")
+    if evidence["applied"]:
+        return (f"motion capture low-passed at {evidence['low_pass_hz']:g} Hz, zero phase: "
+                f"{gaps}; what it held above that the readings do not follow")
+    return (f"motion capture read as sampled: low-passed at {evidence['low_pass_hz']:g} Hz, "
+            f"{gaps}; the readings follow what it holds above that")
 
 
 def _offset_evidence(late: float, without: Fit, read_later: Fit, floor: float) -> dict:
@@ -271,8 +313,7 @@ def _clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, stati
     if lead is None:
         return trial, scaled, static, None
     shifted, inputs, refit = _read_later(
-        rec, name, trial.mocap_late_s, lead, None,
-        lambda tr, inp: _static_map(tr, inp, floor))
+        rec, name, trial, lead, None, lambda tr, inp: _static_map(tr, inp, floor))
     evidence = _offset_evidence(shifted.mocap_late_s, static, refit, floor)
     if evidence["applied"]:
         return shifted, inputs, refit, evidence
@@ -292,7 +333,7 @@ def _lead_after_effects(rec: Recording, name: str, outcome: Outcome) -> dict | N
     lead = _first_order_lead(trial, final, floor)
     if lead is None:
         return None
-    shifted, _, refit = _read_later(rec, name, trial.mocap_late_s, lead, final.spec,
+    shifted, _, refit = _read_later(rec, name, trial, lead, final.spec,
                                     lambda tr, inp: fit(tr, inp, final.spec))
     return _offset_evidence(shifted.mocap_late_s, final, refit, floor)
 
@@ -1072,10 +1113,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     floors = trial.noise
     floor = pooled_noise(trial)
     placed = "" if trial.placed_by == FRAME_COUNTER else f" (placed by {trial.placed_by})"
-    filtered = ("as sampled" if trial.mocap_low_pass_hz is None
-                else f"low-passed at {trial.mocap_low_pass_hz:g} Hz")
     progress(f"[1] calibrating the static map: {trial.n_sensors} sensors ({trial.units}) from "
-             f"{', '.join(trial.angle_names)} ({trial.joint}, {filtered}), {trial.n} frames at "
+             f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
     for sensor, reason in trial.ignored:
@@ -1089,6 +1128,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     if uncovered > 0:
         progress(f"    {uncovered:.1%} of frames are poses no other fold covers: not scored")
     static_fit = _static_map(trial, scaled, floor)
+    trial, scaled, static_fit, mocap_filter = _mocap_filter(rec, name, trial, scaled,
+                                                            static_fit, floor)
+    progress(f"    {filter_words(mocap_filter, trial.units)}")
     trial, scaled, static_fit, clock = _clock_offset(rec, name, trial, scaled, static_fit,
                                                      floor)
     if clock is not None:
@@ -1197,6 +1239,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "joint": trial.joint,
         "angles": list(trial.angle_names),
         "mocap_low_pass_hz": trial.mocap_low_pass_hz,
+        "mocap_filter": mocap_filter,
         "rate_hz": round(trial.rate_hz, 4),
         "frames": trial.n,
         "frames_placed_by": trial.placed_by,
