@@ -229,14 +229,23 @@ def _read_later(rec: Recording, name: str, trial: Trial, lead: float, spec: Spec
     late = trial.mocap_late_s
     for _ in range(CLOCK_STEPS):
         late += lead
-        shifted = prepare_trial(rec, name, late, trial.mocap_low_pass_hz)
-        inputs = make_inputs(shifted, spec)
-        restrict_to_coverage(shifted, inputs.u)
+        shifted, inputs = _read(rec, name, late, trial.mocap_low_pass_hz, spec)
         model = refit(shifted, inputs)
         lead, _ = _lead_s(shifted, model)
         if abs(lead) * shifted.rate_hz < 0.1:
             break
     return shifted, inputs, model
+
+
+def _read(rec: Recording, name: str, late: float, low_pass_hz: float | None,
+          spec: Spec | None) -> tuple[Trial, Inputs]:
+    """The recording on its grid with the motion capture read ``late`` s late and
+    low-passed at ``low_pass_hz`` (None: as sampled), and its inputs scaled for ``spec``,
+    held-out frames scored where the other folds cover their pose."""
+    trial = prepare_trial(rec, name, late, low_pass_hz)
+    inputs = make_inputs(trial, spec)
+    restrict_to_coverage(trial, inputs.u)
+    return trial, inputs
 
 
 def _mocap_filter(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
@@ -1101,11 +1110,17 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         kept_filter = first.summary["mocap_filter"]
         again = _run(rec, name, in_model, progress, processes, found["mocap_late_s"], found,
                      kept_filter if kept_filter and "after_effects" in kept_filter else None)
-        if again.after.gap < first.after.gap:
-            return again
-        progress(f"    kept the first run: {again.after.gap:.4g} against "
-                 f"{first.after.gap:.4g} {first.trial.units} held out")
-        return first
+        return _lower(first, again, progress)
+
+
+def _lower(first: Outcome, again: Outcome, progress: Callable[[str], None]) -> Outcome:
+    """Of a run and the run again from the start, the one whose final held-out gap is lower
+    (the first on a tie; keeping the first is said in a progress line)."""
+    if again.after.gap < first.after.gap:
+        return again
+    progress(f"    kept the first run: {again.after.gap:.4g} against "
+             f"{first.after.gap:.4g} {first.trial.units} held out")
+    return first
 
 
 def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
@@ -1125,9 +1140,7 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
         return first
     trial, final = first.trial, first.after
     other = None if chosen["applied"] else MOCAP_CUTOFF_HZ
-    read = prepare_trial(rec, name, trial.mocap_late_s, other)
-    inputs = make_inputs(read, final.spec)
-    restrict_to_coverage(read, inputs.u)
+    read, inputs = _read(rec, name, trial.mocap_late_s, other, final.spec)
     refit = fit(read, inputs, final.spec)
     rules = _rules(final.block_mse, refit.block_mse, pooled_noise(trial))
     if refit.gap >= final.gap or rules["blocks_improved"] < rules["blocks_needed"]:
@@ -1140,12 +1153,8 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
     how = "low-passed" if other is not None else "read as sampled"
     progress(f"    with {effects} added, the motion capture {how} leaves {refit.gap:.4g} against "
              f"{final.gap:.4g} {trial.units}: again from the start, so read")
-    again = _run(rec, name, in_model, progress, workers, filter_found=found)
-    if again.after.gap < first.after.gap:
-        return again
-    progress(f"    kept the first run: {again.after.gap:.4g} against {first.after.gap:.4g} "
-             f"{trial.units} held out")
-    return first
+    return _lower(first, _run(rec, name, in_model, progress, workers, filter_found=found),
+                  progress)
 
 
 def _run(rec: Recording, name: str, in_model: tuple[str, ...],
