@@ -28,6 +28,7 @@ from exohil.emulators.discrepancy.hidden import (
     suit_recording,
 )
 from exohil.emulators.discrepancy.localise import (
+    SIGNATURES,
     TIME_WINDOWS,
     _holds,
     localise,
@@ -1456,6 +1457,42 @@ def test_a_bump_no_polynomial_follows_is_taken_by_the_local_functions_above_the_
                                    "local_centres must be rows of three numbers")
     noisier = run(_bump_recording(0.15), "bump").summary
     assert noisier["static_map"]["local_functions"] == 0 and noisier["effects"] == [], noisier
+
+
+
+def test_the_report_tabulates_each_sensors_parameters_and_where_the_residual_was(
+        hysteresis_outcome):
+    """The report reads without the JSON: a row per sensor for the loop width the JSON
+    holds, a labelled bin per row of every localisation (before, after, the largest before
+    in bold), and each signature beside what it points to."""
+    summary = json.loads(json.dumps(hysteresis_outcome[1].summary))  # as the JSON reads back
+    text = markdown(summary)
+    assert summary["effects"][0] == "hysteresis"
+    step = summary["steps"][0]
+    for name, width in zip(summary["sensors"], step["params"]["loop_width"], strict=True):
+        assert f"| {name} | {width:.4g} |" in text
+    assert "play_thresholds" not in text and '{"' not in text  # no JSON in the report
+    before, after = summary["localisation_before"], summary["localisation_after"]
+    rows = text.splitlines()
+    largest = max(c["rms"] for c in before["by_time"])
+    for b, a in zip(before["by_time"], after["by_time"], strict=True):
+        cell = f"**{b['rms']:.4g}**" if b["rms"] == largest else f"{b['rms']:.4g}"
+        assert f"| {b['t0_s']:.4g} to {b['t1_s']:.4g} | {cell} | {a['rms']:.4g} |" in rows
+    for name, cells in before["by_angle"].items():
+        assert f"| {name} (deg) | before | after |" in rows
+        assert sum(row.startswith(f"| {c['lo_deg']:.4g} to ") for c in cells
+                   for row in rows) >= len(cells)
+    signature = step["evidence"]["signature"]
+    for key, meaning in SIGNATURES.items():
+        assert f"| {key} | {signature[key]:.4g} | {meaning} |" in rows
+    # an earlier effect chosen again at a later step follows that step's own parameters
+    again = {**summary, "steps": [step, {**step, "effect": "creep", "params": {"tau_s": [2.5]},
+                                          "evidence": {**step["evidence"], "refitted": {
+                                              "hysteresis": {"loop_width": [0.125] * len(
+                                                  summary["sensors"])}}}}]}
+    tail = markdown(again).split("Step 2, creep: tau_s 2.5.", 1)[1]
+    assert tail.split("\n\n")[1] == "Step 2 chose hysteresis again."
+    assert f"| {summary['sensors'][-1]} | 0.125 |" in tail
 
 
 def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_path):

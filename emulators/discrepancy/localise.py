@@ -15,6 +15,24 @@ from exohil.emulators.discrepancy.model import low_pass, trial_motion
 MIN_HOLD_S = 1.0
 #: Equal time windows of the localisation in time.
 TIME_WINDOWS = 8
+#: Each signature :func:`signatures` measures, and what it points to.
+SIGNATURES = {
+    "direction_split_slow": "mean residual while the sensor's input falls minus while it "
+                            "rises, slowest third of movement (sensor units, sign-aligned per "
+                            "sensor): about the loop width for hysteresis, small for lag",
+    "direction_split_fast": "the same split in the fastest third: about the loop width for "
+                            "hysteresis, grows with speed for lag",
+    "rate_independence": "slow split / fast split: about 1 for hysteresis, much less than 1 "
+                         "for lag",
+    "velocity_correlation": "correlation of the residual with the input's rate of change: "
+                            "strong (either sign) for lag",
+    "hold_relaxation": "RMS change of the residual over holds of at least 1 s after a move, "
+                       "in noise floors: creep relaxes during holds; hysteresis and lag stay "
+                       "flat",
+    "time_trend": "share of the residual's variance a cubic in time explains: drift",
+    "extreme_excess": "residual RMS in the outer 5 % of each sensor's range over the RMS in "
+                      "the middle 90 %: saturation compresses the extremes",
+}
 
 
 def motion(trial: Trial, static: np.ndarray) -> dict[str, np.ndarray]:
@@ -92,21 +110,8 @@ def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> 
 
 def signatures(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray],
                floor: float) -> dict[str, float]:
-    """Physical signatures of the five effects in a held-out residual.
-
-    * ``direction_split_slow`` / ``direction_split_fast``: mean residual while the sensor's
-      input falls minus while it rises, in the slowest and fastest third of movement (sensor
-      units, sign-aligned per sensor). Hysteresis: both about the loop width (rate-
-      independent); lag: grows with speed, small when slow.
-    * ``rate_independence``: slow split / fast split (≈ 1 hysteresis, ≪ 1 lag).
-    * ``velocity_correlation``: correlation of the residual with the input's rate of change
-      (lag: strongly negative or positive, ∝ velocity).
-    * ``hold_relaxation``: RMS change of the residual over holds ≥ 1 s after a move, in units
-      of the noise floor (creep: relaxes during holds; hysteresis and lag: flat).
-    * ``time_trend``: share of residual variance explained by a cubic in time (drift).
-    * ``extreme_excess``: residual RMS in the outer 5 % of each sensor's range over the RMS in
-      the middle 90 % (saturation: compression at the extremes).
-    """
+    """Physical signatures of the five effects in a held-out residual (each is explained
+    in :data:`SIGNATURES`)."""
     vel = mot["velocity"]
     valid = trial.valid
     moving = ~mot["still"] & valid

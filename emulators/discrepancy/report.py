@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from exohil.emulators.discrepancy.data import spike_counts
-from exohil.emulators.discrepancy.localise import motion
+from exohil.emulators.discrepancy.localise import SIGNATURES, motion
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
 from exohil.emulators.discrepancy.workflow import Outcome, clock_words, filter_words
 from exohil.formats.atomic import write_bytes
@@ -27,6 +27,21 @@ def _main_angle(outcome: Outcome) -> int:
     return int(np.argmax(np.ptp(a, axis=0)))
 
 
+#: Window of the moving RMS drawn over the residual against time, s.
+RMS_WINDOW_S = 2.0
+
+
+def _moving_rms(x: np.ndarray, window: int) -> np.ndarray:
+    """RMS of the finite values of x (N,) in a centred window of ``window`` frames; NaN
+    where the window holds none."""
+    finite = np.isfinite(x)
+    kernel = np.ones(window)
+    total = np.convolve(np.where(finite, x, 0.0) ** 2, kernel, mode="same")
+    count = np.convolve(finite.astype(float), kernel, mode="same")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(total / count)
+
+
 def _plots(outcome: Outcome) -> dict[str, bytes]:
     import io
 
@@ -39,14 +54,20 @@ def _plots(outcome: Outcome) -> dict[str, bytes]:
     s = trial.n_sensors
     units = trial.units
     out = {}
-    fig, axes = plt.subplots(s, 1, figsize=(10, 1.8 * s + 1), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(s, 1, figsize=(10, 1.8 * s + 1), sharex=True, squeeze=False,
+                             layout="constrained")
+    window = max(1, int(round(RMS_WINDOW_S * trial.rate_hz)))
     for j, ax in enumerate(axes[:, 0]):
-        ax.plot(trial.t, outcome.before.residual[:, j], lw=0.5, color="0.6", label="before")
-        ax.plot(trial.t, outcome.after.residual[:, j], lw=0.5, color="C3", label="after")
+        for fit, light, dark, label in ((outcome.before, "0.8", "0.3", "before"),
+                                        (outcome.after, "#f4a6a6", "C3", "after")):
+            ax.plot(trial.t, fit.residual[:, j], lw=0.5, color=light)
+            ax.plot(trial.t, _moving_rms(fit.residual[:, j], window), lw=1.2, color=dark,
+                    label=label)
         ax.set_ylabel(f"{trial.sensor_names[j]} [{units}]")
     axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
-    fig.suptitle("held-out residual (measured − simulated), before and after the added effects")
+    fig.suptitle("held-out residual (measured − simulated) before and after the added "
+                 f"effects; dark: its RMS over {RMS_WINDOW_S:g} s")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     plt.close(fig)
@@ -55,7 +76,8 @@ def _plots(outcome: Outcome) -> dict[str, bytes]:
     k = _main_angle(outcome)
     direction = motion(trial, outcome.inputs.static)["direction"]
     stride = max(1, trial.n // 20000)
-    fig, axes = plt.subplots(s, 2, figsize=(10, 1.8 * s + 1), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(s, 2, figsize=(10, 1.8 * s + 1), sharex=True, squeeze=False,
+                             layout="constrained")
     for j in range(s):
         for col, (label, fit) in enumerate((("before", outcome.before),
                                             ("after", outcome.after))):
@@ -115,6 +137,131 @@ def _filter_sentence(summary: dict, units: str) -> str:
     return f" {words[0].upper()}{words[1:]}."
 
 
+def _unused(value: object) -> bool:
+    """A parameter of a part of the term the model does not use (None or [] in the JSON)."""
+    return value is None or (isinstance(value, list | tuple) and not value)
+
+
+def _figure(value: object) -> str:
+    """A parameter or statistic as the report prints it: numbers to 4 significant digits,
+    lists joined by commas, — where nothing was measured or set."""
+    if _unused(value):
+        return "—"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, int | float):
+        return f"{value:.4g}"
+    if isinstance(value, list | tuple):
+        return ", ".join(_figure(v) for v in value)
+    return str(value)
+
+
+#: Parameters (``steps[].params`` of the JSON) that hold one entry per sensor.
+PER_SENSOR_PARAMS = frozenset({
+    "loop_width", "gain", "quadratic_gain_per_unit", "centre", "rate_per_s", "change",
+    "mean_rate_per_s", "stops", "softness", "shape", "lower", "upper"})
+#: Parameters left to the JSON: the hysteresis term's play operators (a row per sensor of
+#: as many thresholds and weights as the model has plays).
+JSON_ONLY_PARAMS = frozenset({"play_thresholds", "weights"})
+
+
+def _parameter_block(title: str, params: dict, sensors: list[str]) -> list[str]:
+    """One effect's parameters: those of the whole term after ``title`` (a part of the term
+    the model does not use, None or [] in the JSON, left out), those of each sensor in a
+    table with a row per sensor."""
+    params = {k: v for k, v in params.items() if k not in JSON_ONLY_PARAMS}
+    per_sensor = [k for k, v in params.items() if k in PER_SENSOR_PARAMS
+                  and isinstance(v, list) and len(v) == len(sensors)]
+    whole = "; ".join(f"{k} {_figure(v)}" for k, v in params.items()
+                      if k not in per_sensor and not _unused(v))
+    lines = ["", title + (f": {whole}." if whole else ".")]
+    if per_sensor:
+        lines += ["", "| sensor | " + " | ".join(per_sensor) + " |",
+                  "|---" * (len(per_sensor) + 1) + "|"]
+        lines += [f"| {name} | " + " | ".join(_figure(params[k][j]) for k in per_sensor)
+                  + " |" for j, name in enumerate(sensors)]
+    return lines
+
+
+def _parameter_lines(summary: dict) -> list[str]:
+    """Each step's fitted parameters, and those of the earlier effects that step chose
+    again with its own in place (``evidence.refitted``)."""
+    if not summary["steps"]:
+        return []
+    lines = ["", "## Parameters of each step", "",
+             f"Sensor units ({summary['units']}) unless the name says otherwise; every figure, "
+             "and the hysteresis term's play operators, in full in `discrepancy.json`. Where "
+             "a step chose an earlier effect's parameters again with its own in place "
+             "(`evidence.refitted`), they follow its own."]
+    sensors = summary["sensors"]
+    for i, step in enumerate(summary["steps"], start=1):
+        lines += _parameter_block(f"Step {i}, {step['effect']}", step["params"], sensors)
+        for kind, params in step["evidence"].get("refitted", {}).items():
+            lines += _parameter_block(f"Step {i} chose {kind} again", params, sensors)
+    return lines
+
+
+def _signature_lines(steps: list[dict]) -> list[str]:
+    """The signatures of the residual each step started from, a column per step, with
+    what each points to."""
+    if not steps:
+        return []
+    names = [k for k in SIGNATURES if k in steps[0]["evidence"]["signature"]]
+    lines = ["", "## Signatures in the residual each step started from", "",
+             "| signature | " + " | ".join(f"step {i} ({s['effect']})"
+                                          for i, s in enumerate(steps, start=1))
+             + " | points to |", "|---" * (len(steps) + 2) + "|"]
+    for name in names:
+        lines.append(f"| {name} | " + " | ".join(
+            _figure(s["evidence"]["signature"].get(name)) for s in steps)
+            + f" | {SIGNATURES[name]} |")
+    return lines
+
+
+def _before_after(head: str, rows: list[tuple[str, float | None, float | None]]
+                  ) -> list[str]:
+    """A before/after table of residual RMS, the largest before in bold."""
+    largest = max((b for _, b, _ in rows if b is not None), default=None)
+    out = [f"| {head} | before | after |", "|---|---|---|"]
+    for label, before, after in rows:
+        cell = _figure(before)
+        out.append(f"| {label} | {f'**{cell}**' if before == largest else cell} | "
+                   f"{_figure(after)} |")
+    return out
+
+
+def _localisation_lines(summary: dict) -> list[str]:
+    """Where the residual was before and after the added effects: by direction of motion,
+    speed, holds, time and each angle."""
+    lb, la = summary["localisation_before"], summary["localisation_after"]
+    lines = ["", "## Where the residual was", "",
+             f"Held-out residual RMS in {summary['units']} before and after the added effects "
+             f"(noise floor {summary['noise_floor']:.4g}); in bold the largest before.", "",
+             "By the direction of each sensor's motion:", ""]
+    lines += _before_after("direction", [(d, lb["by_direction"][d], la["by_direction"][d])
+                                         for d in lb["by_direction"]])
+    lines += ["", "By the speed of the movement (thirds of the moving frames):", ""]
+    if lb["by_speed"]:
+        lines += _before_after("speed (deg/s)", [
+            (f"{b['lo_deg_s']:.4g} to {b['hi_deg_s']:.4g}", b["rms"], a["rms"])
+            for b, a in zip(lb["by_speed"], la["by_speed"], strict=True)])
+    else:
+        lines.append("(too few moving frames to split)")
+    hb, ha = lb["holds"], la["holds"]
+    lines += ["", f"During the {hb['count']} holds of at least 1 s: {_figure(hb['rms'])} → "
+              f"{_figure(ha['rms'])}; while moving: {_figure(hb.get('moving_rms'))} → "
+              f"{_figure(ha.get('moving_rms'))}.", "", "By time:", ""]
+    lines += _before_after("time (s)", [
+        (f"{b['t0_s']:.4g} to {b['t1_s']:.4g}", b["rms"], a["rms"])
+        for b, a in zip(lb["by_time"], la["by_time"], strict=True)])
+    for name, cells in lb["by_angle"].items():
+        lines += ["", f"By {name}:", ""]
+        lines += _before_after(f"{name} (deg)", [
+            (f"{b['lo_deg']:.4g} to {b['hi_deg']:.4g}", b["rms"], a["rms"])
+            for b, a in zip(cells, la["by_angle"][name], strict=True)])
+    return lines
+
+
 def markdown(summary: dict) -> str:
     """The human-readable report."""
     u = summary["units"]
@@ -131,18 +278,16 @@ def markdown(summary: dict) -> str:
              f"{summary['gap_before']:.4g} {u} before, {summary['gap_after']:.4g} {u} after; "
              f"noise floor {summary['noise_floor']:.4g} {u}.", "",
              *_clock_lines(summary.get("clock_offset"), u),
-             "| step | effect | held-out gap | removed RMS | blocks improved | parameters |",
-             "|---|---|---|---|---|---|",
+             f"| step | effect | held-out gap ({u}) | removed RMS ({u}) | blocks improved |",
+             "|---|---|---|---|---|",
              f"| 0 | calibrated static map (degree {summary['static_map']['degree']}"
              f"{_local(summary['static_map'].get('local_functions', 0))}"
              f"{_runs(summary['static_map'].get('straight_runs', []))}) | "
-             f"{summary['gap_before']:.4g} | | | |"]
+             f"{summary['gap_before']:.4g} | | |"]
     for i, step in enumerate(summary["steps"], start=1):
         ev = step["evidence"]
-        params = json.dumps({k: v for k, v in step["params"].items()
-                             if k not in ("play_thresholds", "weights")})
         lines.append(f"| {i} | {step['effect']} | {step['gap']:.4g} | {ev['removed_rms']:.4g} "
-                     f"| {ev['blocks_improved']}/{summary['heldout_blocks']} | `{params}` |")
+                     f"| {ev['blocks_improved']}/{summary['heldout_blocks']} |")
     for i, step in enumerate(summary["steps"], start=1):
         held = step["evidence"].get("held_at_stops")
         if held and held["significant"]:
@@ -170,11 +315,8 @@ def markdown(summary: dict) -> str:
                       + (f"; beyond its own noise on {', '.join(beyond)} alone, on too few "
                          f"blocks there" if beyond else "") + ". " + _refined_count(
                              step["evidence"]["refined"], u)]
-    lines += ["", "## Signatures in the residual at each step", ""]
-    for i, step in enumerate(summary["steps"], start=1):
-        sig = step["evidence"]["signature"]
-        lines.append(f"- step {i} ({step['effect']}): " + ", ".join(
-            f"{k} {v}" for k, v in sig.items()))
+    lines += _parameter_lines(summary)
+    lines += _signature_lines(summary["steps"])
     if summary["not_added"]:
         lines += ["", "## Not added (not beyond the noise, or not on enough blocks)", ""]
         for item in summary["not_added"]:
@@ -190,18 +332,7 @@ def markdown(summary: dict) -> str:
                             f"stops remove {curve['removed_rms']:.4g}, and the curve over "
                             f"them {curve['curve_over_stops']['removed_rms']:.4g}: a gentle "
                             f"bend, not a stop"))
-    lb, la = summary["localisation_before"], summary["localisation_after"]
-    lines += ["", "## Where the residual was (before → after, RMS)", "",
-              f"- by direction: {lb['by_direction']} → {la['by_direction']}",
-              f"- by speed tercile: {[c['rms'] for c in lb['by_speed']]} → "
-              f"{[c['rms'] for c in la['by_speed']]}",
-              f"- during holds: {lb['holds']['rms']} → {la['holds']['rms']} "
-              f"({lb['holds']['count']} holds ≥ 1 s)",
-              f"- by time: {[c['rms'] for c in lb['by_time']]} → "
-              f"{[c['rms'] for c in la['by_time']]}"]
-    for name, cells in lb["by_angle"].items():
-        after = la["by_angle"][name]
-        lines.append(f"- by {name}: {[c['rms'] for c in cells]} → {[c['rms'] for c in after]}")
+    lines += _localisation_lines(summary)
     lines += ["", "![residual against time](residual_time.png)", "",
               "![residual against angle](residual_angle.png)", "",
               "The updated model is `suit_profile.toml` (schema exohil-calibrated-suit-profile; "
