@@ -1504,6 +1504,11 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     assert result.exit_code == 0, result.output
     assert "[1] calibrating" in result.stderr and "added hysteresis" in result.stderr
     summary = json.loads((out / "discrepancy.json").read_text())
+    localised = next(line for line in result.stderr.splitlines()
+                     if line.startswith("[3] localised"))
+    assert not set("{}[]'") & set(localised.removeprefix("[3]")), localised  # no reprs
+    for direction, rms in summary["localisation_before"]["by_direction"].items():
+        assert f"{direction} {rms:.4g}" in localised, localised
     chosen = summary["mocap_filter"]
     assert summary["mocap_low_pass_hz"] == (12.0 if chosen["applied"] else None)
     said = filter_words(chosen, "mm")

@@ -1070,6 +1070,18 @@ def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float
     return kind, cand, evidence
 
 
+def _rms_words(rms: float | None) -> str:
+    """A localisation's RMS in a progress line (None: no scored frame there)."""
+    return "none scored" if rms is None else f"{rms:.4g}"
+
+
+def _shape_words(params: dict) -> str:
+    """An effect's parameters that are not per sensor, for a progress line (the JSON and
+    the report have every one)."""
+    return ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                     for k, v in params.items() if not isinstance(v, list | type(None)))
+
+
 def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         progress: Callable[[str], None] = lambda line: None, workers: int | None = None,
         ) -> Outcome:
@@ -1211,9 +1223,10 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
              f"{base.gap:.4g} {trial.units}")
     mot = motion(trial, inputs.static)
     local_before = localise(trial, base.residual, mot)
-    progress(f"[3] localised: by direction {local_before['by_direction']}, during holds "
-             f"{local_before['holds']['rms']}, by speed "
-             f"{[c['rms'] for c in local_before['by_speed']]}")
+    progress(f"[3] localised ({trial.units} RMS): by direction " + ", ".join(
+        f"{d} {_rms_words(r)}" for d, r in local_before["by_direction"].items())
+        + f"; during holds {_rms_words(local_before['holds']['rms'])}; by speed, slow to fast, "
+        + ", ".join(_rms_words(c["rms"]) for c in local_before["by_speed"]))
     steps: list[dict] = []
     rejected: list[dict] = []
     previous = ""  # the effect named in the previous step
@@ -1279,7 +1292,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                    "alternatives": {k: e["heldout_gap"] for k, _, e in scored
                                                     if k != kind}}})
         progress(f"[{step}] added {kind}: held-out gap {cand.gap:.4g} {trial.units} "
-                 f"(tried {table})" + "".join(f"; {k} refitted: {p}" for k, p in refit.items()))
+                 f"(tried {table})" + "".join(f"; {k} refitted: {_shape_words(p)}"
+                                              for k, p in refit.items()))
         step += 1
     after = base
     summary = {
