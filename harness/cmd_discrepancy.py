@@ -12,6 +12,24 @@ from exohil.harness.cli_types import Count, InputFile, OutputDir, refuse_overwri
 #: Most processes ``--workers`` takes: a bound that refuses nonsense (a step has five
 #: candidates at most, so more than five would idle).
 MAX_WORKERS = 64
+#: Memory a run has taken per sensor frame, at most as measured: 12.5 GB in use on the
+#: machine, forked candidates included, for the 450,000 frames of a 30-minute recording
+#: with seven tendons at 250 Hz (docs/discrepancy.md, Speed); 17–23 kB in the largest
+#: process for four to seven sensors.
+BYTES_PER_FRAME = 28_000
+
+
+def memory_warning(frames: int, available: int | None) -> str | None:
+    """A progress line for a recording of ``frames`` sensor frames that may need more
+    memory than the ``available`` bytes (None: unknown, no warning)."""
+    need = frames * BYTES_PER_FRAME
+    if available is None or need <= available:
+        return None
+    return (f"    warning: {frames:,} sensor frames may need up to {need / 1e9:.1f} GB "
+            f"(about {BYTES_PER_FRAME // 1000} kB per frame as measured) and "
+            f"{available / 1e9:.1f} GB are available: the run may be stopped by the system "
+            f"before it ends; analyse the recording in parts (exohil record cut IN "
+            f"--start S --stop S --out PART)")
 
 
 def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
@@ -61,7 +79,8 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
 
     Time and memory grow with the recording: a four-minute trial with seven tendons takes
     under a minute on two cores, a thirty-minute one ten minutes and 10 GB. Analyse a longer
-    session in parts (exohil record cut), each of which holds out its own blocks.
+    session in parts (exohil record cut), each of which holds out its own blocks; a
+    recording that may need more memory than is available gets a warning line first.
 
     \b
     Example:
@@ -72,12 +91,16 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     from exohil.emulators.discrepancy.report import OUTPUT_NAMES, write_outputs
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
+    from exohil.harness.machine import available_memory_bytes
 
     refuse_overwriting_inputs([("--out", out_dir / name) for name in OUTPUT_NAMES],
                               [measured, profile_path])
     name, in_model = _in_model(profile_path)
     try:
         rec = read_recording(measured)
+        warning = memory_warning(len(rec.sensors), available_memory_bytes())
+        if warning is not None:
+            click.echo(warning, err=True)
         outcome = run(rec, measured.name, in_model=in_model,
                       progress=lambda line: click.echo(line, err=True), workers=workers)
     except (RecordingError, DiscrepancyError) as exc:

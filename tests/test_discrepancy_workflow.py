@@ -86,6 +86,8 @@ from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
+from exohil.harness.cmd_discrepancy import BYTES_PER_FRAME, memory_warning
+from exohil.harness.machine import available_memory_bytes
 from exohil.kinematics import ms_to_matrix
 
 FOREIGN = Path(__file__).resolve().parents[2] / "shared" / "samples" / "foreign-recording-v1.mcap"
@@ -1550,6 +1552,28 @@ def test_cli_errors_are_one_line(tmp_path):
     assert result.exit_code == 2 and "is a file" in result.output
     assert len(result.output.strip().splitlines()) == 1
     assert short.read_bytes() == before
+
+
+
+def test_a_recording_that_may_not_fit_in_memory_gets_a_warning_first(tmp_path, monkeypatch):
+    """Past the memory a run has been measured to take per frame, the command says so and
+    how to cut the recording before it starts (and still runs: the figure is an upper
+    bound, not a prediction); within it, or where the system does not say, nothing."""
+    assert memory_warning(1000, None) is None
+    assert memory_warning(1000, 1000 * BYTES_PER_FRAME) is None
+    said = memory_warning(900_000, 20 * 10**9)
+    assert said is not None and "900,000 sensor frames" in said
+    assert f"up to {900_000 * BYTES_PER_FRAME / 1e9:.1f} GB" in said
+    assert "20.0 GB are available" in said and "exohil record cut" in said
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    short = tmp_path / "short.mcap"
+    write_recording(short, rec)
+    monkeypatch.setattr("exohil.harness.machine.available_memory_bytes", lambda: 10**6)
+    result = CliRunner().invoke(main, ["discrepancy", str(short), "--out", str(tmp_path / "o")])
+    lines = result.output.splitlines()
+    assert lines[0] == memory_warning(len(rec.sensors), 10**6), lines
+    assert result.exit_code == 1 and "too short to hold out a block" in lines[-1]
+    assert available_memory_bytes() is None or available_memory_bytes() > 0
 
 
 def test_profile_effects_already_in_the_model_are_not_proposed(tmp_path):
