@@ -103,6 +103,11 @@ def _plots(outcome: Outcome) -> dict[str, bytes]:
     return out
 
 
+def _blocks(count: int) -> str:
+    """A count of held-out blocks in words: "1 block", "7 blocks"."""
+    return f"{count} block" + ("" if count == 1 else "s")
+
+
 def _local(count: int) -> str:
     return f" and {count} local functions" if count else ""
 
@@ -118,7 +123,7 @@ def _refined_count(refined: dict, units: str) -> str:
     on = refined["significant_on_sensors"]
     alone = f"; on {', '.join(on)} alone it passed both rules against its own noise" if on else ""
     return (f"The drift it would become left a held-out gap of {refined['heldout_gap']:.4g} "
-            f"{units} and improved {refined['blocks_improved']} blocks (rule 2 needs "
+            f"{units} and improved {_blocks(refined['blocks_improved'])} (rule 2 needs "
             f"{refined['blocks_needed']}){alone}.")
 
 
@@ -302,7 +307,7 @@ def markdown(summary: dict) -> str:
             lines += ["", f"Step {i} ({step['effect']}) on each sensor alone, every sensor's "
                       f"blocks against its own noise: " + "; ".join(
                           f"{name} removed RMS {r['removed_rms']:.4g} {u} against "
-                          f"{r['noise_floor']:.4g} {u}, {r['blocks_improved']} blocks improved"
+                          f"{r['noise_floor']:.4g} {u}, {_blocks(r['blocks_improved'])} improved"
                           for name, r in alone["sensors"].items()) + "."]
         low = step["evidence"].get("low_degrees")
         if low:
@@ -311,7 +316,7 @@ def markdown(summary: dict) -> str:
                       f"degrees 1–3 of time, which rank the candidates, removed RMS "
                       f"{low['removed_rms']:.4g} {u} against the noise floor "
                       f"{step['evidence']['noise_floor']:.4g} {u} and improved "
-                      f"{low['blocks_improved']} blocks (rule 2 needs {low['blocks_needed']})"
+                      f"{_blocks(low['blocks_improved'])} (rule 2 needs {low['blocks_needed']})"
                       + (f"; beyond its own noise on {', '.join(beyond)} alone, on too few "
                          f"blocks there" if beyond else "") + ". " + _refined_count(
                              step["evidence"]["refined"], u)]
@@ -324,7 +329,7 @@ def markdown(summary: dict) -> str:
             curve = ev.get("against_smooth_curve")
             lines.append(f"- {item['effect']}: held-out gap {item['gap']:.4g}, removed RMS "
                          f"{ev['removed_rms']:.4g} vs noise floor {ev['noise_floor']:.4g}, "
-                         f"{ev['blocks_improved']} blocks improved (rule 2 needs "
+                         f"{_blocks(ev['blocks_improved'])} improved (rule 2 needs "
                          f"{ev['blocks_needed']})"
                          + ("" if curve is None else
                             f"; over a smooth transfer curve of each sensor (held-out gap "
