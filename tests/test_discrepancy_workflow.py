@@ -1461,7 +1461,6 @@ def test_a_bump_no_polynomial_follows_is_taken_by_the_local_functions_above_the_
     assert noisier["static_map"]["local_functions"] == 0 and noisier["effects"] == [], noisier
 
 
-
 def test_the_report_tabulates_each_sensors_parameters_and_where_the_residual_was(
         hysteresis_outcome):
     """The report reads without the JSON: a row per sensor for the loop width the JSON
@@ -1552,7 +1551,6 @@ def test_cli_errors_are_one_line(tmp_path):
     assert result.exit_code == 2 and "is a file" in result.output
     assert len(result.output.strip().splitlines()) == 1
     assert short.read_bytes() == before
-
 
 
 def test_a_recording_that_may_not_fit_in_memory_gets_a_warning_first(tmp_path, monkeypatch):
