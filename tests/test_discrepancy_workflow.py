@@ -1496,6 +1496,24 @@ def test_the_report_tabulates_each_sensors_parameters_and_where_the_residual_was
     assert f"| {summary['sensors'][-1]} | 0.125 |" in tail
 
 
+def test_the_static_map_the_gap_before_was_measured_with_is_the_one_row_0_names(
+        hysteresis_outcome):
+    """A named effect's step chooses the map's degree again: the JSON keeps both maps, and
+    the report's row 0 (beside the gap before) names the calibrated one, the final one
+    after the table where it differs."""
+    _, outcome = hysteresis_outcome
+    summary = json.loads(json.dumps(outcome.summary))
+    assert summary["static_map_calibrated"]["degree"] == outcome.before.spec.degree
+    assert summary["static_map"]["degree"] == outcome.after.spec.degree
+    calibrated = {**summary["static_map"], "degree": summary["static_map"]["degree"] + 1}
+    text = markdown({**summary, "static_map_calibrated": calibrated})
+    row = next(r for r in text.splitlines() if r.startswith("| 0 | calibrated static map"))
+    assert f"(degree {calibrated['degree']}" in row and f"| {summary['gap_before']:.4g} |" in row
+    assert (f"the final model's is degree {summary['static_map']['degree']}" in text)
+    assert "chosen again" not in markdown({**summary,
+                                           "static_map_calibrated": summary["static_map"]})
+
+
 def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_path):
     rec, _ = hysteresis_outcome
     path = tmp_path / "measured.mcap"

@@ -112,6 +112,13 @@ def _local(count: int) -> str:
     return f" and {count} local functions" if count else ""
 
 
+def _map(static_map: dict) -> str:
+    """A static map from the JSON in words: "degree 3 and 206 local functions; straight runs
+    on s1"."""
+    return (f"degree {static_map['degree']}{_local(static_map.get('local_functions', 0))}"
+            f"{_runs(static_map.get('straight_runs', []))}")
+
+
 def _runs(sensors: list[str]) -> str:
     """The static map's straight runs, as its table row says them."""
     return f"; straight runs on {', '.join(sensors)}" if sensors else ""
@@ -270,6 +277,8 @@ def _localisation_lines(summary: dict) -> list[str]:
 def markdown(summary: dict) -> str:
     """The human-readable report."""
     u = summary["units"]
+    final = summary["static_map"]
+    calibrated = summary.get("static_map_calibrated", final)
     lines = [f"# Discrepancy report: {summary['recording']}", "",
              f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
              f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
@@ -285,14 +294,15 @@ def markdown(summary: dict) -> str:
              *_clock_lines(summary.get("clock_offset"), u),
              f"| step | effect | held-out gap ({u}) | removed RMS ({u}) | blocks improved |",
              "|---|---|---|---|---|",
-             f"| 0 | calibrated static map (degree {summary['static_map']['degree']}"
-             f"{_local(summary['static_map'].get('local_functions', 0))}"
-             f"{_runs(summary['static_map'].get('straight_runs', []))}) | "
+             f"| 0 | calibrated static map ({_map(calibrated)}) | "
              f"{summary['gap_before']:.4g} | | |"]
     for i, step in enumerate(summary["steps"], start=1):
         ev = step["evidence"]
         lines.append(f"| {i} | {step['effect']} | {step['gap']:.4g} | {ev['removed_rms']:.4g} "
                      f"| {ev['blocks_improved']}/{summary['heldout_blocks']} |")
+    if _map(final) != _map(calibrated):
+        lines += ["", f"With the effects in place the static map was chosen again: the final "
+                      f"model's is {_map(final)}."]
     for i, step in enumerate(summary["steps"], start=1):
         held = step["evidence"].get("held_at_stops")
         if held and held["significant"]:

@@ -384,6 +384,16 @@ def _map_words(spec: Spec, inputs: Inputs) -> str:
             + (f" and {inputs.centres.shape[0]} local functions" if spec.local else ""))
 
 
+def _map_summary(spec: Spec, inputs: Inputs, runs: list[str]) -> dict:
+    """The static map of ``spec`` for the JSON (``runs``: the sensors with a straight run)."""
+    return {"kind": "legendre_polynomial_and_local" if spec.local else "legendre_polynomial",
+            "degree": spec.degree,
+            "local_functions": inputs.centres.shape[0] if spec.local else 0,
+            "ridge": spec.ridge,
+            **({"local_ridge": spec.local_ridge} if spec.local else {}),
+            "straight_runs": runs}
+
+
 def _candidates(kind: str, spec: Spec) -> list[Spec]:
     """The configurations of ``kind`` to try on top of ``spec`` (lag: see _refine_lag;
     creep: see _creep_families)."""
@@ -1217,6 +1227,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     base = fit(trial, inputs, spec) if in_model else static_fit
     before = base
     runs = [trial.sensor_names[j] for j in inputs.segment_sensors]
+    calibrated = _map_summary(spec, inputs, runs)
     progress(f"[2] simulated with the calibrated model ({_map_words(spec, inputs)}"
              f"{', straight runs on ' + ', '.join(runs) if runs else ''}"
              f"{', with ' + ', '.join(in_model) if in_model else ''}): held-out gap "
@@ -1321,12 +1332,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
         "clock_offset": clock,
-        "static_map": {"kind": ("legendre_polynomial_and_local" if spec.local
-                                else "legendre_polynomial"), "degree": spec.degree,
-                       "local_functions": inputs.centres.shape[0] if spec.local else 0,
-                       "ridge": spec.ridge,
-                       **({"local_ridge": spec.local_ridge} if spec.local else {}),
-                       "straight_runs": runs},
+        "static_map": _map_summary(spec, inputs, runs),
+        "static_map_calibrated": calibrated,
         "heldout_blocks": int(trial.blocks.max()) + 1,
         "localisation_before": local_before,
         "localisation_after": localise(trial, after.residual, mot),
