@@ -60,7 +60,12 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated_recording,
     write_calibrated_profile,
 )
-from exohil.emulators.discrepancy.report import markdown
+from exohil.emulators.discrepancy.report import (
+    JSON_ONLY_PARAMS,
+    PARAMETERS,
+    PER_SENSOR_PARAMS,
+    markdown,
+)
 from exohil.emulators.discrepancy.workflow import (
     CREEP_HOLD_S,
     SIGN_TEST_LEVEL,
@@ -1464,8 +1469,9 @@ def test_a_bump_no_polynomial_follows_is_taken_by_the_local_functions_above_the_
 def test_the_report_tabulates_each_sensors_parameters_and_where_the_residual_was(
         hysteresis_outcome):
     """The report reads without the JSON: a row per sensor for the loop width the JSON
-    holds, a labelled bin per row of every localisation (before, after, the largest before
-    in bold), and each signature beside what it points to."""
+    holds, what each parameter shown means, a labelled bin per row of every localisation
+    (before, after, the largest before in bold), and each signature beside what it points
+    to."""
     summary = json.loads(json.dumps(hysteresis_outcome[1].summary))  # as the JSON reads back
     text = markdown(summary)
     assert summary["effects"][0] == "hysteresis"
@@ -1486,6 +1492,11 @@ def test_the_report_tabulates_each_sensors_parameters_and_where_the_residual_was
     signature = step["evidence"]["signature"]
     for key, meaning in SIGNATURES.items():
         assert f"| {key} | {signature[key]:.4g} | {meaning} |" in rows
+    # each parameter shown is explained once, under the tables; every per-sensor one can be
+    assert PER_SENSOR_PARAMS <= PARAMETERS.keys()
+    for key in step["params"].keys() - JSON_ONLY_PARAMS:
+        assert rows.count(f"| {key} | {PARAMETERS[key]} |") == 1
+    assert "| tau_s |" not in text  # only those shown
     # an earlier effect chosen again at a later step follows that step's own parameters
     again = {**summary, "steps": [step, {**step, "effect": "creep", "params": {"tau_s": [2.5]},
                                           "evidence": {**step["evidence"], "refitted": {

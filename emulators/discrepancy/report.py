@@ -177,6 +177,57 @@ PER_SENSOR_PARAMS = frozenset({
 JSON_ONLY_PARAMS = frozenset({"play_thresholds", "weights"})
 
 
+#: What each parameter of ``steps[].params`` means, in the order the report explains them
+#: (a per-sensor one is a column of its step's table, the others follow the step's title).
+PARAMETERS = {
+    "loop_width": "the falling branch minus the rising branch after an excursion wider than "
+                  "the widest play, sensor units: positive where the reading is higher on the "
+                  "way down than on the way up (it trails its input), negative where lower",
+    "tau_s": "time constant(s), s: of each low-pass of the stretch (creep), or of the "
+             "reading's first-order low-pass (lag)",
+    "build_recover_s": "a creep that builds and recovers at different rates: its build and "
+                       "recovery time constants, s",
+    "hold_grow_recover_s": "a creep that flows only while the joint holds still: its growth "
+                           "(during holds) and recovery (while moving) time constants, s",
+    "gain": "per sensor, the weight of each creep state (one per time constant, then the "
+            "build/recover and hold states; a share of the static prediction, no unit), or "
+            "of a rate limit's column",
+    "quadratic_gain_per_unit": "the weight of each low-passed (ŝ − centre)², per sensor "
+                               "unit: a creep whose driver grows with the square of the "
+                               "stretch",
+    "centre": "the middle of the static prediction's range (p1–p99), where that quadratic "
+              "driver is centred, sensor units",
+    "model": "which lag: first_order (a low-pass), delay, first_order_delay (a low-pass, then "
+             "a delay) or rate_limit (a slew-rate limit)",
+    "delay_s": "the pure delay, s",
+    "sensors": "the sensors the lag acts on",
+    "rate_per_s": "the most the reading changes per second under a slew-rate limit, sensor "
+                  "units/s (— : no limit)",
+    "basis": "the drift's functions of time: a Legendre polynomial or piecewise linear",
+    "degree": "the drift polynomial's degree",
+    "intervals": "the piecewise-linear drift's even intervals over the recording",
+    "knots_every_s": "the spacing of its knots, s",
+    "change": "the drift from the first frame to the last, sensor units",
+    "mean_rate_per_s": "that change over the recording's length, sensor units/s",
+    "stops": "lower, upper: the level where the reading stops following the pose, sensor "
+             "units (— : no stop at that end)",
+    "softness": "lower, upper: how far beyond the knee the bend's asymptote lies, sensor "
+                "units (0: a hard stop)",
+    "shape": "lower, upper: the soft knee's form, tanh or exp (an exponential approach)",
+    "lower": "the lowest reading the model predicts, sensor units",
+    "upper": "the highest reading the model predicts, sensor units",
+}
+
+
+def _meaning_lines(steps: list[dict]) -> list[str]:
+    """What the parameters of ``steps`` (and of what they chose again) mean, those shown."""
+    shown = {k for step in steps
+             for params in [step["params"], *step["evidence"].get("refitted", {}).values()]
+             for k, v in params.items() if k not in JSON_ONLY_PARAMS and not _unused(v)}
+    rows = [f"| {k} | {meaning} |" for k, meaning in PARAMETERS.items() if k in shown]
+    return ["", "| parameter | meaning |", "|---|---|", *rows] if rows else []
+
+
 def _parameter_block(title: str, params: dict, sensors: list[str]) -> list[str]:
     """One effect's parameters: those of the whole term after ``title`` (a part of the term
     the model does not use, None or [] in the JSON, left out), those of each sensor in a
@@ -210,7 +261,7 @@ def _parameter_lines(summary: dict) -> list[str]:
         lines += _parameter_block(f"Step {i}, {step['effect']}", step["params"], sensors)
         for kind, params in step["evidence"].get("refitted", {}).items():
             lines += _parameter_block(f"Step {i} chose {kind} again", params, sensors)
-    return lines
+    return lines + _meaning_lines(summary["steps"])
 
 
 def _signature_lines(steps: list[dict]) -> list[str]:
