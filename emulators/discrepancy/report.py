@@ -14,7 +14,12 @@ import numpy as np
 from exohil.emulators.discrepancy.data import spike_counts
 from exohil.emulators.discrepancy.localise import SIGNATURES, motion
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
-from exohil.emulators.discrepancy.workflow import Outcome, clock_words, filter_words
+from exohil.emulators.discrepancy.workflow import (
+    Outcome,
+    clock_words,
+    filter_words,
+    map_words,
+)
 from exohil.formats.atomic import write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
@@ -106,22 +111,6 @@ def _plots(outcome: Outcome) -> dict[str, bytes]:
 def _blocks(count: int) -> str:
     """A count of held-out blocks in words: "1 block", "7 blocks"."""
     return f"{count} block" + ("" if count == 1 else "s")
-
-
-def _local(count: int) -> str:
-    return f" and {count} local functions" if count else ""
-
-
-def _map(static_map: dict) -> str:
-    """A static map from the JSON in words: "degree 3 and 206 local functions; straight runs
-    on s1"."""
-    return (f"degree {static_map['degree']}{_local(static_map.get('local_functions', 0))}"
-            f"{_runs(static_map.get('straight_runs', []))}")
-
-
-def _runs(sensors: list[str]) -> str:
-    """The static map's straight runs, as its table row says them."""
-    return f"; straight runs on {', '.join(sensors)}" if sensors else ""
 
 
 def _refined_count(refined: dict, units: str) -> str:
@@ -345,15 +334,15 @@ def markdown(summary: dict) -> str:
              *_clock_lines(summary.get("clock_offset"), u),
              f"| step | effect | held-out gap ({u}) | removed RMS ({u}) | blocks improved |",
              "|---|---|---|---|---|",
-             f"| 0 | calibrated static map ({_map(calibrated)}) | "
+             f"| 0 | calibrated static map ({map_words(calibrated)}) | "
              f"{summary['gap_before']:.4g} | | |"]
     for i, step in enumerate(summary["steps"], start=1):
         ev = step["evidence"]
         lines.append(f"| {i} | {step['effect']} | {step['gap']:.4g} | {ev['removed_rms']:.4g} "
                      f"| {ev['blocks_improved']}/{summary['heldout_blocks']} |")
-    if _map(final) != _map(calibrated):
+    if map_words(final) != map_words(calibrated):
         lines += ["", f"With the effects in place the static map was chosen again: the final "
-                      f"model's is {_map(final)}."]
+                      f"model's is {map_words(final)}."]
     for i, step in enumerate(summary["steps"], start=1):
         held = step["evidence"].get("held_at_stops")
         if held and held["significant"]:

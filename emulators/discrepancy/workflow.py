@@ -378,10 +378,13 @@ def _map_of(spec: Spec) -> tuple:
     return (spec.degree, spec.ridge) + ((spec.local_ridge,) if spec.local else ())
 
 
-def _map_words(spec: Spec, inputs: Inputs) -> str:
-    """The static map in words: "degree 4", or "degree 3 and 212 local functions"."""
-    return (f"degree {spec.degree}"
-            + (f" and {inputs.centres.shape[0]} local functions" if spec.local else ""))
+def map_words(static_map: dict) -> str:
+    """A static map of the JSON (:func:`_map_summary`) in words, as progress line [2] and
+    the report say it: "degree 4", "degree 3 and 212 local functions; straight runs on s1"."""
+    local = static_map.get("local_functions", 0)
+    runs = static_map.get("straight_runs", [])
+    return (f"degree {static_map['degree']}" + (f" and {local} local functions" if local else "")
+            + (f"; straight runs on {', '.join(runs)}" if runs else ""))
 
 
 def _map_summary(spec: Spec, inputs: Inputs, runs: list[str]) -> dict:
@@ -1228,8 +1231,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     before = base
     runs = [trial.sensor_names[j] for j in inputs.segment_sensors]
     calibrated = _map_summary(spec, inputs, runs)
-    progress(f"[2] simulated with the calibrated model ({_map_words(spec, inputs)}"
-             f"{', straight runs on ' + ', '.join(runs) if runs else ''}"
+    progress(f"[2] simulated with the calibrated model ({map_words(calibrated)}"
              f"{', with ' + ', '.join(in_model) if in_model else ''}): held-out gap "
              f"{base.gap:.4g} {trial.units}")
     mot = motion(trial, inputs.static)
