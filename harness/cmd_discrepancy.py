@@ -70,8 +70,8 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
               help="Output folder: discrepancy.json, report.md, plots, suit_profile.toml.")
 @click.option("--workers", type=Count(1, MAX_WORKERS), default=None,
               help="Processes that try each step's candidate effects at once (one per "
-                   "candidate at most)  [default: one per CPU]. The result is the same for any "
-                   "number.")
+                   "candidate at most) and draw the two plots  [default: one per CPU]. The "
+                   "result is the same for any number.")
 def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
                 workers: int | None) -> None:
     """Find what the simulated suit gets wrong on MEASURED (sensors + motion capture), name
@@ -105,7 +105,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
                       progress=lambda line: click.echo(line, err=True), workers=workers)
     except (RecordingError, DiscrepancyError) as exc:
         raise click.ClickException(str(exc)) from exc
-    written = write_outputs(outcome, out_dir, f"{name}+{measured.stem}")
+    written = write_outputs(outcome, out_dir, f"{name}+{measured.stem}", workers)
     s = outcome.summary
     click.echo(f"{s['conclusion']}: held-out gap {s['gap_before']:.4g} -> {s['gap_after']:.4g} "
                f"{s['units']}; wrote {', '.join(str(p) for p in written)}", err=True)

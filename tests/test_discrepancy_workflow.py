@@ -65,6 +65,7 @@ from exohil.emulators.discrepancy.report import (
     PARAMETERS,
     PER_SENSOR_PARAMS,
     markdown,
+    plots,
 )
 from exohil.emulators.discrepancy.workflow import (
     CREEP_HOLD_S,
@@ -110,6 +111,14 @@ def test_the_outcome_does_not_depend_on_how_many_processes_computed_it(hysteresi
     assert json.dumps(alone.summary) == json.dumps(outcome.summary)
     # the first step tried all five candidates: four beside the one it named
     assert len(alone.summary["steps"][0]["evidence"]["alternatives"]) == 4
+
+
+def test_the_plots_are_the_same_drawn_in_two_processes_or_one(hysteresis_outcome):
+    _, outcome = hysteresis_outcome
+    apart, together = plots(outcome, workers=2), plots(outcome, workers=1)
+    assert set(apart) == {"residual_time.png", "residual_angle.png"}
+    assert all(png.startswith(b"\x89PNG") for png in apart.values())
+    assert apart == together
 
 
 def frames_kept(rec: Recording, keep: np.ndarray) -> Recording:

@@ -14,6 +14,7 @@ import numpy as np
 from exohil.emulators.discrepancy.data import spike_counts
 from exohil.emulators.discrepancy.localise import SIGNATURES, motion
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
+from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import (
     Outcome,
     clock_words,
@@ -47,18 +48,40 @@ def _moving_rms(x: np.ndarray, window: int) -> np.ndarray:
         return np.sqrt(total / count)
 
 
-def _plots(outcome: Outcome) -> dict[str, bytes]:
-    import io
-
+def plots(outcome: Outcome, workers: int | None = None) -> dict[str, bytes]:
+    """The two plots as PNG bytes, by file name, each drawn in a forked process of its own
+    where there are two CPUs (drawing is a few seconds of one core each; the figures are
+    the same either way)."""
     import matplotlib
 
     matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401  (loaded once, before the processes fork)
+
+    draw = {"residual_time.png": _time_plot, "residual_angle.png": _angle_plot}
+    names = list(draw)
+    pngs = forked_map(lambda name: draw[name](outcome), names, workers_for(workers))
+    return dict(zip(names, pngs, strict=True))
+
+
+def _png(fig) -> bytes:  # noqa: ANN001  (a matplotlib Figure: not imported at module level)
+    """The figure as PNG bytes (90 dpi); the figure is closed."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _time_plot(outcome: Outcome) -> bytes:
+    """The held-out residual of each sensor against time, before and after, with its RMS
+    over ``RMS_WINDOW_S``."""
     import matplotlib.pyplot as plt
 
     trial = outcome.trial
     s = trial.n_sensors
-    units = trial.units
-    out = {}
     fig, axes = plt.subplots(s, 1, figsize=(10, 1.8 * s + 1), sharex=True, squeeze=False,
                              layout="constrained")
     window = max(1, int(round(RMS_WINDOW_S * trial.rate_hz)))
@@ -68,16 +91,21 @@ def _plots(outcome: Outcome) -> dict[str, bytes]:
             ax.plot(trial.t, fit.residual[:, j], lw=0.5, color=light)
             ax.plot(trial.t, _moving_rms(fit.residual[:, j], window), lw=1.2, color=dark,
                     label=label)
-        ax.set_ylabel(f"{trial.sensor_names[j]} [{units}]")
+        ax.set_ylabel(f"{trial.sensor_names[j]} [{trial.units}]")
     axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle("held-out residual (measured − simulated) before and after the added "
                  f"effects; dark: its RMS over {RMS_WINDOW_S:g} s")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    out["residual_time.png"] = buf.getvalue()
+    return _png(fig)
 
+
+def _angle_plot(outcome: Outcome) -> bytes:
+    """The held-out residual of each sensor against the widest-ranging angle, before and
+    after, coloured by the direction of the sensor's motion (at most 20,000 frames)."""
+    import matplotlib.pyplot as plt
+
+    trial = outcome.trial
+    s = trial.n_sensors
     k = _main_angle(outcome)
     direction = motion(trial, outcome.inputs.static)["direction"]
     stride = max(1, trial.n // 20000)
@@ -96,16 +124,12 @@ def _plots(outcome: Outcome) -> dict[str, bytes]:
             if j == 0:
                 ax.set_title(label)
             if col == 0:
-                ax.set_ylabel(f"{trial.sensor_names[j]} [{units}]")
+                ax.set_ylabel(f"{trial.sensor_names[j]} [{trial.units}]")
     axes[0, 1].legend(loc="upper right", fontsize=8, markerscale=6)
     for ax in axes[-1]:
         ax.set_xlabel(f"{trial.angle_names[k]} [deg]")
     fig.suptitle("held-out residual against angle, by direction of the sensor's motion")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    out["residual_angle.png"] = buf.getvalue()
-    return out
+    return _png(fig)
 
 
 def _blocks(count: int) -> str:
@@ -395,10 +419,13 @@ def markdown(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str) -> list[Path]:
-    """Write every output into ``out_dir`` (created if needed); returns the paths."""
+def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str,
+                  workers: int | None = None) -> list[Path]:
+    """Write every output into ``out_dir`` (created if needed); returns the paths. The plots
+    are drawn in up to ``workers`` processes (default: one per CPU, one inside a worker
+    process; :func:`~.workers.workers_for`)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    files: dict[str, bytes] = _plots(outcome)
+    files: dict[str, bytes] = plots(outcome, workers)
     suit = calibrated_suit(outcome, profile_name)
     files["suit_profile.toml"] = to_toml(profile_dict(
         suit, f"calibrated by exohil discrepancy from {outcome.summary['recording']}")
