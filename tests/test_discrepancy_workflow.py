@@ -113,6 +113,17 @@ def test_the_outcome_does_not_depend_on_how_many_processes_computed_it(hysteresi
     assert len(alone.summary["steps"][0]["evidence"]["alternatives"]) == 4
 
 
+def test_the_docs_outputs_table_names_every_field_of_the_json(hysteresis_outcome):
+    """A user looks a field up in docs/discrepancy.md's Outputs table: every top-level key
+    of discrepancy.json is named there (in backquotes) and every step key too."""
+    docs = Path(__file__).resolve().parents[1] / "docs" / "discrepancy.md"
+    row = next(line for line in docs.read_text().splitlines()
+               if line.startswith("| `discrepancy.json` |"))
+    named = set(re.findall(r'"?`?([a-z_]+)`?"?', " ".join(re.findall(r"`[^`]*`", row))))
+    summary = hysteresis_outcome[1].summary
+    assert set(summary) - named == set()
+    assert set(summary["steps"][0]) - named == set()
+
 def test_the_plots_are_the_same_drawn_in_two_processes_or_one(hysteresis_outcome):
     _, outcome = hysteresis_outcome
     apart, together = plots(outcome, workers=2), plots(outcome, workers=1)
