@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from scipy.signal import lfilter, lfilter_zi
 
 from exohil.emulators.discrepancy import DiscrepancyError, model, noise_floor, prepare_trial, run
 from exohil.emulators.discrepancy.data import (
@@ -36,6 +37,7 @@ from exohil.emulators.discrepancy.localise import (
     signatures,
 )
 from exohil.emulators.discrepancy.model import (
+    NEGLIGIBLE,
     Design,
     Fit,
     Groups,
@@ -573,6 +575,26 @@ def test_play_delay_and_low_pass():
                                [0, 0, 0, 1, 2, 3])
     step = low_pass(np.r_[np.zeros(3), np.ones(2000)][:, None], 0.1, 1000.0)[:, 0]
     assert step[2] == 0.0 and abs(step[3 + 100] - (1 - np.exp(-1))) < 0.01
+
+
+@pytest.mark.parametrize("tau_s", [0.002, 0.01, 0.2])
+def test_a_low_pass_decays_to_zero_never_through_subnormal_numbers(tau_s):
+    """A local function falls to zero away from its poses; low-passed, its tail decays
+    geometrically. Down to ``NEGLIGIBLE`` it is the filter's exact output; below it, zero:
+    never a subnormal number, on which every later product of the design crawls."""
+    rate = 250.0
+    x = np.zeros((60000, 3))
+    x[:50, 0], x[:50, 1], x[20000:20050, 2] = 1.0, -2.0, 0.5  # a pulse, then a long zero
+    out = low_pass(x, tau_s, rate)
+    tiny = np.finfo(float).tiny
+    assert not np.any((out != 0.0) & (np.abs(out) < tiny))
+    pole = np.exp(-1.0 / (rate * tau_s))
+    b, a = [0.0, 1.0 - pole], [1.0, -pole]
+    exact, _ = lfilter(b, a, x, axis=0, zi=lfilter_zi(b, a)[:, None] * x[0][None, :])
+    kept = np.abs(exact) >= NEGLIGIBLE
+    np.testing.assert_allclose(out[kept], exact[kept], rtol=1e-9, atol=0.0)
+    assert np.all(out[~kept] == 0.0)
+    assert kept[:, 2].sum() > 50 and (~kept[:, 2]).sum() > 50  # both parts were tested
 
 
 @pytest.mark.parametrize("shape", ["tanh", "exp"])
