@@ -181,3 +181,30 @@ def test_the_blind_scorer_refuses_an_answer_key_that_is_not_a_list(tmp_path, tex
     out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path))
     assert out.returncode != 0 and error in out.stderr and "Traceback" not in out.stderr, (
         out.stderr)
+
+
+def test_the_anchor_angle_is_seen_from_the_caps_centre_in_the_generators_frames():
+    """The third blind generator's check of nearly opposite anchors: on a round cap at the
+    origin that the scapula does not tilt, an anchor straight below the cap's centre and a
+    humerus anchor straight above it are 180° apart; turned to the side, 90°."""
+    from benchmarks.blind3 import generate as blind3
+    from benchmarks.blind3.antipodal import anchor_angles_deg
+
+    suit = blind3.Suit(np.random.default_rng(0), 1)
+    suit.axes, suit.cap_offset, suit.pivot = np.full(3, 50.0), np.zeros(3), np.zeros(3)
+    suit.rhythm, suit.onscap = 0.0, [False]
+    suit.prox, suit.dist = [np.array([0.0, -80.0, 0.0])], [np.array([0.0, 120.0, 0.0])]
+    zero = np.zeros(1)
+    assert anchor_angles_deg(suit, zero, zero, zero)[0, 0] == pytest.approx(180.0)
+    suit.prox = [np.array([80.0, 0.0, 0.0])]
+    assert anchor_angles_deg(suit, zero, zero, zero)[0, 0] == pytest.approx(90.0)
+
+
+def test_the_anchor_check_refuses_missing_summaries_before_regenerating(tmp_path):
+    """Every twin's summary must be there before minutes of regenerating begin."""
+    (tmp_path / "rec_00.json").write_text("{}")
+    out = run_module("benchmarks.blind3.antipodal", str(tmp_path), "--only", "0", "1")
+    assert out.returncode == 2 and "rec_01.json is missing" in out.stderr, out.stderr
+    assert "Traceback" not in out.stderr and "twin" not in out.stdout, out
+    out = run_module("benchmarks.blind3.antipodal", str(tmp_path), "--only", "40")
+    assert out.returncode == 2 and "no twin 40" in out.stderr, out.stderr
