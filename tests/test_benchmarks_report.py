@@ -201,10 +201,15 @@ def test_the_anchor_angle_is_seen_from_the_caps_centre_in_the_generators_frames(
 
 
 def test_the_anchor_check_refuses_missing_summaries_before_regenerating(tmp_path):
-    """Every twin's summary must be there before minutes of regenerating begin."""
+    """Every twin's summary must be there, with the steps of the reading, before minutes of
+    regenerating begin."""
     (tmp_path / "rec_00.json").write_text("{}")
     out = run_module("benchmarks.blind3.antipodal", str(tmp_path), "--only", "0", "1")
     assert out.returncode == 2 and "rec_01.json is missing" in out.stderr, out.stderr
     assert "Traceback" not in out.stderr and "twin" not in out.stdout, out
     out = run_module("benchmarks.blind3.antipodal", str(tmp_path), "--only", "40")
     assert out.returncode == 2 and "no twin 40" in out.stderr, out.stderr
+    (tmp_path / "rec_01.json").write_text(json.dumps({"localisation_after": {"steps": []}}))
+    out = run_module("benchmarks.blind3.antipodal", str(tmp_path), "--only", "0", "1")
+    assert out.returncode == 2 and "rec_00.json has no steps of the reading" in out.stderr
+    assert "Traceback" not in out.stderr and "twin" not in out.stdout, out

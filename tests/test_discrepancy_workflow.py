@@ -30,10 +30,12 @@ from exohil.emulators.discrepancy.hidden import (
 )
 from exohil.emulators.discrepancy.localise import (
     SIGNATURES,
+    STEP_SIGMAS,
     TIME_WINDOWS,
     _holds,
     localise,
     motion,
+    reading_steps,
     signatures,
 )
 from exohil.emulators.discrepancy.model import (
@@ -66,6 +68,7 @@ from exohil.emulators.discrepancy.report import (
     JSON_ONLY_PARAMS,
     PARAMETERS,
     PER_SENSOR_PARAMS,
+    _step_lines,
     markdown,
     plots,
 )
@@ -431,6 +434,65 @@ def test_holds_are_found_through_mocap_noise_and_sway():
     assert where["holds"]["count"] >= 5
     assert (found & planned).sum() / planned.sum() > 0.8
     assert (found & ~planned).sum() / found.sum() < 0.1
+
+
+def _stepped(trial, mask: np.ndarray, size: float):
+    """``trial`` with sensor 0's reading raised by ``size`` on the frames ``mask`` (N,), and
+    the residual a simulation that follows the original reading leaves."""
+    y = trial.y.copy()
+    y[:, 0] += size * mask
+    return replace(trial, y=y), np.where(trial.valid[:, None], y - trial.y, np.nan)
+
+
+def test_a_reading_that_jumps_at_a_pose_is_found_there_and_nowhere_else():
+    """Sensor 0 reads 20 mm more whenever the arm is above 40° of elevation (a tendon that
+    slips over a prominence there): steps are found at that elevation, on that sensor
+    alone, where the simulation does not move as much; the unchanged readings and the
+    noise have none."""
+    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=60.0)))
+    phi = trial.angles[:, trial.angle_names.index("shoulder_elv")]
+    stepped, residual = _stepped(trial, phi > 40.0, 20.0)
+    assert reading_steps(trial, np.zeros_like(trial.y)) == []
+    found = reading_steps(stepped, residual)
+    assert [e["sensor"] for e in found] == [trial.sensor_names[0]]
+    crossings = np.flatnonzero(np.diff((phi > 40.0).astype(int)))
+    assert 3 <= found[0]["count"] <= len(crossings)
+    assert found[0]["median_size"] == pytest.approx(20.0, rel=0.1)
+    rising = {round(float(trial.t[c + 1]), 3): phi[c + 1] > 40.0 for c in crossings}
+    for step in found[0]["largest"]:
+        assert abs(step["angles_deg"][1] - 40.0) < 2.0
+        t = min(rising, key=lambda c: abs(c - step["t_s"]))
+        assert abs(t - step["t_s"]) < 0.05 and (step["size"] > 0) == rising[t]
+    noisy = replace(trial, y=trial.y + np.random.default_rng(1).normal(
+        0.0, trial.noise, trial.y.shape))
+    assert reading_steps(noisy, np.where(trial.valid[:, None], noisy.y - trial.y, np.nan)) == []
+    table = _step_lines([], found, "mm", list(trial.angle_names))
+    row = next(line for line in table if line.startswith(f"| {trial.sensor_names[0]} |"))
+    largest = found[0]["largest"][0]
+    assert row.startswith(f"| {trial.sensor_names[0]} | 0 | {found[0]['count']} | ")
+    assert f"{largest['t_s']:.4g} s, {largest['size']:+.4g}, " in row
+    assert f", {largest['speed_deg_s']:.4g}" in row
+
+
+def test_steps_at_one_pose_are_counted_as_recurring_and_a_lag_is_no_step():
+    """On a one-angle joint swinging through 0° again and again, a jump of the reading at 0°
+    recurs at one pose every time, at the speed the joint crosses it; the same reading
+    low-passed (a lag the simulation lacks)
+    moves late, not suddenly, and has none."""
+    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=60.0)))
+    swing = 30.0 * np.sin(2.0 * np.pi * 0.25 * (trial.t - trial.t[0]))[:, None]
+    knee = replace(trial, angles=swing, angle_names=("knee_angle",))
+    stepped, residual = _stepped(knee, swing[:, 0] > 0.0, 10.0)
+    found = reading_steps(stepped, residual)
+    assert len(found) == 1 and found[0]["count"] >= 20
+    assert found[0]["at_a_recurring_pose"] == found[0]["count"]
+    # crossed at 30° × 2π × 0.25 Hz
+    assert found[0]["median_speed_deg_s"] == pytest.approx(47.1, rel=0.1)
+    late = knee.y.copy()
+    late[:, :1] = low_pass(knee.y[:, :1], 0.2, knee.rate_hz)
+    assert STEP_SIGMAS * knee.noise[0] < np.max(np.abs(late[:, 0] - knee.y[:, 0]))
+    assert reading_steps(replace(knee, y=late),
+                         np.where(knee.valid[:, None], late - knee.y, np.nan)) == []
 
 
 def test_what_no_frame_measures_is_null_not_nan():
@@ -1593,7 +1655,12 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     assert set(summary["effects"]) <= {"hysteresis", "creep", "saturation", "lag", "drift"}
     for step in summary["steps"]:
         assert set(step) == {"effect", "gap", "params", "evidence"}
-    assert (out / "report.md").read_text().startswith("# Discrepancy report")
+    report = (out / "report.md").read_text()
+    assert report.startswith("# Discrepancy report")
+    assert "## Sudden changes of the reading" in report
+    before = sum(e["count"] for e in summary["localisation_before"]["steps"])
+    assert summary["localisation_after"]["steps"] == []  # a loop the model follows
+    assert f"None after the added effects ({before} before)." in report
     assert load_calibrated_profile(out / "suit_profile.toml").sensors == rec.sensor_names
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary left
     again = CliRunner().invoke(main, ["discrepancy", str(path), "--profile",

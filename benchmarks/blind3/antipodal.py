@@ -9,7 +9,9 @@ movement (the generator's own draws, written to a temporary folder and thrown aw
 prints, per sensor, what the calibrated static map left of it (the summary's held-out
 ``sensor_gap_before`` over the sensor's ``noise_floor_per_sensor``) beside the largest angle
 between the tendon's two anchors seen from the cap's centre (in the cap's unit-sphere space,
-where the generator wraps the path) and the share of frames where that angle exceeds 175°.
+where the generator wraps the path), the share of frames where that angle exceeds 175°, and
+the sudden steps of the reading the workflow's localisation found after its effects (method
+step 5 of docs/discrepancy.md: their count, and in brackets how many came back at one pose).
 
 At 180° the plane of the wrapped path (the great circle through both anchors) is undefined:
 the generator's path goes over whichever side the anchors' small misalignment points to, and
@@ -105,18 +107,26 @@ def main() -> None:
     if missing:  # before minutes of regenerating
         parser.error(f"{missing[0]} is missing ({len(missing)} in all): score the twins "
                      f"first (see benchmarks/blind3/README.md)")
+    summaries = [json.loads(path.read_text()) for path in paths]
+    older = [str(path) for path, summary in zip(paths, summaries, strict=True)
+             if "steps" not in summary.get("localisation_after", {})]
+    if older:
+        parser.error(f"{older[0]} has no steps of the reading ({len(older)} in all): "
+                     f"scored before they were found; score the twins again")
     rows = []
-    print("twin    sensor     left/noise  max angle  frames > 175°")
-    for index, path in zip(indices, paths, strict=True):
-        summary = json.loads(path.read_text())
+    print("twin    sensor     left/noise  max angle  frames > 175°  steps (at one pose)")
+    for index, summary in zip(indices, summaries, strict=True):
         names, angles = twin_angles(index)
+        steps = {e["sensor"]: e for e in summary["localisation_after"]["steps"]}
         for j, name in enumerate(summary["sensors"]):
             left = summary["sensor_gap_before"][j] / summary["noise_floor_per_sensor"][j]
             a = angles[:, names.index(name)]
-            rows.append((left, float(a.max())))
+            found = steps.get(name, {"count": 0, "at_a_recurring_pose": 0})
+            rows.append((left, float(a.max()), found["at_a_recurring_pose"] > 0))
             print(f"rec_{index:02d}  {name:9s} {left:8.2f} {a.max():9.1f}° "
-                  f"{np.mean(a > NEARLY_OPPOSITE_DEG):12.1%}", flush=True)
-    left, widest = np.array(rows).T
+                  f"{np.mean(a > NEARLY_OPPOSITE_DEG):12.1%}  {found['count']:6d} "
+                  f"({found['at_a_recurring_pose']})", flush=True)
+    left, widest, recurring = np.array(rows).T
     for label, group in ((f"never past {NEARLY_OPPOSITE_DEG:g}°",
                           widest < NEARLY_OPPOSITE_DEG),
                          (f"past {NEARLY_OPPOSITE_DEG:g}°, never 179°",
@@ -125,7 +135,8 @@ def main() -> None:
         if group.any():
             print(f"anchors {label}: {group.sum()} sensors, left/noise median "
                   f"{np.median(left[group]):.2f}, over 3 in {np.mean(left[group] > 3):.0%}, "
-                  f"over 5 in {np.mean(left[group] > 5):.0%}")
+                  f"over 5 in {np.mean(left[group] > 5):.0%}, steps at one pose in "
+                  f"{int(recurring[group].sum())}")
 
 
 if __name__ == "__main__":

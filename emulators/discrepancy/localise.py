@@ -9,12 +9,33 @@ from __future__ import annotations
 import numpy as np
 
 from exohil.emulators.discrepancy.data import Trial
-from exohil.emulators.discrepancy.model import low_pass, trial_motion
+from exohil.emulators.discrepancy.model import low_pass, map_inputs, trial_motion
 
 #: A hold counts for creep when it lasts at least this long, s.
 MIN_HOLD_S = 1.0
 #: Equal time windows of the localisation in time.
 TIME_WINDOWS = 8
+#: A step in the reading (:func:`reading_steps`): the reading's mean over the STEP_WINDOW_S
+#: after a frame differs from its mean over the STEP_WINDOW_S before by at least STEP_SIGMAS
+#: of the sensor's noise (a difference of two such means has 0.28 σ of noise at 250 Hz), and
+#: so does the held-out residual's: by at least STEP_FLATNESS times the residual's spread
+#: within either window, from one level to another, while the simulation's own change is at
+#: most SIMULATED_SHARE of the reading's. A straight ramp across both windows differs by
+#: √12 ≈ 3.46 times its spread, a swing or a decay more spread than that, so a fast move
+#: that the reading follows late (a lag) is no step; a move the simulation follows too (the
+#: reading relaxing after it, a loop turning) is none either, nor is a reading that stays put
+#: while the simulation moves: the reading jumps where the simulation does not.
+STEP_WINDOW_S = 0.1
+STEP_SIGMAS = 6.0
+STEP_FLATNESS = 4.0
+SIMULATED_SHARE = 0.5
+#: Share of a window's frames that must be scored for its mean to count.
+STEP_WINDOW_SHARE = 0.6
+#: Two steps of one sensor are at the same pose when no angle differs by more than this
+#: (the arm's axes, for a shoulder in MoBL-ARMS angles), degrees.
+SAME_POSE_DEG = 5.0
+#: The largest steps listed per sensor.
+STEPS_LISTED = 5
 #: Each signature :func:`signatures` measures, and what it points to.
 SIGNATURES = {
     "direction_split_slow": "mean residual while the sensor's input falls minus while it "
@@ -105,7 +126,116 @@ def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> 
     return {"by_time": by_time, "by_angle": by_angle, "by_direction": by_direction,
             "by_speed": by_speed,
             "holds": {"count": len(holds), "rms": _rms(residual[in_hold]),
-                      "moving_rms": _rms(residual[moving])}}
+                      "moving_rms": _rms(residual[moving])},
+            "steps": reading_steps(trial, residual)}
+
+
+def _window_stats(r: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean (less that of all of ``r``), standard deviation and count of the finite values
+    of ``r`` (N,) over each window r[k : k + w], k = 0 … N − w."""
+    ok = np.isfinite(r)
+    x = np.where(ok, r - np.mean(r[ok]) if ok.any() else 0.0, 0.0)  # centred: no cancellation
+    count, total, squares = (c[w:] - c[:-w] for c in (
+        np.concatenate([[0.0], np.cumsum(v)]) for v in (ok.astype(float), x, x * x)))
+    mean = total / np.maximum(count, 1.0)
+    spread = np.sqrt(np.maximum(squares / np.maximum(count, 1.0) - mean**2, 0.0))
+    return mean, spread, count
+
+
+def _poses(trial: Trial) -> tuple[np.ndarray, bool]:
+    """(N, K) each frame's pose and whether it is K/3 unit axes (a shoulder in MoBL-ARMS
+    angles: the humerus's axes, compared by the angle between them) or K angles in degrees."""
+    lo, hi = np.zeros(trial.angles.shape[1]), np.ones(trial.angles.shape[1])
+    u, kind = map_inputs(trial.angles, trial.angle_names, lo, hi)
+    return (u, True) if kind in ("arm_direction", "arm_axes") else (trial.angles, False)
+
+
+def _near_another(poses: np.ndarray, axes: bool, rows: int = 256) -> int:
+    """How many of the M ``poses`` lie within SAME_POSE_DEG of another: no angle between
+    two of their axes (or, not ``axes``, no difference of two of their angles) larger. In
+    ``rows`` at a time, so memory stays bounded however many steps a sensor has."""
+    if axes:
+        poses = poses.reshape(poses.shape[0], -1, 3)
+        limit = np.cos(np.radians(SAME_POSE_DEG))
+    count = 0
+    for start in range(0, poses.shape[0], rows):
+        part = poses[start:start + rows]
+        if axes:
+            near = (np.einsum("mak,nak->mna", part, poses) >= limit).all(axis=2)
+        else:
+            near = (np.abs(part[:, None, :] - poses[None, :, :]) <= SAME_POSE_DEG).all(axis=2)
+        count += int(np.sum(near.sum(axis=1) > 1))  # each is near itself
+    return count
+
+
+def reading_steps(trial: Trial, residual: np.ndarray) -> list[dict]:
+    """Sudden steps in each sensor's held-out residual ``residual`` (N, S): places where the
+    reading jumps from one level to another while the simulation does not (see
+    :data:`STEP_SIGMAS`). None of the five effects makes one: a step that comes back
+    whenever the joint passes the same pose says the reading is not a smooth function of the
+    pose there (a tendon slipping over a bony prominence, a sensor catching on the fabric);
+    steps at separate poses are knocks or slips of the suit on the skin.
+
+    A joint that passes every pose each cycle (a knee flexing again and again) brings steps
+    made by fast movement back to one pose too: the joint's speed at each step tells them
+    apart (a slip happens at any speed; a jump the movement makes, while it is fast).
+
+    Returns one entry per sensor with a step: ``sensor``, ``count``, ``median_size`` (sensor
+    units), ``at_a_recurring_pose`` (steps with another of the sensor's steps within
+    :data:`SAME_POSE_DEG`), ``median_speed_deg_s`` (the joint's speed at its steps) and the
+    :data:`STEPS_LISTED` largest (``t_s``, ``size``, the joint's ``angles_deg`` and
+    ``speed_deg_s``). Windows that straddle a held-out block's edge, where the simulation
+    changes fold, are not looked at.
+    """
+    w = max(3, int(round(STEP_WINDOW_S * trial.rate_hz)))
+    n = trial.n
+    if n < 2 * w + 1:
+        return []
+    k = np.arange(w, n - w + 1)  # a step between frames k − 1 and k
+    stretch = np.concatenate([[0], np.cumsum(np.diff(trial.blocks) != 0)])
+    one_block = stretch[k - w] == stretch[k + w - 1]
+    poses, axes = _poses(trial)
+    speed, _ = trial_motion(trial)
+    out = []
+    before, after = k - w, k
+    for j, name in enumerate(trial.sensor_names):
+        reading = np.where(np.isfinite(residual[:, j]), trial.y[:, j], np.nan)
+        level, _, _ = _window_stats(reading, w)
+        moved = level[after] - level[before]  # the reading's change
+        level, spread, count = _window_stats(residual[:, j], w)
+        size = level[after] - level[before]  # the residual's: what the simulation misses
+        least = STEP_SIGMAS * trial.noise[j]
+        hit = (one_block & (np.minimum(count[before], count[after]) >= STEP_WINDOW_SHARE * w)
+               & (np.abs(moved) >= least) & (np.abs(size) >= least)
+               & (np.abs(size) >= STEP_FLATNESS * np.maximum(spread[before], spread[after]))
+               & (np.abs(moved - size) <= SIMULATED_SHARE * np.abs(moved)))
+        at = _peaks(np.flatnonzero(hit), np.abs(size), w)
+        if not at.size:
+            continue
+        recurring = _near_another(poses[k[at]], axes)
+        largest = at[np.argsort(-np.abs(size[at]), kind="stable")[:STEPS_LISTED]]
+        out.append({
+            "sensor": name, "count": int(at.size),
+            "median_size": round(float(np.median(np.abs(size[at]))), 5),
+            "at_a_recurring_pose": recurring,
+            "median_speed_deg_s": round(float(np.median(speed[k[at]])), 1),
+            "largest": [{"t_s": round(float(trial.t[k[i]]), 3),
+                         "size": round(float(size[i]), 5),
+                         "angles_deg": [round(float(a), 1) for a in trial.angles[k[i]]],
+                         "speed_deg_s": round(float(speed[k[i]]), 1)}
+                        for i in largest]})
+    return out
+
+
+def _peaks(hits: np.ndarray, strength: np.ndarray, w: int) -> np.ndarray:
+    """The strongest index of each run of ``hits`` (sorted indices) whose members lie
+    within ``w`` of the next: one step is seen from every window that straddles it."""
+    if not hits.size:
+        return hits
+    starts = np.flatnonzero(np.concatenate([[True], np.diff(hits) > w]))
+    ends = np.append(starts[1:], hits.size)
+    return np.array([hits[a + np.argmax(strength[hits[a:b]])] for a, b in zip(starts, ends,
+                                                                              strict=True)])
 
 
 def signatures(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray],

@@ -12,7 +12,15 @@ from pathlib import Path
 import numpy as np
 
 from exohil.emulators.discrepancy.data import spike_counts
-from exohil.emulators.discrepancy.localise import SIGNATURES, motion
+from exohil.emulators.discrepancy.localise import (
+    SAME_POSE_DEG,
+    SIGNATURES,
+    SIMULATED_SHARE,
+    STEP_FLATNESS,
+    STEP_SIGMAS,
+    STEP_WINDOW_S,
+    motion,
+)
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import (
@@ -335,6 +343,40 @@ def _localisation_lines(summary: dict) -> list[str]:
         lines += _before_after(f"{name} (deg)", [
             (f"{b['lo_deg']:.4g} to {b['hi_deg']:.4g}", b["rms"], a["rms"])
             for b, a in zip(cells, la["by_angle"][name], strict=True)])
+    return lines + _step_lines(lb["steps"], la["steps"], summary["units"], summary["angles"])
+
+
+def _step_lines(before: list[dict], after: list[dict], units: str, angles: list[str]
+                ) -> list[str]:
+    """The sudden changes of the reading the simulation does not make (see
+    :func:`~.localise.reading_steps`), after the added effects, with the count before."""
+    counts = {e["sensor"]: e["count"] for e in before}
+    lines = ["", "## Sudden changes of the reading", "",
+             f"Where a sensor's reading, and its residual, moved by at least {STEP_SIGMAS:g} "
+             f"noise SDs between the means of the {1000 * STEP_WINDOW_S:g} ms before and "
+             f"after, from one level to another (by {STEP_FLATNESS:g} times the residual's "
+             "spread within either), while the simulation moved by at most "
+             f"{SIMULATED_SHARE:.0%} of that. None of the five effects makes a reading jump, "
+             "so what the added effects leave of these stays in the gap. Steps that come back "
+             f"at a pose (another step of the sensor within {SAME_POSE_DEG:g}° of it) at any "
+             "speed say the reading is not a smooth function of the pose there: a tendon or a "
+             "knit slipping over a bony prominence, a sensor catching on the fabric. Steps "
+             "only while the joint moves fast are a response to the movement that none of the "
+             "effects follows (on a joint that passes every pose each cycle they come back at "
+             "a pose too). Steps at separate poses are knocks, or slips of the suit on the "
+             "skin.", ""]
+    if not after:
+        return lines + [f"None after the added effects ({sum(counts.values())} before)."]
+    lines += [f"| sensor | steps before | after | after, at a pose of another | median size "
+              f"({units}) | median joint speed (deg/s) | largest: time (s), size, "
+              f"{', '.join(angles)} (deg), speed (deg/s) |", "|---|---|---|---|---|---|---|"]
+    for e in after:
+        biggest = "; ".join(f"{x['t_s']:.4g} s, {x['size']:+.4g}, "
+                            + "/".join(f"{a:.4g}" for a in x["angles_deg"])
+                            + f", {x['speed_deg_s']:.4g}" for x in e["largest"][:3])
+        lines.append(f"| {e['sensor']} | {counts.get(e['sensor'], 0)} | {e['count']} | "
+                     f"{e['at_a_recurring_pose']} | {e['median_size']:.4g} | "
+                     f"{e['median_speed_deg_s']:.4g} | {biggest} |")
     return lines
 
 
