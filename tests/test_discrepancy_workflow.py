@@ -89,6 +89,7 @@ from exohil.emulators.discrepancy.workflow import (
     drift_options,
     filter_words,
     pooled_noise,
+    steps_words,
 )
 from exohil.emulators.effects import Signal
 from exohil.emulators.protocols import Trajectory
@@ -472,6 +473,10 @@ def test_a_reading_that_jumps_at_a_pose_is_found_there_and_nowhere_else():
     assert row.startswith(f"| {trial.sensor_names[0]} | 0 | {found[0]['count']} | ")
     assert f"{largest['t_s']:.4g} s, {largest['size']:+.4g}, " in row
     assert f", {largest['speed_deg_s']:.4g}" in row
+    said = steps_words(found, "mm")
+    assert (f"{trial.sensor_names[0]} {found[0]['count']} "
+            f"({found[0]['at_a_recurring_pose']} at a pose of another, ") in said
+    assert f"median {found[0]['median_size']:.4g} mm" in said
 
 
 def test_steps_at_one_pose_are_counted_as_recurring_and_a_lag_is_no_step():

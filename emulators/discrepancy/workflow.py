@@ -275,6 +275,14 @@ def _mocap_filter(rec: Recording, name: str, trial: Trial, scaled: Inputs, stati
     return filtered, inputs, _static_map(filtered, inputs, floor), evidence
 
 
+def steps_words(steps: list[dict], units: str) -> str:
+    """The sudden changes of the reading (:func:`~.localise.reading_steps`) in words."""
+    return "sudden changes of the reading no effect follows: " + "; ".join(
+        f"{e['sensor']} {e['count']} ({e['at_a_recurring_pose']} at a pose of another, median "
+        f"{e['median_size']:.4g} {units}, joint at {e['median_speed_deg_s']:.4g} deg/s)"
+        for e in steps)
+
+
 def filter_words(evidence: dict | None, units: str) -> str:
     """How the motion capture was read (:func:`_mocap_filter`, :func:`_filter_again`), in
     words."""
@@ -1309,6 +1317,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                               for k, p in refit.items()))
         step += 1
     after = base
+    local_after = localise(trial, after.residual, mot)
+    if local_after["steps"]:
+        progress(f"    {steps_words(local_after['steps'], trial.units)}; see report.md")
     summary = {
         "recording": name,
         "effects": [s["effect"] for s in steps],
@@ -1338,7 +1349,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "static_map_calibrated": calibrated,
         "heldout_blocks": int(trial.blocks.max()) + 1,
         "localisation_before": local_before,
-        "localisation_after": localise(trial, after.residual, mot),
+        "localisation_after": local_after,
         "steps": steps,
         "not_added": rejected,
         "conclusion": _conclusion(steps, spec),
