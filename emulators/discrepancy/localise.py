@@ -142,12 +142,14 @@ def _window_stats(r: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray, np.nda
     return mean, spread, count
 
 
-def _poses(trial: Trial) -> tuple[np.ndarray, bool]:
-    """(N, K) each frame's pose and whether it is K/3 unit axes (a shoulder in MoBL-ARMS
-    angles: the humerus's axes, compared by the angle between them) or K angles in degrees."""
-    lo, hi = np.zeros(trial.angles.shape[1]), np.ones(trial.angles.shape[1])
-    u, kind = map_inputs(trial.angles, trial.angle_names, lo, hi)
-    return (u, True) if kind in ("arm_direction", "arm_axes") else (trial.angles, False)
+def _poses(trial: Trial, frames: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(M, K) the pose at each of the M ``frames`` and whether it is K/3 unit axes (a
+    shoulder in MoBL-ARMS angles: the humerus's axes, compared by the angle between them)
+    or K angles in degrees."""
+    angles = trial.angles[frames]
+    lo, hi = np.zeros(angles.shape[1]), np.ones(angles.shape[1])  # the scaling is not used
+    u, kind = map_inputs(angles, trial.angle_names, lo, hi)
+    return (u, True) if kind in ("arm_direction", "arm_axes") else (angles, False)
 
 
 def _near_another(poses: np.ndarray, axes: bool, rows: int = 256) -> int:
@@ -194,7 +196,6 @@ def reading_steps(trial: Trial, residual: np.ndarray) -> list[dict]:
     k = np.arange(w, n - w + 1)  # a step between frames k − 1 and k
     stretch = np.concatenate([[0], np.cumsum(np.diff(trial.blocks) != 0)])
     one_block = stretch[k - w] == stretch[k + w - 1]
-    poses, axes = _poses(trial)
     speed, _ = trial_motion(trial)
     out = []
     before, after = k - w, k
@@ -212,7 +213,7 @@ def reading_steps(trial: Trial, residual: np.ndarray) -> list[dict]:
         at = _peaks(np.flatnonzero(hit), np.abs(size), w)
         if not at.size:
             continue
-        recurring = _near_another(poses[k[at]], axes)
+        recurring = _near_another(*_poses(trial, k[at]))
         largest = at[np.argsort(-np.abs(size[at]), kind="stable")[:STEPS_LISTED]]
         out.append({
             "sensor": name, "count": int(at.size),
