@@ -20,6 +20,24 @@ from exohil.emulators.discrepancy.data import (
     quantisation_step,
     smooth_angles,
 )
+from exohil.emulators.discrepancy.filters import (
+    NEGLIGIBLE,
+    apply_lag,
+    delay,
+    low_pass,
+    play,
+    rate_limit,
+)
+from exohil.emulators.discrepancy.folds import (
+    Design,
+    Groups,
+    Reduced,
+    Ridge,
+    fold_coefs,
+    fold_products,
+    reduce,
+    ridge_solve,
+)
 from exohil.emulators.discrepancy.hidden import (
     Case,
     make_recording,
@@ -39,22 +57,12 @@ from exohil.emulators.discrepancy.localise import (
     signatures,
 )
 from exohil.emulators.discrepancy.model import (
-    NEGLIGIBLE,
-    Design,
     Fit,
-    Groups,
-    Reduced,
-    Ridge,
     Spec,
     Stops,
-    delay,
     fit,
-    fold_coefs,
-    low_pass,
     make_inputs,
-    play,
-    rate_limit,
-    reduce,
+    map_ridge,
     restrict_to_coverage,
 )
 from exohil.emulators.discrepancy.profile import (
@@ -1787,19 +1795,19 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
     trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
     inputs = make_inputs(trial, Spec(degree=2))
     spec = Spec(degree=2, hysteresis=True, drift_degree=2)
-    ridge = model.Ridge.of_map(inputs, spec)
+    ridge = map_ridge(inputs, spec)
     rng = np.random.default_rng(1)
     for j in range(trial.n_sensors):  # the later sensors reuse the first one's matrices
-        red = model.reduce(trial, model.design(trial.rate_hz, inputs, spec, j), trial.y[:, j])
+        red = reduce(trial, model.design(trial.rate_hz, inputs, spec, j), trial.y[:, j])
         assert red.shared_grams is not None and red.shared_grams.ps < red.n_columns
         m = red.yd.size
         usable = red.rows.usable(trial.valid)
         knees = np.where(rng.random(m) < 0.05, rng.random(m), 1.0)
         for ok in (usable, usable & (rng.random(m) > 0.1)):
             for weights, target in ((None, None), (knees, red.yd + rng.normal(size=m))):
-                got = model.fold_coefs(red, ok, ridge, weights, target)
+                got = fold_coefs(red, ok, ridge, weights, target)
                 np.testing.assert_array_equal(
-                    model.fold_coefs(red, ok, ridge, weights, target, folds=False), got[-1:])
+                    fold_coefs(red, ok, ridge, weights, target, folds=False), got[-1:])
                 xd = np.hstack([red.xs, red.xe])
                 xw = xd * (np.ones(m) if weights is None else weights)[:, None]
                 t = red.yd if target is None else target
@@ -1807,7 +1815,7 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
                 for b in range(N_BLOCKS + 1):  # the last: every block
                     rows = ok & (red.rows.bd != b)
                     gram, rhs = xw[rows].T @ xw[rows], xw[rows].T @ t[rows]
-                    want = model._solve(gram, rhs, ridge.loading(gram, effect))
+                    want = ridge_solve(gram, rhs, ridge.loading(gram, effect))
                     # the basis is nearly collinear: compared where it matters, as fits
                     np.testing.assert_allclose(xd @ got[b], xd @ want, rtol=0,
                                                atol=1e-9 * np.abs(red.yd).max())
@@ -1834,14 +1842,14 @@ def test_designs_and_fold_products_are_their_plain_definitions():
                                  for tau in (1.0, 5.0)]
                               + [model.creep_quadratic_columns(inputs, tau, rate)[:, j:j + 1]
                                  for tau in (1.0, 5.0)])
-            np.testing.assert_array_equal(x.shared, model.apply_lag(
+            np.testing.assert_array_equal(x.shared, apply_lag(
                 model.static_basis(inputs, 2), kind, value, rate, after))
             np.testing.assert_array_equal(x.own, np.hstack([
-                model.apply_lag(terms, kind, value, rate, after),
+                apply_lag(terms, kind, value, rate, after),
                 model.drift_columns(inputs.t_norm, 3)]))
             dense = np.hstack([x.shared, x.own])
             coefs = rng.normal(size=(N_BLOCKS + 1, dense.shape[1]))
-            held, full = (a[:, 0] for a in model.fold_products(trial, [x], [coefs]))
+            held, full = (a[:, 0] for a in fold_products(trial, [x], [coefs]))
             np.testing.assert_allclose(held, np.einsum("np,np->n", dense, coefs[trial.blocks]),
                                        rtol=1e-12, atol=1e-12)
             np.testing.assert_allclose(full, dense @ coefs[-1], rtol=1e-12, atol=1e-12)

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from exohil.emulators.discrepancy.data import Trial
-from exohil.emulators.discrepancy.model import low_pass, map_inputs, trial_motion
+from exohil.emulators.discrepancy.filters import low_pass
+from exohil.emulators.discrepancy.model import map_inputs, trial_motion
 
 #: A hold counts for creep when it lasts at least this long, s.
 MIN_HOLD_S = 1.0

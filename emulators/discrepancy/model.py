@@ -2,7 +2,8 @@
 
 Every model here is linear in its coefficients once a few shape parameters (time constants,
 delays, knots) are fixed, so fitting is a ridge least-squares solve per sensor and blocked
-cross-validation costs one Gram matrix per block (fold fit = total − held-out block).
+cross-validation costs one Gram matrix per block (fold fit = total − held-out block;
+``folds.py``). The signal operators of the effect terms are in ``filters.py``.
 
 For sensor j with static prediction ŝⱼ (a polynomial of the angles, fitted first and then
 held fixed as the *input* of the history-dependent terms) the model is
@@ -36,26 +37,33 @@ held fixed as the *input* of the history-dependent terms) the model is
 
 from __future__ import annotations
 
-import functools
 import itertools
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.signal import lfilter, lfilter_zi, savgol_filter
+from scipy.signal import savgol_filter
 
 from exohil.emulators.discrepancy.data import N_BLOCKS, Trial
+from exohil.emulators.discrepancy.filters import apply_lag, low_pass, play, rate_limit
+from exohil.emulators.discrepancy.folds import (
+    FIT_RATE_HZ,
+    RIDGE,
+    Design,
+    Reduced,
+    Ridge,
+    block_grams,
+    block_mse,
+    fit_coefs,
+    fold_coefs,
+    fold_products,
+    reduce,
+    ridge_solve,
+)
 from exohil.emulators.effects import Creep, Signal
 from exohil.kinematics import ms_to_matrix
 
-#: Magnitude below which a low-passed value is set to zero (:func:`low_pass`): far below
-#: any term it is summed with, and above the square root of the smallest normal number, so
-#: that products of kept values never turn subnormal.
-NEGLIGIBLE = 1e-150
-#: Regression rate, Hz: features are computed at the recording's rate and averaged down to
-#: about this rate for the least-squares fits (predictions and gaps use the full rate).
-FIT_RATE_HZ = 25.0
 #: Share of moving frames a sensor must sit at an end of its range to count as a stop.
 PLATEAU_SHARE = 0.02
 #: Knee candidates of a soft stop: the share of a sensor's valid frames beyond the knee.
@@ -108,23 +116,14 @@ LOCAL_DEGREE = 3
 LOCAL_RIDGES = (1e-5, 1e-4, 1e-3)
 #: Relative ridges of the polynomial beside the local functions.
 LOCAL_STATIC_RIDGES = (1e-10,)
-#: Relative ridge of the static map's columns (columns are scaled to unit norm) when none is
-#: chosen: the largest of ``STATIC_RIDGES``.
-RIDGE = 1e-7
 #: Relative ridges of the static map tried with each degree (chosen on the held-out blocks):
 #: the Legendre products of a unit arm vector are nearly collinear over the poses a recording
 #: visits, so even a small ridge biases the map between poses and a smaller one can interpolate
 #: better (or, at a higher degree, worse).
 STATIC_RIDGES = (1e-10, 1e-9, 1e-8, RIDGE)
-#: Relative ridge of the effect columns: 0.1 % of the energy each adds beyond the static map
-#: (:class:`Ridge`), a negligible bias.
-EFFECT_RIDGE = 1e-3
 #: Lags whose lagged columns are kept (:func:`lagged_term`): the model's and the one being
 #: tried against it.
 KEPT_LAGS = 2
-#: Row selections whose shared Gram matrices are kept (:class:`SharedGrams`): the valid
-#: rows, and those off a sensor's hard stops while they are chosen.
-KEPT_GRAMS = 4
 
 
 @dataclass(frozen=True)
@@ -199,7 +198,7 @@ class Spec:
     Attributes:
         degree: total degree of the static polynomial.
         local: the static map also has the local basis (:func:`local_terms`).
-        local_ridge: the local functions' ridge (:class:`Ridge`).
+        local_ridge: the local functions' ridge (:class:`~.folds.Ridge`).
         hysteresis: play-operator term on.
         creep_tau_s: time constants of the creep low-passes, s (empty = none).
         creep_quadratic: each low-pass also of (ŝ − centre)², a driver that is not
@@ -298,128 +297,6 @@ def legendre_products(u: np.ndarray, degree: int) -> tuple[np.ndarray, list[tupl
                 col = col * per_angle[i][k]
         basis[:, p] = col
     return basis, exponents
-
-
-def play(x: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
-    """Play (backlash) operators, relaxed at the first sample.
-
-    Args:
-        x: (N, S) inputs.
-        thresholds: (S, K) half-widths, same units as x.
-
-    Returns:
-        (N, S, K) operator outputs.
-    """
-    n, s = x.shape
-    k = thresholds.shape[1]
-    lower = x[:, :, None] - thresholds[None]
-    upper = x[:, :, None] + thresholds[None]
-    out = np.empty((n, s, k))
-    out[0] = x[0][:, None]
-    for i in range(1, n):
-        np.maximum(out[i - 1], lower[i], out=out[i])
-        np.minimum(out[i], upper[i], out=out[i])
-    return out
-
-
-def low_pass(x: np.ndarray, tau_s: float, rate_hz: float) -> np.ndarray:
-    """First-order low-pass along axis 0 (step-invariant), starting at rest at x[0].
-
-    A column that falls to zero (a local function of step 2 away from its poses) decays
-    geometrically behind the filter, and within seconds into subnormal numbers, on which
-    x86 arithmetic is tens of times slower: every product of the lagged design (its Gram
-    matrices, its predictions) and the filter itself crawled (a seven-tendon map's Gram
-    matrix 7.4 s instead of 0.14 s). So the filter runs in stretches over which nothing
-    above ``NEGLIGIBLE`` can decay below the smallest normal number, and magnitudes below
-    ``NEGLIGIBLE`` are set to zero after each, output and state alike (nothing they are
-    summed with notices them; the results are the same), and the product of two that are
-    kept is still a normal number.
-    """
-    if tau_s <= 0:
-        return x.copy()
-    pole = math.exp(-1.0 / (rate_hz * tau_s))
-    b, a = [0.0, 1.0 - pole], [1.0, -pole]
-    state = lfilter_zi(b, a)[:, None] * x[0][None, :]
-    # frames for a decay from NEGLIGIBLE to the smallest normal number, less a tenth
-    stretch = max(1, int(0.9 * math.log(NEGLIGIBLE / np.finfo(float).tiny) / -math.log(pole))
-                  if pole > 0.0 else x.shape[0])
-    out = np.empty(x.shape)
-    for start in range(0, x.shape[0], stretch):
-        part, state = lfilter(b, a, x[start:start + stretch], axis=0, zi=state)
-        part *= np.abs(part) >= NEGLIGIBLE  # in place: three times faster than indexing
-        state *= np.abs(state) >= NEGLIGIBLE
-        out[start:start + stretch] = part
-    return out
-
-
-def delay(x: np.ndarray, delay_s: float, rate_hz: float) -> np.ndarray:
-    """x delayed by ``delay_s`` (fractional samples by linear interpolation; the ends hold)."""
-    samples = delay_s * rate_hz
-    k = int(math.floor(samples))
-    frac = samples - k
-
-    def shifted(by: int) -> np.ndarray:
-        out = np.empty_like(x)
-        if by >= 0:
-            out[by:] = x[:x.shape[0] - by]
-            out[:by] = x[0]
-        else:
-            out[:by] = x[-by:]
-            out[by:] = x[-1]
-        return out
-
-    if frac == 0:
-        return shifted(k)
-    out = shifted(k)  # (1 − frac)·x[i − k] + frac·x[i − k − 1], in place: no temporaries
-    out *= 1.0 - frac
-    later = shifted(k + 1)
-    later *= frac
-    out += later
-    return out
-
-
-def rate_limit(x: np.ndarray, rate: float, rate_hz: float) -> np.ndarray:
-    """x (N,) through a slew-rate limit: the output follows x but changes by at most
-    ``rate`` (units/s) per second, starting at x[0]."""
-    step = rate / rate_hz
-    out = np.array(x, dtype=float)  # on the target wherever it has kept up
-    values = out.tolist()  # floats: a numpy scalar per frame is 10× slower
-    # the frames a reading on the target one frame before cannot reach: only from these
-    # on does it fall behind, and the loop runs until it has caught up
-    behind = np.flatnonzero((out[1:] > out[:-1] + step) | (out[1:] < out[:-1] - step)) + 1
-    i, n = 0, len(values)
-    while True:
-        k = int(np.searchsorted(behind, i))
-        if k == len(behind):
-            return out
-        i = int(behind[k])
-        y = values[i - 1]
-        while i < n:
-            target = values[i]
-            if target > y + step:
-                y += step
-            elif target < y - step:
-                y -= step
-            else:  # caught up: on the target from here to the next frame out of reach
-                i += 1
-                break
-            out[i] = y
-            i += 1
-
-
-def apply_lag(x: np.ndarray, kind: str, value_s: float, rate_hz: float,
-              delay_s: float = 0.0) -> np.ndarray:
-    """The lag term applied to the columns of x (N, P): a first-order low-pass of time
-    constant ``value_s``, a delay of ``value_s``, or (``first_order_delay``) the low-pass
-    followed by a delay of ``delay_s``. A rate limit is not applied column by column (it
-    is a column of its own, :func:`rate_limit_column`): x as it is."""
-    if kind == "first_order":
-        return low_pass(x, value_s, rate_hz)
-    if kind == "delay":
-        return delay(x, value_s, rate_hz)
-    if kind == "first_order_delay":
-        return delay(low_pass(x, value_s, rate_hz), delay_s, rate_hz)
-    return x
 
 
 @dataclass
@@ -804,33 +681,6 @@ def drift_columns(t_norm: np.ndarray, degree: int, piecewise: bool = False) -> n
     return np.clip(1.0 - np.abs(t_norm[:, None] - knots[None, :]) / width, 0.0, None)
 
 
-@dataclass(frozen=True)
-class Design:
-    """One sensor's design matrix [shared | own], (N, Ps + Pe), kept as its two blocks.
-
-    ``shared`` is the (lagged) static basis, the same array for every sensor and every
-    candidate with that lag (cached, never copied); ``own`` holds the sensor's effect
-    columns (Pe ≥ 0). Every fit touches each block once at the full rate: joining them
-    would copy the whole matrix per sensor per fit.
-    """
-
-    shared: np.ndarray
-    own: np.ndarray
-
-    @classmethod
-    def of(cls, x: np.ndarray) -> Design:
-        """A design that is one plain (N, P) matrix."""
-        return cls(shared=x, own=x[:, :0])
-
-    def times(self, coefs: np.ndarray) -> np.ndarray:
-        """(N, K): the design times each row of ``coefs`` (K, P); (N,) for one (P,)."""
-        ps = self.shared.shape[1]
-        out = self.shared @ coefs[..., :ps].T
-        if self.own.shape[1]:
-            out = out + self.own @ coefs[..., ps:].T
-        return out
-
-
 def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
     """The design of sensor j for ``spec`` at ``rate_hz`` (before any stop)."""
     spec = spec.for_sensor(j)
@@ -934,466 +784,6 @@ class Fit:
         return np.sqrt(np.nanmean(self.residual**2, axis=0))
 
 
-def _equilibrate(gram: np.ndarray, loading: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """``gram`` (..., P, P) with the loading (..., P) on its diagonal, its columns scaled
-    to unit norm (for conditioning), and the scale (..., P). A column that is zero on every
-    fitted frame (a rate limit no move reaches) gets 1 on the diagonal: coefficient 0."""
-    diag = np.diagonal(gram, axis1=-2, axis2=-1)
-    dead = diag <= 0
-    scale = np.sqrt(np.where(dead, 1.0, diag))
-    g = gram / (scale[..., :, None] * scale[..., None, :])
-    on_diagonal = np.arange(gram.shape[-1])
-    g[..., on_diagonal, on_diagonal] += loading / scale**2 + dead
-    return g, scale
-
-
-def _solve(gram: np.ndarray, rhs: np.ndarray, loading: np.ndarray) -> np.ndarray:
-    """Ridge solve with ``loading`` (..., P) added to the Gram matrix's diagonal
-    (:func:`_equilibrate`); ``gram`` (..., P, P) and ``rhs`` (..., P) may be stacks (one per
-    fold)."""
-    g, scale = _equilibrate(gram, loading)
-    return np.linalg.solve(g, (rhs / scale)[..., None])[..., 0] / scale
-
-
-@dataclass(frozen=True)
-class Ridge:
-    """Relative ridge of a design whose first ``n_static`` columns are the static map.
-
-    A static column's loading is ``static`` times its energy in the fold. An effect column's
-    is ``effect`` times the energy it adds beyond the static map over every block (the
-    diagonal of the Schur complement of the static block). A creep column (the low-passed
-    static prediction) is nearly the static prediction itself: its energy is mostly offset
-    and stretch that the map already carries, and a ridge relative to that energy shrank the
-    creep term itself (a held-out gap of 0.51 mm where the term, unshrunk, leaves 0.21 mm).
-    Relative to what the column adds, the ridge is the negligible bias it is meant to be, and
-    a column that is nearly constant in a fold (a play operator that never reverses there)
-    still cannot extrapolate with a huge coefficient.
-
-    The static map's local functions (columns ``local``, a [start, stop) pair) all get
-    ``local_ridge`` times their mean energy in the fold.
-    """
-
-    n_static: int
-    static: float = RIDGE
-    effect: float = EFFECT_RIDGE
-    local: tuple[int, int] = (0, 0)
-    local_ridge: float = 0.0
-
-    @classmethod
-    def of_map(cls, inputs: Inputs, spec: Spec) -> Ridge:
-        """The ridge of a design whose static map is ``spec``'s."""
-        n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
-        start = math.comb(spec.degree + inputs.u.shape[1], spec.degree)
-        count = inputs.centres.shape[0] if spec.local else 0
-        return cls(n_static=n_static, static=spec.ridge, local=(start, start + count),
-                   local_ridge=spec.local_ridge)
-
-    def static_loading(self, diag: np.ndarray) -> np.ndarray:
-        """(..., n_static) diagonal loading of the static columns from their energies
-        ``diag`` (..., n_static)."""
-        out = self.static * diag
-        start, stop = self.local
-        if stop > start:
-            out[..., start:stop] = self.local_ridge * diag[..., start:stop].mean(
-                axis=-1, keepdims=True)
-        return out
-
-    def effect_loading(self, gram_all: np.ndarray) -> np.ndarray:
-        """(P − n_static,) diagonal loading of the effect columns, from the design's Gram
-        matrix over every block (the same for every fold)."""
-        n = self.n_static
-        if gram_all.shape[0] == n:
-            return np.empty(0)
-        diag_all = np.diag(gram_all)
-        g_ss = gram_all[:n, :n] + np.diag(self.static_loading(diag_all[:n]))
-        g_se = gram_all[:n, n:]
-        return self.added_loading(g_se, diag_all[n:], np.linalg.solve(g_ss, g_se))
-
-    def added_loading(self, g_se: np.ndarray, diag_e: np.ndarray, through: np.ndarray
-                      ) -> np.ndarray:
-        """(Pe,) the effect columns' loading from their products with the static columns
-        over every block ``g_se`` (n_static, Pe), their energies ``diag_e`` (Pe,) and
-        ``through`` = (G_ss + static loading)⁻¹ g_se: ``effect`` times the energy each adds
-        beyond the static map."""
-        added = diag_e - np.einsum("ij,ij->j", g_se, through)
-        return self.effect * np.maximum(added, 1e-12 * diag_e)
-
-    def loading(self, gram: np.ndarray, effect: np.ndarray) -> np.ndarray:
-        """(..., P) diagonal loading for a fold's ``gram`` (..., P, P), or a stack of folds':
-        the static columns' from the fold, the effect columns' ``effect``
-        (:meth:`effect_loading`)."""
-        diag = np.diagonal(gram, axis1=-2, axis2=-1)
-        out = np.empty(diag.shape)
-        out[..., :self.n_static] = self.static_loading(diag[..., :self.n_static])
-        out[..., self.n_static:] = effect
-        return out
-
-
-@dataclass(frozen=True)
-class Groups:
-    """How a trial's frames are averaged into fit rows, the same for every design.
-
-    Rows average the valid frames of a group of ``m`` consecutive grid frames in one
-    held-out block: a group that straddles a block boundary gives one row per block, or
-    the fit that predicts a block would hold some of its frames. A row is fit to use
-    (``whole``) when at least half of its frames are valid, or, in a recording that holds
-    fewer than half of its frames, 90 % of the recording's share of valid frames (else a
-    link that drops three of five frames leaves no row). Rows are sorted by block.
-
-    Attributes:
-        m: frames per group.
-        n: grid frames covered (whole groups; a trailing partial group is dropped).
-        weights: (G + K, m) each row's weight on its group's frames, in group order; rows
-            G… are the second halves of the K groups ``split`` across a block edge.
-        split: (K,) the groups split across a block edge.
-        order: (M,) the rows (as in ``weights``) sorted by block.
-        group: (M,) the group (grid frames ``group·m … group·m + m − 1``) of each row.
-        frames: (M, m) bool, the valid frames of its group each row averages.
-        bd: (M,) the held-out block of each row (−1: no valid frame), ascending: each
-            block's rows are contiguous.
-        whole: (M,) bool, rows fit to use.
-    """
-
-    m: int
-    n: int
-    weights: np.ndarray
-    split: np.ndarray
-    order: np.ndarray
-    group: np.ndarray
-    frames: np.ndarray
-    bd: np.ndarray
-    whole: np.ndarray
-
-    @functools.cached_property
-    def bounds(self) -> np.ndarray:
-        """(N_BLOCKS + 1,) block b's rows are ``bounds[b]:bounds[b + 1]`` (rows of no
-        block, −1, come first)."""
-        return np.searchsorted(self.bd, np.arange(N_BLOCKS + 1))
-
-    def mean(self, a: np.ndarray) -> np.ndarray:
-        """(M, P) each row's mean of ``a`` (N, P), finite on every valid frame."""
-        g = self.n // self.m
-        a3 = a[: self.n].reshape(g, self.m, a.shape[1])
-        out = np.concatenate([np.einsum("gk,gkp->gp", self.weights[:g], a3),
-                              np.einsum("gk,gkp->gp", self.weights[g:], a3[self.split])])
-        return out[self.order]
-
-    def usable(self, mask: np.ndarray) -> np.ndarray:
-        """(M,) rows fit to use whose averaged frames are all in ``mask`` (N,)."""
-        inside = mask[: self.n].reshape(-1, self.m)
-        return self.whole & ~np.any(self.frames & ~inside[self.group], axis=1)
-
-
-@dataclass(frozen=True)
-class Reduced:
-    """A design and measurement averaged down to about ``FIT_RATE_HZ`` for the fits.
-
-    The design is kept as its two blocks, like :class:`Design`: the shared block's
-    average is the same array for every sensor of a fit (joining them copied it per sensor
-    per fit).
-
-    Attributes:
-        xs: (M, Ps) the shared block of the design, mean of each row's valid frames.
-        xe: (M, Pe) the sensor's own columns, the same rows.
-        yd: (M,) measurement, same rows.
-        rows: how the rows were formed (:class:`Groups`).
-        shared_grams: the per-block Gram matrices of ``xs``, by the rows they were formed on
-            (:func:`block_grams`); None: every Gram matrix is formed anew.
-    """
-
-    xs: np.ndarray
-    xe: np.ndarray
-    yd: np.ndarray
-    rows: Groups
-    shared_grams: SharedGrams | None = None
-
-    @property
-    def n_columns(self) -> int:
-        """P = Ps + Pe."""
-        return self.xs.shape[1] + self.xe.shape[1]
-
-    def times(self, coef: np.ndarray, rows: slice = slice(None)) -> np.ndarray:
-        """The design's ``rows`` times ``coef`` (P,)."""
-        ps = self.xs.shape[1]
-        return self.xs[rows] @ coef[:ps] + self.xe[rows] @ coef[ps:]
-
-
-@dataclass
-class SharedGrams:
-    """The per-block Gram matrices (N_BLOCKS, Ps, Ps) of the averaged shared block
-    (:attr:`Reduced.xs`, ``ps`` columns), kept for the last ``KEPT_GRAMS`` row selections:
-    every sensor of a fit asks for the same ones; and for as many row selections and
-    static ridges, each fold's static system factored (:meth:`factored`)."""
-
-    ps: int
-    by_rows: dict[bytes, np.ndarray] = field(default_factory=dict)
-    factors: dict[tuple, StaticFactors | None] = field(default_factory=dict)
-
-    def of(self, xs: np.ndarray, ok: np.ndarray, bounds: np.ndarray) -> np.ndarray:
-        """(N_BLOCKS, Ps, Ps) for the rows ``ok`` (M,) of the averaged shared block ``xs``
-        (M, Ps), rows sorted by block between ``bounds``."""
-        key = ok.tobytes()
-        grams = self.by_rows.get(key)
-        if grams is None:
-            if len(self.by_rows) >= KEPT_GRAMS:
-                del self.by_rows[next(iter(self.by_rows))]
-            grams = np.empty((N_BLOCKS, self.ps, self.ps))
-            for b in range(N_BLOCKS):
-                rows = xs[bounds[b]:bounds[b + 1]][ok[bounds[b]:bounds[b + 1]]]
-                grams[b] = rows.T @ rows
-            self.by_rows[key] = grams
-        return grams
-
-    def factored(self, xs: np.ndarray, ok: np.ndarray, bounds: np.ndarray, ridge: Ridge
-                 ) -> StaticFactors | None:
-        """Each fold's static system for the rows ``ok`` with ``ridge``'s static loading,
-        factored; None where one is not positive definite in floating point."""
-        key = (ok.tobytes(), ridge.static, ridge.local, ridge.local_ridge)
-        if key not in self.factors:
-            if len(self.factors) >= KEPT_GRAMS:
-                del self.factors[next(iter(self.factors))]
-            grams = self.of(xs, ok, bounds)
-            folds = fold_sums(grams, grams.sum(axis=0))
-            diag = np.diagonal(folds, axis1=-2, axis2=-1)
-            g, scale = _equilibrate(folds, ridge.static_loading(diag))
-            try:
-                inverse = np.linalg.inv(np.linalg.cholesky(g))
-            except np.linalg.LinAlgError:
-                self.factors[key] = None
-            else:
-                self.factors[key] = StaticFactors(scale=scale, inverse_chol=inverse)
-        return self.factors[key]
-
-
-@dataclass(frozen=True)
-class StaticFactors:
-    """The static block A = L·Lᵀ of each fold's ridge system (:func:`_equilibrate`): its
-    scale (N_BLOCKS + 1, Ps) and the inverse of its Cholesky factor L⁻¹ (N_BLOCKS + 1,
-    Ps, Ps), the last the all-block fit's. (NumPy has no triangular solve; SciPy's LAPACK
-    runs on a second OpenBLAS whose threads contend with NumPy's: twice as slow on two
-    cores.)"""
-
-    scale: np.ndarray
-    inverse_chol: np.ndarray
-
-    def solve(self, f: int, rhs: np.ndarray) -> np.ndarray:
-        """Fold f's equilibrated static system solved for ``rhs`` (Ps, K): L⁻ᵀ(L⁻¹ rhs)."""
-        inverse = self.inverse_chol[f]
-        return inverse.T @ (inverse @ rhs)
-
-
-def fold_sums(per_block: np.ndarray, total: np.ndarray) -> np.ndarray:
-    """(N_BLOCKS + 1, ...) each fold's sum of ``per_block`` (N_BLOCKS, ...), whose sum over
-    the blocks is ``total``: fold b's without block b, the last every block's (``total``)."""
-    return np.concatenate([total - per_block, total[None]])
-
-
-def fit_groups(trial: Trial) -> Groups:
-    """The trial's fit rows (see :class:`Groups`), computed once per trial."""
-    kept = trial.cache.get("groups")
-    if kept is not None:
-        return kept
-    m = max(1, int(round(trial.rate_hz / FIT_RATE_HZ)))
-    n = (trial.n // m) * m
-    valid = trial.valid[:n].reshape(-1, m)
-    blocks = trial.blocks[:n].reshape(-1, m)
-    first = np.where(valid, blocks, N_BLOCKS).min(axis=1)
-    last = np.where(valid, blocks, -1).max(axis=1)
-    # a block holds ≥ 2.5 s, a group 40 ms: a group meets at most two blocks
-    split = np.flatnonzero((first != last) & (last >= 0))
-    group = np.concatenate([np.arange(valid.shape[0]), split])
-    bd = np.concatenate([np.where(last >= 0, first, -1), last[split]])
-    in_block = blocks[group] == bd[:, None]
-    frames = valid[group] & in_block
-    count = frames.sum(axis=1)
-    weights = frames / np.maximum(count, 1)[:, None]  # each row's mean over its valid frames
-    order = np.argsort(bd, kind="stable")  # each block's rows contiguous (fold_coefs)
-    # at least half its frames; where the recording holds fewer than half of them (a link
-    # that drops most frames), 90 % of the recording's share, which a typical group holds
-    held = float(trial.valid.mean())
-    share = 0.5 if held >= 0.5 else 0.9 * held
-    whole = (count > 0) & (count >= share * in_block.sum(axis=1))
-    groups = Groups(m=m, n=n, weights=weights, split=split, order=order, group=group[order],
-                    frames=frames[order], bd=bd[order], whole=whole[order])
-    trial.cache["groups"] = groups
-    return groups
-
-
-def reduce(trial: Trial, x: Design, y: np.ndarray) -> Reduced:
-    """The design x (finite on every valid frame) and measurement y (N,), which may be NaN
-    where invalid, averaged to about ``FIT_RATE_HZ`` (a trailing partial group is dropped).
-    The shared block's average is kept for the next design that shares it."""
-    groups = fit_groups(trial)
-    kept = trial.cache.get("shared")
-    if kept is None or kept[0] is not x.shared:
-        kept = (x.shared, groups.mean(x.shared), SharedGrams(ps=x.shared.shape[1]))
-        trial.cache["shared"] = kept
-    yd = groups.mean(np.where(trial.valid, y, 0.0)[:, None])[:, 0]
-    return Reduced(xs=kept[1], xe=groups.mean(x.own), yd=yd, rows=groups,
-                   shared_grams=kept[2])
-
-
-def fit_coefs(trial: Trial, x: Design, y: np.ndarray, ridge: Ridge | None = None,
-              ) -> np.ndarray:
-    """Blocked CV and full-data fit of one sensor on design x (N, P) and measurement y (N,)
-    over the valid frames, with the relative ridge ``ridge`` (default: ``RIDGE`` on every
-    column): the (N_BLOCKS + 1, P) fold coefficients (:func:`fold_coefs`), whose held-out
-    and full-data predictions :func:`fold_products` forms."""
-    red = reduce(trial, x, y)
-    ridge = Ridge(n_static=red.n_columns) if ridge is None else ridge
-    return fold_coefs(red, red.rows.usable(trial.valid), ridge)
-
-
-def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
-                target: np.ndarray | None = None, static: bool = True,
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-block Gram matrices (N_BLOCKS, P, P) and right-hand sides (N_BLOCKS, P) of the
-    rows ``ok`` (M,) of the averaged design, each row times ``weights`` (M,; default 1; at
-    most 1: the slopes of a stop), against ``target`` (M,; default the averaged
-    measurement). The shared columns' unweighted Gram matrices come formed
-    (``red.shared_grams``, the same for every sensor of a fit); only rows whose weight is
-    not 1 (in a stop's knee) correct them. With ``static`` False (unweighted only), the
-    shared columns' block is left unset, for a caller that has it factored."""
-    ps = red.xs.shape[1]
-    p = red.n_columns
-    y = red.yd if target is None else target
-    grams = np.empty((N_BLOCKS, p, p))
-    rhs = np.empty((N_BLOCKS, p))
-    bounds = red.rows.bounds
-    if static and red.shared_grams is not None:
-        grams[:, :ps, :ps] = red.shared_grams.of(red.xs, ok, bounds)
-    for b in range(N_BLOCKS):
-        rows = slice(bounds[b], bounds[b + 1])
-        xs, xe, yb, keep = red.xs[rows], red.xe[rows], y[rows], ok[rows]
-        wb = None if weights is None else weights[rows]
-        if not keep.all():  # views where every row counts (no copy)
-            xs, xe, yb = xs[keep], xe[keep], yb[keep]
-            wb = None if wb is None else wb[keep]
-        if static and red.shared_grams is None:
-            xw = xs if wb is None else xs * wb[:, None]
-            grams[b, :ps, :ps] = xw.T @ xw
-        elif static and wb is not None:
-            bent = wb != 1.0
-            if ps and bent.any():
-                # the rows' share 1 − w² taken out; zᵀz of one array is a symmetric
-                # rank-k update in BLAS, half the work of a general product
-                z = xs[bent] * np.sqrt(1.0 - wb[bent] ** 2)[:, None]
-                grams[b, :ps, :ps] -= z.T @ z
-        own = xe if wb is None else xe * (wb**2)[:, None]  # Σ w²·x·xₑᵀ
-        yw = yb if wb is None else yb * wb  # Σ w·x·t: the rows times w, not the target
-        grams[b, :ps, ps:] = xs.T @ own
-        grams[b, ps:, ps:] = xe.T @ own
-        grams[b, ps:, :ps] = grams[b, :ps, ps:].T
-        rhs[b, :ps] = xs.T @ yw
-        rhs[b, ps:] = xe.T @ yw
-    return grams, rhs
-
-
-def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge, weights: np.ndarray | None = None,
-               target: np.ndarray | None = None, folds: bool = True) -> np.ndarray:
-    """(N_BLOCKS + 1, P) ridge coefficients: row b fitted without block b, the last row on
-    every block (one Gram matrix per block, :func:`block_grams`; a fold's is the total
-    minus its block's); with ``folds`` False, only the last row, (1, P). Without weights,
-    the shared static block's factors are reused (:func:`_fold_coefs_factored`)."""
-    shared = red.shared_grams
-    if weights is None and shared is not None and shared.ps == ridge.n_static:
-        factors = shared.factored(red.xs, ok, red.rows.bounds, ridge)
-        if factors is not None:
-            return _fold_coefs_factored(red, ok, ridge, factors, target, folds)
-    grams, rhs = block_grams(red, ok, weights, target)
-    gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
-    effect = ridge.effect_loading(gram_all)
-    # fold b's Gram matrix is the total minus block b's; the last is the total
-    fold_grams = fold_sums(grams, gram_all) if folds else gram_all[None]
-    fold_rhs = fold_sums(rhs, rhs_all) if folds else rhs_all[None]
-    return _solve(fold_grams, fold_rhs, ridge.loading(fold_grams, effect))
-
-
-def _fold_coefs_factored(red: Reduced, ok: np.ndarray, ridge: Ridge, factors: StaticFactors,
-                         target: np.ndarray | None, folds: bool = True) -> np.ndarray:
-    """:func:`fold_coefs` by block elimination: each fold's static block is factored once
-    for every sensor and candidate that shares it (``factors``), so a fit solves only its
-    effect columns' Schur complement, of their count, instead of the whole system.
-
-    With the equilibrated system [[A, B], [Bᵀ, C]] [βs; βe] = [rs; re] (A the static
-    block): (C − Bᵀ A⁻¹ B) βe = re − Bᵀ A⁻¹ rs, then βs = A⁻¹ (rs − B βe). The effect
-    columns' ridge uses the all-block A as :meth:`Ridge.effect_loading` does.
-    """
-    ps = factors.scale.shape[1]
-    grams, rhs = block_grams(red, ok, target=target, static=False)
-    cross_all, rhs_all = grams[:, :, ps:].sum(axis=0), rhs.sum(axis=0)
-    cross = fold_sums(grams[:, :, ps:], cross_all)  # (N_BLOCKS + 1, P, Pe)
-    fold_rhs = fold_sums(rhs, rhs_all)
-    n_folds, pe = cross.shape[0], cross.shape[2]
-    coefs = np.empty(fold_rhs.shape)
-    order = range(n_folds) if folds else [n_folds - 1]
-    effect = np.empty(0)
-    if pe:  # the effect columns' ridge: the energy each adds beyond the static map
-        scale_all = factors.scale[-1][:, None]
-        g_se = cross_all[:ps]
-        through = factors.solve(-1, g_se / scale_all) / scale_all  # A_all⁻¹ g_se, unscaled
-        effect = ridge.added_loading(g_se, np.diagonal(cross_all[ps:]), through)
-    for f in order:
-        s_s = factors.scale[f]
-        r_s = fold_rhs[f, :ps] / s_s
-        if not pe:
-            coefs[f] = factors.solve(f, r_s[:, None])[:, 0] / s_s
-            continue
-        c, s_e = _equilibrate(cross[f, ps:], effect)
-        b = cross[f, :ps] / (s_s[:, None] * s_e[None, :])
-        z = factors.solve(f, np.column_stack([b, r_s]))  # A⁻¹ [B | rs]
-        schur = c - b.T @ z[:, :pe]
-        beta_e = np.linalg.solve(schur, fold_rhs[f, ps:] / s_e - b.T @ z[:, pe])
-        coefs[f, :ps] = (z[:, pe] - z[:, :pe] @ beta_e) / s_s
-        coefs[f, ps:] = beta_e / s_e
-    return coefs if folds else coefs[-1:]
-
-
-def block_runs(trial: Trial) -> tuple[np.ndarray, np.ndarray]:
-    """The trial's runs of consecutive frames held out by one block: (R + 1,) frame bounds
-    and (R,) the block of each run."""
-    kept = trial.cache.get("block_runs")
-    if kept is None:
-        bounds = np.concatenate([[0], np.flatnonzero(np.diff(trial.blocks)) + 1, [trial.n]])
-        kept = trial.cache["block_runs"] = (bounds, trial.blocks[bounds[:-1]])
-    return kept
-
-
-def fold_products(trial: Trial, designs: Sequence[Design], coefs: Sequence[np.ndarray],
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Each design times its fold coefficients (N_BLOCKS + 1, P): (held, full), each (N, K)
-    for K designs: every frame times the row of the fold that held it out, and every frame
-    times the last row. A shared block is read once, a run of one held-out block at a time
-    (:func:`block_runs`, in place: no sorted copy), in one product for every design that
-    shares it (all sensors of one fit) and both rows, formed transposed (coefficients times
-    the run's transpose: the faster BLAS product for this narrow a result)."""
-    bounds, run_block = block_runs(trial)
-    out = np.empty((2, len(designs), trial.n))  # [0]: held, [1]: full
-    sharing: dict[int, list[int]] = {}
-    for k, x in enumerate(designs):
-        sharing.setdefault(id(x.shared), []).append(k)
-    for members in sharing.values():
-        ps = designs[members[0]].shared.shape[1]
-        run_t = designs[members[0]].shared.T  # (Ps, N), a view
-        # per block b, (2·members, Ps): the fold without block b, then the full fit, of each
-        full = [coefs[k][-1, :ps] for k in members]
-        pairs = [np.stack([coefs[k][b, :ps] for k in members] + full) for b in range(N_BLOCKS)]
-        for start, stop, b in zip(bounds[:-1], bounds[1:], run_block, strict=True):
-            product = (pairs[b] @ run_t[:, start:stop]).reshape(2, len(members), -1)
-            if len(members) == len(designs):  # members is 0 … K − 1
-                out[:, :, start:stop] = product
-            else:
-                out[:, members, start:stop] = product
-    frames = np.arange(trial.n)
-    for k, x in enumerate(designs):
-        if x.own.shape[1]:
-            own = x.own @ coefs[k][:, x.shared.shape[1]:].T  # (N, N_BLOCKS + 1), narrow
-            out[0, k] += own[frames, trial.blocks]
-            out[1, k] += own[:, -1]
-    return out[0].T, out[1].T
-
-
 def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
                       coefs: np.ndarray, shared: int = SHARED_ITERATIONS,
                       own: int = OWN_ITERATIONS) -> np.ndarray:
@@ -1404,9 +794,9 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
     stop). Unlike a fit on the frames between the stops, the map is fitted on the frames in
     the knees too, where it would otherwise be extrapolated. The first ``shared`` iterations
     linearise every fold at the all-block fit's prediction (one Gram matrix per block, as in
-    :func:`fold_coefs`); the last ``own`` linearise each fold at its own prediction, so that no
-    fold's fit depends on its held-out block. Every shared iteration but the last needs only
-    the all-block fit (the next is linearised at it).
+    :func:`~.folds.fold_coefs`); the last ``own`` linearise each fold at its own prediction,
+    so that no fold's fit depends on its held-out block. Every shared iteration but the last
+    needs only the all-block fit (the next is linearised at it).
     """
     def linearised(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each row's weight h′(ŝ) and target y − h(ŝ) + h′(ŝ)·ŝ, at ŝ = x·coef."""
@@ -1426,7 +816,7 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
             others = np.arange(N_BLOCKS) != b  # every block for the last row
             grams[b], rhs[b] = block_g[others].sum(axis=0), block_r[others].sum(axis=0)
         # the effect columns' ridge from the all-block fit's system (the last row's)
-        coefs = _solve(grams, rhs, ridge.loading(grams, ridge.effect_loading(grams[-1])))
+        coefs = ridge_solve(grams, rhs, ridge.loading(grams, ridge.effect_loading(grams[-1])))
     return coefs
 
 
@@ -1450,7 +840,7 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
     of them to its neighbours with its shape. A compressive end of range without a plateau
     is thus told from a hard stop by the data, not assumed. Hard stops are scored with the
     map fitted off them, soft knees with the map fitted through them from ``plain`` (the
-    fold fits without stops, :func:`fold_coefs`). Each end's knee is searched with the other
+    fold fits without stops, :func:`~.folds.fold_coefs`). Each end's knee is searched with the other
     end as found without knees; the better end is kept and the other end's knee searched
     again given it.
     """
@@ -1541,12 +931,21 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
 
 def fit_with_stops(trial: Trial, y: np.ndarray, ridge: Ridge, stops: Stops, sigma: float,
                    red: Reduced, plain: np.ndarray) -> np.ndarray:
-    """:func:`fit_coefs`'s fold coefficients for a sensor with ``stops``: with hard stops
+    """:func:`~.folds.fit_coefs`'s fold coefficients for a sensor with ``stops``: with hard stops
     only, the map fitted off them; with a soft knee, fitted through the knees
     (:func:`fit_through_stops`, starting from ``plain``, the fold fits without stops)."""
     ok = red.rows.usable(trial.valid & off_hard_stops(y, stops, sigma))
     return (fit_through_stops(red, ok, ridge, stops, plain) if stops.soft
             else fold_coefs(red, ok, ridge))
+
+
+def map_ridge(inputs: Inputs, spec: Spec) -> Ridge:
+    """The ridge (:class:`~.folds.Ridge`) of a design whose static map is ``spec``'s."""
+    n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
+    start = math.comb(spec.degree + inputs.u.shape[1], spec.degree)
+    count = inputs.centres.shape[0] if spec.local else 0
+    return Ridge(n_static=n_static, static=spec.ridge, local=(start, start + count),
+                 local_ridge=spec.local_ridge)
 
 
 def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
@@ -1558,7 +957,7 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     designs: list[Design] = []
     fold: list[np.ndarray] = []  # per sensor, (N_BLOCKS + 1, P) fold coefficients
     stops: list[Stops] = []
-    ridge = Ridge.of_map(inputs, spec)  # the static map is the same for every sensor
+    ridge = map_ridge(inputs, spec)  # the static map is the same for every sensor
     for j in range(trial.n_sensors):
         y = trial.y[:, j]
         x = design(trial.rate_hz, inputs, spec, j)
@@ -1584,18 +983,6 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     coefs = [c[-1] for c in fold]
     return Fit(spec=spec, residual=residual, block_mse=block_mse(trial, residual), coef=coefs,
                prediction=prediction, stops=stops)
-
-
-def block_mse(trial: Trial, residual: np.ndarray) -> np.ndarray:
-    """(N_BLOCKS,) mean squared held-out ``residual`` (N, any sensors) per block over its
-    scored frames (NaN where it is not); NaN for a block with no scored frame."""
-    out = np.full(N_BLOCKS, np.nan)
-    for b in range(N_BLOCKS):
-        r = residual[trial.blocks == b]
-        r = r[np.isfinite(r)]
-        if r.size:
-            out[b] = np.mean(r**2)
-    return out
 
 
 def restrict_to_coverage(trial: Trial, u: np.ndarray) -> float:
@@ -1648,7 +1035,7 @@ def make_inputs(trial: Trial, static_map: Spec | None = None) -> Inputs:
         return inputs
     inputs.static_degree, inputs.static_local = static_map.degree, static_map.local
     basis = static_basis(inputs, static_map.degree, static_map.local)
-    static_ridge = Ridge.of_map(inputs, static_map)
+    static_ridge = map_ridge(inputs, static_map)
     coef = np.column_stack([fit_coefs(trial, Design.of(basis), trial.y[:, j], static_ridge)[-1]
                             for j in range(trial.n_sensors)])
     inputs.static_coef = coef

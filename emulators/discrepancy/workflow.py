@@ -74,6 +74,7 @@ from exohil.emulators.discrepancy.data import (
     prepare_trial,
     spike_counts,
 )
+from exohil.emulators.discrepancy.folds import block_mse
 from exohil.emulators.discrepancy.localise import localise, motion, signatures
 from exohil.emulators.discrepancy.model import (
     LOCAL_DEGREE,
@@ -84,7 +85,6 @@ from exohil.emulators.discrepancy.model import (
     Fit,
     Inputs,
     Spec,
-    block_mse,
     drift_columns,
     fit,
     make_inputs,
