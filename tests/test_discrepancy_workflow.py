@@ -80,20 +80,23 @@ from exohil.emulators.discrepancy.report import (
     markdown,
     plots,
 )
+from exohil.emulators.discrepancy.rules import (
+    SIGN_TEST_LEVEL,
+    blocks_needed,
+    candidate_evidence,
+    rules_on_blocks,
+    stops_leave_curve_nothing,
+)
 from exohil.emulators.discrepancy.workflow import (
     CREEP_HOLD_S,
-    SIGN_TEST_LEVEL,
     _against_curve,
     _best,
     _clock_offset,
     _counted_refined,
     _creep_families,
-    _evidence,
     _flows_within_holds,
     _rate_limit,
-    _rules,
     _static_map,
-    blocks_needed,
     drift_options,
     filter_words,
     pooled_noise,
@@ -534,7 +537,7 @@ def test_what_no_frame_measures_is_null_not_nan():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         base, cand = fit(trial, inputs, Spec(degree=2)), fit(trial, inputs, Spec(degree=3))
-        evidence = _evidence(trial, base, cand, 0.1)
+        evidence = candidate_evidence(trial, base, cand, 0.1)
     assert np.isnan(base.block_mse[0]) and np.isfinite(base.block_mse[1:]).all()
     json.dumps(evidence, allow_nan=False)
     assert evidence["blocks_improved"] <= N_BLOCKS - 1
@@ -1093,7 +1096,7 @@ def test_a_candidate_must_improve_most_blocks(improved, significant):
     without the best block is not enough when two blocks of eight got worse."""
     base = np.full(N_BLOCKS, 10.0)
     cand = base - np.where(np.arange(N_BLOCKS) < improved, 4.0, -1.0)
-    rules = _rules(base, cand, floor=1.0)
+    rules = rules_on_blocks(base, cand, floor=1.0)
     assert rules["delta_mse"] > 1.0 and rules["delta_mse_without_best_block"] > 0
     assert rules["beyond_noise"]  # rules 1 and 2 before the sign test
     assert rules["blocks_improved"] == improved and rules["blocks_needed"] == 7
@@ -1115,7 +1118,7 @@ def _stops_against_curve(bend: Callable[[np.ndarray], np.ndarray]) -> tuple[Fit,
     floor = pooled_noise(trial)
     base = fit(trial, inputs, quadratic)
     cand = _best(trial, inputs, "saturation", quadratic)
-    evidence = _evidence(trial, base, cand, floor)
+    evidence = candidate_evidence(trial, base, cand, floor)
     assert evidence["significant"], evidence  # each bends the map by more than the noise
     judged = _against_curve(trial, inputs, quadratic, cand, evidence, floor)
     assert judged["against_smooth_curve"]["curve_gap"] < base.gap
@@ -1168,7 +1171,6 @@ def test_stops_that_tie_with_the_curve_leave_it_something():
     0.008805, where its hidden effect is a sample-and-hold lag.)"""
     from types import SimpleNamespace
 
-    from exohil.emulators.discrepancy.workflow import _stops_leave_curve_nothing
 
     curve_blocks = np.full(8, 2.0)
     curve = SimpleNamespace(block_mse=curve_blocks, gap=float(np.sqrt(curve_blocks.mean())))
@@ -1178,9 +1180,9 @@ def test_stops_that_tie_with_the_curve_leave_it_something():
                                    (np.full(8, 1.9), True)):
         stops = SimpleNamespace(block_mse=blocks, gap=float(np.sqrt(blocks.mean())))
         assert stops.gap < curve.gap
-        encompassed, rules = _stops_leave_curve_nothing(stops, curve, nothing_added, 0.1)
+        encompassed, rules = stops_leave_curve_nothing(stops, curve, nothing_added, 0.1)
         assert encompassed is leaves_nothing, rules
-    assert not _stops_leave_curve_nothing(stops, curve, {"beyond_noise": True}, 0.1)[0]
+    assert not stops_leave_curve_nothing(stops, curve, {"beyond_noise": True}, 0.1)[0]
 
 
 def test_the_report_says_why_stops_were_left_to_the_curve(hysteresis_outcome):
@@ -1261,7 +1263,7 @@ def test_a_drift_is_counted_on_the_drift_it_would_become():
     base = _static_map(trial, scaled, floor)
     inputs = make_inputs(trial, base.spec)
     cand = _best(trial, inputs, "drift", base.spec)
-    pooled = _rules(base.block_mse, cand.block_mse, floor)
+    pooled = rules_on_blocks(base.block_mse, cand.block_mse, floor)
     assert pooled["beyond_noise"] and not pooled["significant"], pooled
     counted = _counted_refined(trial, inputs, base, cand, pooled, floor)
     assert counted["significant"] and counted["refined"]["significant"], counted

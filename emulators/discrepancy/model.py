@@ -269,6 +269,25 @@ class Spec:
             return self
         return self.without_lag()
 
+    def rate_limits(self) -> list[float | None]:
+        """The rate limits per sensor for JSON: null where a sensor has none (+inf)."""
+        return [r if math.isfinite(r) else None for r in self.lag_rates]
+
+    def config(self) -> dict:
+        """The model's terms and their shape parameters, for JSON (a candidate's
+        evidence)."""
+        return {"degree": self.degree, "local": self.local,
+                **({"local_ridge": self.local_ridge} if self.local else {}),
+                "hysteresis": self.hysteresis,
+                "creep_tau_s": list(self.creep_tau_s), "creep_quadratic": self.creep_quadratic,
+                "creep_asym_s": list(self.creep_asym_s),
+                "creep_hold_s": list(self.creep_hold_s),
+                "lag": self.lag_kind,
+                "lag_s": self.lag_s, "lag_delay_s": self.lag_delay_s,
+                "lag_rates": self.rate_limits(), "lag_sensors": list(self.lag_sensors),
+                "drift_degree": self.drift_degree, "drift_piecewise": self.drift_piecewise,
+                "saturation": self.saturation, "ridge": self.ridge}
+
 
 def legendre_products(u: np.ndarray, degree: int) -> tuple[np.ndarray, list[tuple[int, ...]]]:
     """Products of Legendre polynomials Pₖ(uᵢ) of total degree ≤ ``degree``.

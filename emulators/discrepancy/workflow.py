@@ -1,56 +1,7 @@
 """The discrepancy workflow: calibrate, simulate, localise, name the missing effect, add it,
 repeat until nothing significant remains.
 
-Decision rule (why an effect is named): a candidate is *significant* when, on held-out
-contiguous blocks (blocked cross-validation: every block is predicted by a model fitted on
-the others), it
-
-1. removes systematic error larger than the measurement noise: the drop in held-out mean
-   squared error ΔMSE exceeds σ², σ being the white-noise floor estimated from second
-   differences (:func:`noise_floor`); an effect whose contribution per sample is below the
-   sensor noise cannot be told from it (signal-to-noise ratio < 1), and
-2. does not rest on a few blocks: ΔMSE stays positive when the block with the largest
-   improvement is left out (evidence from at least two independent stretches of time), and
-   the candidate lowers the error on so many blocks that chance would rarely do it (a sign
-   test at ``SIGN_TEST_LEVEL``: 7 of 8). A model that misses the static map by many noise
-   variances (a foreign geometry) lets any flexible term win a little on some blocks and
-   lose on others; a physical effect acts everywhere the motion shows it. A drift is
-   counted again on its refined form (:func:`_counted_refined`), and once more before the
-   workflow concludes that nothing is significant (:func:`_last_count`).
-
-A stop is a local effect: a clamp on one sensor of five can remove more than that sensor's
-noise and still less than the noise of all five. So a saturation candidate that holds some
-sensors at a hard stop (each sits on a plateau while the joint moves, its physical
-signature, see :func:`~exohil.emulators.discrepancy.model.plateaus`) is also significant
-when rules 1 and 2 hold on those sensors alone, against their own noise, or on the frames
-it holds there alone (without rule 2's count, as those frames lie only in the blocks where
-the arm reached the stop): a stop reached on 5 % of the frames changes only those, and a map
-fitted through it spreads what it cannot bend over the rest. Those frames must be as many
-as a plateau spans (the share of the signature): a map that passes the stop on a handful
-of frames shows no plateau there.
-
-Any other effect can also act on some sensors only (one sensor's warm-up, one sheath's
-creep): it is also significant when rules 1 and 2 hold on one sensor alone, against that
-sensor's noise, with rule 2's sign test shared among the sensors (Bonferroni: each at
-``SIGN_TEST_LEVEL`` divided by their number, every one of eight blocks), so that a suit
-with more sensors is not given more chances to name what its map misses on one of them,
-and the candidate lowers the held-out error of all sensors together (also without its
-best block): a term that follows one sensor's misfit and fits noise on the others does not.
-Stops are judged on their plateaus instead (above): a map that misses one sensor bends
-like a stop there.
-
-3. A stop must bend more than a smooth curve: a significant saturation is fitted again on
-   top of a cubic transfer curve of each sensor's static prediction and must clear rules 1
-   and 2 over that curve alone (:func:`_against_curve`), unless it explains everything the
-   curve would: the curve added to the stops does not clear rule 1 over them, and the stops
-   alone predict the held-out blocks better than the curve alone. Knees at both ends of a
-   sensor can imitate a reading that curves gently over its whole range, which is
-   calibration; a stop approached gently is a bend that both follow, and the better one
-   that leaves the other nothing to add is the explanation.
-
-Held-out error already charges a candidate for its extra parameters (fitting noise makes
-held-out error worse, not better), so no parameter-count penalty is added. Among significant
-candidates the largest ΔMSE is named; the workflow stops when none is significant.
+Why an effect is named, and when nothing is: the decision rule (:mod:`.rules`).
 """
 
 from __future__ import annotations
@@ -80,7 +31,6 @@ from exohil.emulators.discrepancy.model import (
     LOCAL_DEGREE,
     LOCAL_RIDGES,
     LOCAL_STATIC_RIDGES,
-    PLATEAU_SHARE,
     STATIC_RIDGES,
     Fit,
     Inputs,
@@ -90,6 +40,12 @@ from exohil.emulators.discrepancy.model import (
     make_inputs,
     restrict_to_coverage,
     static_basis,
+)
+from exohil.emulators.discrepancy.rules import (
+    beyond_noise_somewhere,
+    candidate_evidence,
+    rules_on_blocks,
+    stops_leave_curve_nothing,
 )
 from exohil.emulators.discrepancy.workers import forked_map, one_blas_thread, workers_for
 from exohil.formats.recording import Recording
@@ -130,9 +86,6 @@ CREEP_MAX_FITS = 16
 #: a one-sided lag, and on the default suit a 0.2 s low-pass stood in for the lag model's
 #: missing delay); slower than ten minutes is a ramp over any recording (drift).
 CREEP_TAU_RANGE_S = (1.0, 600.0)
-#: Rule 2's sign test: the largest chance that a candidate no better than the model it
-#: extends improves as many held-out blocks as it must (7 of 8 blocks: 3.5 %).
-SIGN_TEST_LEVEL = 0.05
 DRIFT_DEGREES = (1, 2, 3)
 #: Degrees a named drift is refined over (see _refine_drift), up to one per DRIFT_SPAN_S.
 DRIFT_REFINE_DEGREES = (4, 6, 8, 12, 16, 24, 32, 48)
@@ -194,7 +147,8 @@ def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
         return best
     polynomial = min((f for f in fits if not f.spec.local), key=lambda f: f.gap)
     bent = _best(trial, inputs, "saturation", polynomial.spec)
-    return best if _rules(bent.block_mse, best.block_mse, floor)["beyond_noise"] else polynomial
+    bends = rules_on_blocks(bent.block_mse, best.block_mse, floor)["beyond_noise"]
+    return best if bends else polynomial
 
 
 def _lead_s(trial: Trial, model: Fit) -> tuple[float, np.ndarray]:
@@ -218,7 +172,7 @@ def _first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
     if lead <= 0.0:
         return None
     shifted = block_mse(trial, model.residual - lead * slope)
-    return lead if _rules(model.block_mse, shifted, floor)["significant"] else None
+    return lead if rules_on_blocks(model.block_mse, shifted, floor)["significant"] else None
 
 
 def _read_later(rec: Recording, name: str, trial: Trial, lead: float, spec: Spec | None,
@@ -302,7 +256,7 @@ def _offset_evidence(late: float, without: Fit, read_later: Fit, floor: float) -
     """Rules 1 and 2 for the motion capture read ``late`` s late (``read_later``) over
     ``without``, the share of ``without``'s residual above the noise it explains, and
     whether the offset is kept (``applied``: both rules and at least ``CLOCK_SHARE``)."""
-    rules = _rules(without.block_mse, read_later.block_mse, floor)
+    rules = rules_on_blocks(without.block_mse, read_later.block_mse, floor)
     excess = without.gap**2 - floor**2
     share = (without.gap**2 - read_later.gap**2) / excess if excess > 0 else 0.0
     return {"mocap_late_s": round(late, 6),
@@ -458,7 +412,7 @@ def _flows_within_holds(trial: Trial, inputs: Inputs, held: Fit) -> bool:
     """A creep during holds must beat the same model with both time constants one frame
     long (an offset while still that does not flow within the hold) by the naming rule."""
     instant = fit(trial, inputs, replace(held.spec, creep_hold_s=(1.0 / trial.rate_hz,) * 2))
-    return bool(_evidence(trial, instant, held, pooled_noise(trial))["significant"])
+    return bool(candidate_evidence(trial, instant, held, pooled_noise(trial))["significant"])
 
 
 def _creep_grids(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, ...]:
@@ -800,7 +754,7 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
                 "centre": np.round(inputs.centre, 5).tolist() if spec.creep_quadratic else None}
     if kind == "lag":
         if spec.lag_kind == "rate_limit":
-            return {"model": spec.lag_kind, "rate_per_s": _rates(spec),
+            return {"model": spec.lag_kind, "rate_per_s": spec.rate_limits(),
                     "gain": [round(float(c[cols][0]), 5) for c in result.coef]}
         on = {"sensors": [trial.sensor_names[j] for j in
                           (spec.lag_sensors or range(trial.n_sensors))]}
@@ -835,127 +789,6 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     raise ValueError(kind)
 
 
-def blocks_needed(n: int, level: float = SIGN_TEST_LEVEL) -> int:
-    """The fewest of ``n`` blocks a candidate must improve to pass rule 2's sign test: so many
-    that a candidate no better than the model it extends (each block as likely to improve
-    as not) improves that many with probability at most ``level``; ``n + 1`` when no count
-    is that unlikely (too few blocks to tell)."""
-    for k in range(n + 1):
-        if sum(math.comb(n, i) for i in range(k, n + 1)) / 2.0**n <= level:
-            return k
-    return n + 1
-
-
-def _rules(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float,
-           level: float = SIGN_TEST_LEVEL) -> dict:
-    """Rules 1 and 2 (the module's docstring) from held-out MSE per block, over the blocks
-    with scored frames, against white noise of RMS ``floor``, rule 2's sign test at
-    ``level``."""
-    delta = base_mse - cand_mse
-    delta = delta[np.isfinite(delta)]
-    dmse = float(np.mean(delta)) if delta.size else 0.0
-    robust = float(np.mean(np.sort(delta)[:-1])) if delta.size > 1 else 0.0
-    improved, needed = int(np.sum(delta > 0)), blocks_needed(delta.size, level)
-    beyond_noise = bool(dmse > floor**2 and robust > 0)
-    return {
-        "delta_mse": round(dmse, 8),
-        "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
-        "noise_floor": round(floor, 6),
-        "blocks_improved": improved,
-        "blocks_needed": needed,
-        "delta_mse_without_best_block": round(robust, 8),
-        "beyond_noise": beyond_noise,
-        "significant": beyond_noise and improved >= needed,
-    }
-
-
-def _adds_stops(base: Fit, cand: Fit) -> bool:
-    """Whether ``cand`` is ``base`` with the stops (saturation) added."""
-    return cand.spec.saturation and not base.spec.saturation
-
-
-def _held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
-    """Rules 1 and 2 on the sensors ``cand`` holds at a hard stop, against their own noise,
-    over all their frames and over the frames it holds (see the module's docstring); None
-    unless ``cand`` adds the stops and holds a sensor."""
-    if not _adds_stops(base, cand):
-        return None
-    held = [j for j, st in enumerate(cand.stops) if st.hard]
-    if not held:
-        return None
-    noise = float(np.sqrt(np.mean(trial.noise[held] ** 2)))
-    sensors = _rules(block_mse(trial, base.residual[:, held]),
-                     block_mse(trial, cand.residual[:, held]), noise)
-    at_stop = np.zeros((trial.n, len(held)), dtype=bool)
-    for k, j in enumerate(held):  # frames the fitted map takes beyond a hard stop
-        st, p = cand.stops[j], cand.prediction[:, j]
-        at_stop[:, k] = ((st.soft_lo == 0) & (p == st.lo)) | ((st.soft_hi == 0) & (p == st.hi))
-    # a stop the map reaches on fewer frames than a plateau spans holds no plateau there
-    at_stop &= at_stop[trial.scored].mean(axis=0) >= PLATEAU_SHARE
-    frames = _rules(block_mse(trial, np.where(at_stop, base.residual[:, held], np.nan)),
-                    block_mse(trial, np.where(at_stop, cand.residual[:, held], np.nan)), noise)
-    return {"sensors": [trial.sensor_names[j] for j in held], **sensors,
-            # the frames held lie only in the folds where the arm reached the stop (four of
-            # eight can never pass rule 2's count); the plateau there is the evidence
-            "significant": sensors["significant"] or frames["beyond_noise"],
-            "frames_held": {"share": round(float(at_stop[trial.scored].mean()), 4), **frames}}
-
-
-def _on_one_sensor(trial: Trial, base: Fit, cand: Fit, pooled: dict) -> dict | None:
-    """Rules 1 and 2 on each sensor alone, against its own noise, with rule 2's sign test
-    shared among the sensors (Bonferroni: at ``SIGN_TEST_LEVEL`` / sensors each, so every
-    one of eight blocks with up to twelve sensors, and never with more): the sensors where
-    ``cand`` passes, or None with one sensor. None passes unless ``cand`` also lowers the
-    held-out error of all sensors together, without its best block too (``pooled``: its
-    rules over all of them): a term that follows what the map misses on one sensor and
-    fits noise on the others makes the model worse."""
-    if trial.n_sensors < 2:
-        return None
-    if not (pooled["delta_mse"] > 0 and pooled["delta_mse_without_best_block"] > 0):
-        return {"significant": False, "pooled_error_lowered": False, "sensors": {},
-                "beyond_noise_sensors": []}
-    level = SIGN_TEST_LEVEL / trial.n_sensors
-    passing, beyond_noise = {}, []
-    for j in range(trial.n_sensors):
-        rules = _rules(block_mse(trial, base.residual[:, [j]]),
-                       block_mse(trial, cand.residual[:, [j]]), float(trial.noise[j]), level)
-        if rules["beyond_noise"]:
-            beyond_noise.append(trial.sensor_names[j])
-        if rules["significant"]:
-            passing[trial.sensor_names[j]] = {
-                k: rules[k] for k in ("delta_mse", "removed_rms", "noise_floor",
-                                      "blocks_improved", "blocks_needed")}
-    return {"significant": bool(passing), "pooled_error_lowered": True, "sensors": passing,
-            "beyond_noise_sensors": beyond_noise}
-
-
-def _beyond_noise(evidence: dict) -> bool:
-    """Rule 1 and the first half of rule 2 (without the sign test), pooled over the sensors
-    or on one sensor alone (:func:`_on_one_sensor`)."""
-    alone = evidence.get("on_one_sensor")
-    return bool(evidence["beyond_noise"] or (alone and alone["beyond_noise_sensors"]))
-
-
-def _evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
-    """Rules 1 and 2 for ``cand`` over ``base``, pooled over the sensors; a candidate that adds
-    stops is also judged on the sensors it holds at hard stops, any other on each sensor
-    alone."""
-    rules = _rules(base.block_mse, cand.block_mse, floor)
-    held = _held_at_stops(trial, base, cand)
-    alone = None if _adds_stops(base, cand) else _on_one_sensor(trial, base, cand, rules)
-    for extra in (held, alone):
-        if extra is not None:
-            rules["significant"] = rules["significant"] or extra["significant"]
-    return {
-        "heldout_gap": round(cand.gap, 6),
-        "gap_reduction": round((base.gap - cand.gap) / base.gap, 4) if base.gap > 0 else 0.0,
-        **rules,
-        "config": _config(cand.spec),
-        **({} if held is None else {"held_at_stops": held}),
-        **({} if alone is None else {"on_one_sensor": alone}),
-    }
-
-
 def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence: dict,
                    floor: float) -> dict:
     """``evidence`` of the stops ``cand`` over ``spec`` with rule 3: added to a smooth
@@ -970,9 +803,9 @@ def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence
     nothing to the stops."""
     curve = fit(trial, inputs, replace(spec, output_curve=True))
     both = fit(trial, inputs, replace(cand.spec, output_curve=True))
-    over = _evidence(trial, curve, both, floor)
-    curve_adds = _rules(cand.block_mse, both.block_mse, floor)
-    encompassed, stops_vs_curve = _stops_leave_curve_nothing(cand, curve, curve_adds, floor)
+    over = candidate_evidence(trial, curve, both, floor)
+    curve_adds = rules_on_blocks(cand.block_mse, both.block_mse, floor)
+    encompassed, stops_vs_curve = stops_leave_curve_nothing(cand, curve, curve_adds, floor)
     return {**evidence, "significant": over["significant"] or encompassed,
             "against_smooth_curve": {
                 "curve_gap": round(curve.gap, 6), **over,
@@ -983,19 +816,6 @@ def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence
                 "stops_leave_curve_nothing": encompassed}}
 
 
-def _stops_leave_curve_nothing(stops: Fit, curve: Fit, curve_adds: dict, floor: float
-                               ) -> tuple[bool, dict]:
-    """Rule 3's other branch: the curve added to the stops does not clear rule 1 over them
-    (``curve_adds``), and the stops alone predict the held-out blocks better than the curve
-    alone, on the whole and in as many blocks as rule 2's sign test asks: two explanations
-    of one bend that each win some blocks are a tie, and a tie names nothing. Also the
-    rules of the stops alone against the curve alone."""
-    stops_vs_curve = _rules(curve.block_mse, stops.block_mse, floor)
-    return (bool(not curve_adds["beyond_noise"] and stops.gap < curve.gap
-                 and stops_vs_curve["blocks_improved"] >= stops_vs_curve["blocks_needed"]),
-            stops_vs_curve)
-
-
 def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
                      floor: float) -> dict:
     """``evidence`` of a drift beyond the noise that improves too few blocks, with rules 1
@@ -1004,7 +824,7 @@ def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidenc
     recording worsens the blocks around the step until a drift follows it. The drift is
     still ranked by its low-degree ΔMSE, so a flexible function of time never outranks a
     creep for its flexibility."""
-    refined = _evidence(trial, base, _refine_drift(trial, inputs, cand), floor)
+    refined = candidate_evidence(trial, base, _refine_drift(trial, inputs, cand), floor)
     keys = ("heldout_gap", "delta_mse", "blocks_improved", "blocks_needed", "significant")
     alone = refined.get("on_one_sensor") or {"sensors": {}}
     return {**evidence, "significant": refined["significant"],
@@ -1042,24 +862,6 @@ def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
     return np.nanmean(slow**2, axis=0)  # every sensor analysed has finite frames
 
 
-def _config(spec: Spec) -> dict:
-    return {"degree": spec.degree, "local": spec.local,
-            **({"local_ridge": spec.local_ridge} if spec.local else {}),
-            "hysteresis": spec.hysteresis,
-            "creep_tau_s": list(spec.creep_tau_s), "creep_quadratic": spec.creep_quadratic,
-            "creep_asym_s": list(spec.creep_asym_s), "creep_hold_s": list(spec.creep_hold_s),
-            "lag": spec.lag_kind,
-            "lag_s": spec.lag_s, "lag_delay_s": spec.lag_delay_s,
-            "lag_rates": _rates(spec), "lag_sensors": list(spec.lag_sensors),
-            "drift_degree": spec.drift_degree, "drift_piecewise": spec.drift_piecewise,
-            "saturation": spec.saturation, "ridge": spec.ridge}
-
-
-def _rates(spec: Spec) -> list[float | None]:
-    """The rate limits per sensor for JSON: null where a sensor has none (+inf)."""
-    return [r if math.isfinite(r) else None for r in spec.lag_rates]
-
-
 def _drift_of(spec: Spec) -> tuple[int, bool]:
     """The drift term's count and basis (to tell whether a refit changed it)."""
     return spec.drift_degree, spec.drift_piecewise
@@ -1083,8 +885,8 @@ def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float
     """The best configuration of effect ``kind`` added to ``spec`` and its evidence against
     ``base`` (the model without it): one candidate of a step, on its own."""
     cand = _best(trial, inputs, kind, spec)
-    evidence = _evidence(trial, base, cand, floor)
-    if kind == "drift" and _beyond_noise(evidence) and not evidence["significant"]:
+    evidence = candidate_evidence(trial, base, cand, floor)
+    if kind == "drift" and beyond_noise_somewhere(evidence) and not evidence["significant"]:
         evidence = _counted_refined(trial, inputs, base, cand, evidence, floor)
     if kind == "saturation" and evidence["significant"]:
         evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
@@ -1175,7 +977,7 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
     other = None if chosen["applied"] else MOCAP_CUTOFF_HZ
     read, inputs = _read(rec, name, trial.mocap_late_s, other, final.spec)
     refit = fit(read, inputs, final.spec)
-    rules = _rules(final.block_mse, refit.block_mse, pooled_noise(trial))
+    rules = rules_on_blocks(final.block_mse, refit.block_mse, pooled_noise(trial))
     if refit.gap >= final.gap or rules["blocks_improved"] < rules["blocks_needed"]:
         return first
     gaps = (refit.gap, final.gap) if other is None else (final.gap, refit.gap)
@@ -1291,7 +1093,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
             # still missing was fitted against it: refit it once, with the next effect added
             cand = _refine_lag_delay(trial, inputs, cand)
         previous = kind
-        evidence = _evidence(trial, base, cand, floor)
+        evidence = candidate_evidence(trial, base, cand, floor)
         if kind == "saturation":  # judged against the smooth curve when it was named
             evidence["against_smooth_curve"] = winners[0][2]["against_smooth_curve"]
         if "refined" in winners[0][2]:  # a drift counted on the drift it would become

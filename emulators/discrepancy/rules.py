@@ -1,0 +1,202 @@
+"""Why the discrepancy workflow names an effect: rules 1–3 on held-out blocks.
+
+A candidate is *significant* when, on held-out
+contiguous blocks (blocked cross-validation: every block is predicted by a model fitted on
+the others), it
+
+1. removes systematic error larger than the measurement noise: the drop in held-out mean
+   squared error ΔMSE exceeds σ², σ being the white-noise floor estimated from second
+   differences (:func:`~.data.noise_floor`); an effect whose contribution per sample is
+   below the sensor noise cannot be told from it (signal-to-noise ratio < 1), and
+2. does not rest on a few blocks: ΔMSE stays positive when the block with the largest
+   improvement is left out (evidence from at least two independent stretches of time), and
+   the candidate lowers the error on so many blocks that chance would rarely do it (a sign
+   test at ``SIGN_TEST_LEVEL``: 7 of 8). A model that misses the static map by many noise
+   variances (a foreign geometry) lets any flexible term win a little on some blocks and
+   lose on others; a physical effect acts everywhere the motion shows it. A drift is
+   counted again on its refined form (:func:`~.workflow._counted_refined`), and once more
+   before the workflow concludes that nothing is significant
+   (:func:`~.workflow._last_count`).
+
+A stop is a local effect: a clamp on one sensor of five can remove more than that sensor's
+noise and still less than the noise of all five. So a saturation candidate that holds some
+sensors at a hard stop (each sits on a plateau while the joint moves, its physical
+signature, see :func:`~exohil.emulators.discrepancy.model.plateaus`) is also significant
+when rules 1 and 2 hold on those sensors alone, against their own noise, or on the frames
+it holds there alone (without rule 2's count, as those frames lie only in the blocks where
+the arm reached the stop): a stop reached on 5 % of the frames changes only those, and a map
+fitted through it spreads what it cannot bend over the rest. Those frames must be as many
+as a plateau spans (the share of the signature): a map that passes the stop on a handful
+of frames shows no plateau there.
+
+Any other effect can also act on some sensors only (one sensor's warm-up, one sheath's
+creep): it is also significant when rules 1 and 2 hold on one sensor alone, against that
+sensor's noise, with rule 2's sign test shared among the sensors (Bonferroni: each at
+``SIGN_TEST_LEVEL`` divided by their number, every one of eight blocks), so that a suit
+with more sensors is not given more chances to name what its map misses on one of them,
+and the candidate lowers the held-out error of all sensors together (also without its
+best block): a term that follows one sensor's misfit and fits noise on the others does not.
+Stops are judged on their plateaus instead (above): a map that misses one sensor bends
+like a stop there.
+
+3. A stop must bend more than a smooth curve: a significant saturation is fitted again on
+   top of a cubic transfer curve of each sensor's static prediction and must clear rules 1
+   and 2 over that curve alone (:func:`~.workflow._against_curve`), unless it explains
+   everything the curve would: the curve added to the stops does not clear rule 1 over
+   them, and the stops alone predict the held-out blocks better than the curve alone.
+   Knees at both ends of a sensor can imitate a reading that curves gently over its whole
+   range, which is calibration; a stop approached gently is a bend that both follow, and
+   the better one that leaves the other nothing to add is the explanation.
+
+Held-out error already charges a candidate for its extra parameters (fitting noise makes
+held-out error worse, not better), so no parameter-count penalty is added. Among significant
+candidates the largest ΔMSE is named; the workflow stops when none is significant.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from exohil.emulators.discrepancy.data import Trial
+from exohil.emulators.discrepancy.folds import block_mse
+from exohil.emulators.discrepancy.model import PLATEAU_SHARE, Fit
+
+#: Rule 2's sign test: the largest chance that a candidate no better than the model it
+#: extends improves as many held-out blocks as it must (7 of 8 blocks: 3.5 %).
+SIGN_TEST_LEVEL = 0.05
+
+
+def blocks_needed(n: int, level: float = SIGN_TEST_LEVEL) -> int:
+    """The fewest of ``n`` blocks a candidate must improve to pass rule 2's sign test: so many
+    that a candidate no better than the model it extends (each block as likely to improve
+    as not) improves that many with probability at most ``level``; ``n + 1`` when no count
+    is that unlikely (too few blocks to tell)."""
+    for k in range(n + 1):
+        if sum(math.comb(n, i) for i in range(k, n + 1)) / 2.0**n <= level:
+            return k
+    return n + 1
+
+
+def rules_on_blocks(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float,
+           level: float = SIGN_TEST_LEVEL) -> dict:
+    """Rules 1 and 2 (the module's docstring) from held-out MSE per block, over the blocks
+    with scored frames, against white noise of RMS ``floor``, rule 2's sign test at
+    ``level``."""
+    delta = base_mse - cand_mse
+    delta = delta[np.isfinite(delta)]
+    dmse = float(np.mean(delta)) if delta.size else 0.0
+    robust = float(np.mean(np.sort(delta)[:-1])) if delta.size > 1 else 0.0
+    improved, needed = int(np.sum(delta > 0)), blocks_needed(delta.size, level)
+    beyond_noise = bool(dmse > floor**2 and robust > 0)
+    return {
+        "delta_mse": round(dmse, 8),
+        "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
+        "noise_floor": round(floor, 6),
+        "blocks_improved": improved,
+        "blocks_needed": needed,
+        "delta_mse_without_best_block": round(robust, 8),
+        "beyond_noise": beyond_noise,
+        "significant": beyond_noise and improved >= needed,
+    }
+
+
+def adds_stops(base: Fit, cand: Fit) -> bool:
+    """Whether ``cand`` is ``base`` with the stops (saturation) added."""
+    return cand.spec.saturation and not base.spec.saturation
+
+
+def held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
+    """Rules 1 and 2 on the sensors ``cand`` holds at a hard stop, against their own noise,
+    over all their frames and over the frames it holds (see the module's docstring); None
+    unless ``cand`` adds the stops and holds a sensor."""
+    if not adds_stops(base, cand):
+        return None
+    held = [j for j, st in enumerate(cand.stops) if st.hard]
+    if not held:
+        return None
+    noise = float(np.sqrt(np.mean(trial.noise[held] ** 2)))
+    sensors = rules_on_blocks(block_mse(trial, base.residual[:, held]),
+                     block_mse(trial, cand.residual[:, held]), noise)
+    at_stop = np.zeros((trial.n, len(held)), dtype=bool)
+    for k, j in enumerate(held):  # frames the fitted map takes beyond a hard stop
+        st, p = cand.stops[j], cand.prediction[:, j]
+        at_stop[:, k] = ((st.soft_lo == 0) & (p == st.lo)) | ((st.soft_hi == 0) & (p == st.hi))
+    # a stop the map reaches on fewer frames than a plateau spans holds no plateau there
+    at_stop &= at_stop[trial.scored].mean(axis=0) >= PLATEAU_SHARE
+    frames = rules_on_blocks(block_mse(trial, np.where(at_stop, base.residual[:, held], np.nan)),
+                    block_mse(trial, np.where(at_stop, cand.residual[:, held], np.nan)), noise)
+    return {"sensors": [trial.sensor_names[j] for j in held], **sensors,
+            # the frames held lie only in the folds where the arm reached the stop (four of
+            # eight can never pass rule 2's count); the plateau there is the evidence
+            "significant": sensors["significant"] or frames["beyond_noise"],
+            "frames_held": {"share": round(float(at_stop[trial.scored].mean()), 4), **frames}}
+
+
+def on_one_sensor(trial: Trial, base: Fit, cand: Fit, pooled: dict) -> dict | None:
+    """Rules 1 and 2 on each sensor alone, against its own noise, with rule 2's sign test
+    shared among the sensors (Bonferroni: at ``SIGN_TEST_LEVEL`` / sensors each, so every
+    one of eight blocks with up to twelve sensors, and never with more): the sensors where
+    ``cand`` passes, or None with one sensor. None passes unless ``cand`` also lowers the
+    held-out error of all sensors together, without its best block too (``pooled``: its
+    rules over all of them): a term that follows what the map misses on one sensor and
+    fits noise on the others makes the model worse."""
+    if trial.n_sensors < 2:
+        return None
+    if not (pooled["delta_mse"] > 0 and pooled["delta_mse_without_best_block"] > 0):
+        return {"significant": False, "pooled_error_lowered": False, "sensors": {},
+                "beyond_noise_sensors": []}
+    level = SIGN_TEST_LEVEL / trial.n_sensors
+    passing, beyond_noise = {}, []
+    for j in range(trial.n_sensors):
+        rules = rules_on_blocks(block_mse(trial, base.residual[:, [j]]),
+                       block_mse(trial, cand.residual[:, [j]]), float(trial.noise[j]), level)
+        if rules["beyond_noise"]:
+            beyond_noise.append(trial.sensor_names[j])
+        if rules["significant"]:
+            passing[trial.sensor_names[j]] = {
+                k: rules[k] for k in ("delta_mse", "removed_rms", "noise_floor",
+                                      "blocks_improved", "blocks_needed")}
+    return {"significant": bool(passing), "pooled_error_lowered": True, "sensors": passing,
+            "beyond_noise_sensors": beyond_noise}
+
+
+def beyond_noise_somewhere(evidence: dict) -> bool:
+    """Rule 1 and the first half of rule 2 (without the sign test), pooled over the sensors
+    or on one sensor alone (:func:`on_one_sensor`)."""
+    alone = evidence.get("on_one_sensor")
+    return bool(evidence["beyond_noise"] or (alone and alone["beyond_noise_sensors"]))
+
+
+def candidate_evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict:
+    """Rules 1 and 2 for ``cand`` over ``base``, pooled over the sensors; a candidate that adds
+    stops is also judged on the sensors it holds at hard stops, any other on each sensor
+    alone."""
+    rules = rules_on_blocks(base.block_mse, cand.block_mse, floor)
+    held = held_at_stops(trial, base, cand)
+    alone = None if adds_stops(base, cand) else on_one_sensor(trial, base, cand, rules)
+    for extra in (held, alone):
+        if extra is not None:
+            rules["significant"] = rules["significant"] or extra["significant"]
+    return {
+        "heldout_gap": round(cand.gap, 6),
+        "gap_reduction": round((base.gap - cand.gap) / base.gap, 4) if base.gap > 0 else 0.0,
+        **rules,
+        "config": cand.spec.config(),
+        **({} if held is None else {"held_at_stops": held}),
+        **({} if alone is None else {"on_one_sensor": alone}),
+    }
+
+
+def stops_leave_curve_nothing(stops: Fit, curve: Fit, curve_adds: dict, floor: float
+                               ) -> tuple[bool, dict]:
+    """Rule 3's other branch: the curve added to the stops does not clear rule 1 over them
+    (``curve_adds``), and the stops alone predict the held-out blocks better than the curve
+    alone, on the whole and in as many blocks as rule 2's sign test asks: two explanations
+    of one bend that each win some blocks are a tie, and a tie names nothing. Also the
+    rules of the stops alone against the curve alone."""
+    stops_vs_curve = rules_on_blocks(curve.block_mse, stops.block_mse, floor)
+    return (bool(not curve_adds["beyond_noise"] and stops.gap < curve.gap
+                 and stops_vs_curve["blocks_improved"] >= stops_vs_curve["blocks_needed"]),
+            stops_vs_curve)
