@@ -59,7 +59,6 @@ from exohil.emulators.discrepancy.localise import (
 from exohil.emulators.discrepancy.model import (
     Fit,
     Spec,
-    Stops,
     fit,
     make_inputs,
     map_ridge,
@@ -87,6 +86,7 @@ from exohil.emulators.discrepancy.rules import (
     rules_on_blocks,
     stops_leave_curve_nothing,
 )
+from exohil.emulators.discrepancy.stops import Stops
 from exohil.emulators.discrepancy.workflow import (
     CREEP_HOLD_S,
     _against_curve,

@@ -21,13 +21,13 @@ import numpy as np
 from exohil.emulators.discrepancy.model import (
     Inputs,
     Spec,
-    Stops,
     design,
     holding_still,
     joint_speed,
     map_inputs,
     static_terms,
 )
+from exohil.emulators.discrepancy.stops import Stops
 from exohil.emulators.discrepancy.workflow import Outcome
 from exohil.emulators.effects import Noise, Signal
 from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory

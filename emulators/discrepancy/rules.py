@@ -21,7 +21,7 @@ the others), it
 A stop is a local effect: a clamp on one sensor of five can remove more than that sensor's
 noise and still less than the noise of all five. So a saturation candidate that holds some
 sensors at a hard stop (each sits on a plateau while the joint moves, its physical
-signature, see :func:`~exohil.emulators.discrepancy.model.plateaus`) is also significant
+signature, see :func:`~.stops.plateaus`) is also significant
 when rules 1 and 2 hold on those sensors alone, against their own noise, or on the frames
 it holds there alone (without rule 2's count, as those frames lie only in the blocks where
 the arm reached the stop): a stop reached on 5 % of the frames changes only those, and a map
@@ -61,7 +61,8 @@ import numpy as np
 
 from exohil.emulators.discrepancy.data import Trial
 from exohil.emulators.discrepancy.folds import block_mse
-from exohil.emulators.discrepancy.model import PLATEAU_SHARE, Fit
+from exohil.emulators.discrepancy.model import Fit
+from exohil.emulators.discrepancy.stops import PLATEAU_SHARE
 
 #: Rule 2's sign test: the largest chance that a candidate no better than the model it
 #: extends improves as many held-out blocks as it must (7 of 8 blocks: 3.5 %).
