@@ -87,18 +87,17 @@ from exohil.emulators.discrepancy.rules import (
     stops_leave_curve_nothing,
 )
 from exohil.emulators.discrepancy.stops import Stops
+from exohil.emulators.discrepancy.timing import clock_offset, filter_words
 from exohil.emulators.discrepancy.workflow import (
     CREEP_HOLD_S,
     _against_curve,
     _best,
-    _clock_offset,
     _counted_refined,
     _creep_families,
     _flows_within_holds,
     _rate_limit,
     _static_map,
     drift_options,
-    filter_words,
     pooled_noise,
     steps_words,
 )
@@ -777,7 +776,8 @@ def test_a_relaxation_that_reads_ahead_is_left_to_the_effects(clean_101):
     scaled = make_inputs(trial)
     restrict_to_coverage(trial, scaled.u)
     static = _static_map(trial, scaled, floor)
-    kept, _, fitted, clock = _clock_offset(relaxing, "relaxing", trial, scaled, static, floor)
+    kept, _, fitted, clock = clock_offset(relaxing, "relaxing", trial, scaled, static, floor,
+                                          lambda tr, inp: _static_map(tr, inp, floor))
     assert clock is not None and clock["mocap_late_s"] > 0.01 and clock["significant"]
     assert not clock["applied"] and clock["share_of_excess"] < 0.4
     assert kept is trial and fitted is static

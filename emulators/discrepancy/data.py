@@ -34,7 +34,7 @@ MOCAP_GAP_INTERVALS = 4.0
 #: amplitude; above the cutoff a tracker's white noise may be all there is, which the static
 #: map would read as sensor motion the suit never made (0.3° of it on a clean suit was named
 #: hysteresis: the play operator smoothed it away). The workflow chooses (see
-#: :func:`exohil.emulators.discrepancy.workflow._mocap_filter`).
+#: :func:`exohil.emulators.discrepancy.timing.mocap_filter`).
 MOCAP_CUTOFF_HZ = 12.0
 MOCAP_FILTER_ORDER = 4
 #: Motion capture sampled so slowly that the cutoff is above this share of its Nyquist

@@ -22,13 +22,9 @@ from exohil.emulators.discrepancy.localise import (
     motion,
 )
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
+from exohil.emulators.discrepancy.timing import clock_words, filter_words
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
-from exohil.emulators.discrepancy.workflow import (
-    Outcome,
-    clock_words,
-    filter_words,
-    map_words,
-)
+from exohil.emulators.discrepancy.workflow import Outcome, map_words
 from exohil.formats.atomic import write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",

@@ -47,6 +47,14 @@ from exohil.emulators.discrepancy.rules import (
     rules_on_blocks,
     stops_leave_curve_nothing,
 )
+from exohil.emulators.discrepancy.timing import (
+    clock_offset,
+    clock_words,
+    filter_words,
+    lead_after_effects,
+    mocap_filter,
+    read_trial,
+)
 from exohil.emulators.discrepancy.workers import forked_map, one_blas_thread, workers_for
 from exohil.formats.recording import Recording
 
@@ -92,11 +100,6 @@ DRIFT_REFINE_DEGREES = (4, 6, 8, 12, 16, 24, 32, 48)
 #: Shortest span of time one degree of a refined drift may stand for, s: twice a held-out
 #: block, so the drift over a block is interpolated from the blocks around it.
 DRIFT_SPAN_S = 2 * BLOCK_S
-#: Readings that run ahead of the motion capture are a clock offset (:func:`_clock_offset`),
-#: corrected when it explains at least this share of what the static map leaves above the
-#: noise, found in at most ``CLOCK_STEPS`` static refits.
-CLOCK_SHARE = 0.5
-CLOCK_STEPS = 3
 
 
 @dataclass
@@ -151,188 +154,12 @@ def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
     return best if bends else polynomial
 
 
-def _lead_s(trial: Trial, model: Fit) -> tuple[float, np.ndarray]:
-    """How far the readings run ahead of the motion capture, s (negative: behind), and the
-    rate of change dŝ/dt (N, S) of ``model``'s full prediction ŝ, per second: the lead is
-    the least-squares d of the held-out residual on d·dŝ/dt over the scored frames, each
-    sensor weighted by the inverse of its noise variance. A reading ahead by d is
-    ŝ(t + d) ≈ ŝ + d·dŝ/dt."""
-    slope = np.gradient(model.prediction, axis=0) * trial.rate_hz
-    scored = np.isfinite(model.residual)
-    weight = 1.0 / np.maximum(trial.noise, np.finfo(float).tiny) ** 2
-    num = float(np.sum(np.where(scored, model.residual * slope, 0.0) * weight))
-    den = float(np.sum(np.where(scored, slope**2, 0.0) * weight))
-    return (num / den if den > 0 else 0.0), slope
-
-
-def _first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
-    """The lead of ``model``'s readings (:func:`_lead_s`) where it is positive and removing
-    it from the held-out residual to first order clears rules 1 and 2; else None."""
-    lead, slope = _lead_s(trial, model)
-    if lead <= 0.0:
-        return None
-    shifted = block_mse(trial, model.residual - lead * slope)
-    return lead if rules_on_blocks(model.block_mse, shifted, floor)["significant"] else None
-
-
-def _read_later(rec: Recording, name: str, trial: Trial, lead: float, spec: Spec | None,
-                refit: Callable[[Trial, Inputs], Fit]) -> tuple[Trial, Inputs, Fit]:
-    """The recording read as ``trial`` was (its motion capture filtered alike) but ``lead``
-    s later, and refitted (``refit``, on inputs scaled for ``spec``), up to ``CLOCK_STEPS``
-    times, each adding the lead that remains, until it is within a tenth of a frame."""
-    late = trial.mocap_late_s
-    for _ in range(CLOCK_STEPS):
-        late += lead
-        shifted, inputs = _read(rec, name, late, trial.mocap_low_pass_hz, spec)
-        model = refit(shifted, inputs)
-        lead, _ = _lead_s(shifted, model)
-        if abs(lead) * shifted.rate_hz < 0.1:
-            break
-    return shifted, inputs, model
-
-
-def _read(rec: Recording, name: str, late: float, low_pass_hz: float | None,
-          spec: Spec | None) -> tuple[Trial, Inputs]:
-    """The recording on its grid with the motion capture read ``late`` s late and
-    low-passed at ``low_pass_hz`` (None: as sampled), and its inputs scaled for ``spec``,
-    held-out frames scored where the other folds cover their pose."""
-    trial = prepare_trial(rec, name, late, low_pass_hz)
-    inputs = make_inputs(trial, spec)
-    restrict_to_coverage(trial, inputs.u)
-    return trial, inputs
-
-
-def _mocap_filter(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
-                  floor: float) -> tuple[Trial, Inputs, Fit, dict | None]:
-    """The trial with its motion capture low-passed at ``MOCAP_CUTOFF_HZ`` where that
-    predicts the held-out readings better, with its scaled inputs and static map; the
-    evidence (None: the motion capture samples too slowly to filter).
-
-    What the motion capture holds above the cutoff is either a tracker's noise, which the
-    suit never felt, or movement the tendons followed (a tremor; joint angles solved from
-    markers frame by frame and replayed). Only the sensors can tell: the map of
-    ``trial`` (read as sampled) is refitted on the low-passed angles, and whichever leaves
-    the smaller held-out gap is kept; the filtered trial then gets its static map chosen
-    again (:func:`_static_map`).
-    """
-    filtered = prepare_trial(rec, name, trial.mocap_late_s, MOCAP_CUTOFF_HZ)
-    if filtered.mocap_low_pass_hz is None:
-        return trial, scaled, static, None
-    inputs = make_inputs(filtered)
-    restrict_to_coverage(filtered, inputs.u)
-    same_map = fit(filtered, inputs, static.spec)
-    applied = same_map.gap < static.gap
-    evidence = {"low_pass_hz": filtered.mocap_low_pass_hz, "applied": applied,
-                "gap_as_sampled": round(static.gap, 6), "gap_low_passed": round(same_map.gap, 6)}
-    if not applied:
-        return trial, scaled, static, evidence
-    return filtered, inputs, _static_map(filtered, inputs, floor), evidence
-
-
 def steps_words(steps: list[dict], units: str) -> str:
     """The sudden changes of the reading (:func:`~.localise.reading_steps`) in words."""
     return "sudden changes of the reading no effect follows: " + "; ".join(
         f"{e['sensor']} {e['count']} ({e['at_a_recurring_pose']} at a pose of another, median "
         f"{e['median_size']:.4g} {units}, joint at {e['median_speed_deg_s']:.4g} deg/s)"
         for e in steps)
-
-
-def filter_words(evidence: dict | None, units: str) -> str:
-    """How the motion capture was read (:func:`_mocap_filter`, :func:`_filter_again`), in
-    words."""
-    if evidence is None:
-        return "motion capture read as sampled (too slow to low-pass)"
-    model = "final model" if "after_effects" in evidence else "static map"
-    gaps = (f"the {model}'s held-out gap {evidence['gap_low_passed']:.4g} against "
-            f"{evidence['gap_as_sampled']:.4g} {units} as sampled")
-    if evidence["applied"]:
-        return (f"motion capture low-passed at {evidence['low_pass_hz']:g} Hz, zero phase: "
-                f"{gaps}; what it held above that the readings do not follow")
-    return (f"motion capture read as sampled: low-passed at {evidence['low_pass_hz']:g} Hz, "
-            f"{gaps}; the readings follow what it holds above that")
-
-
-def _offset_evidence(late: float, without: Fit, read_later: Fit, floor: float) -> dict:
-    """Rules 1 and 2 for the motion capture read ``late`` s late (``read_later``) over
-    ``without``, the share of ``without``'s residual above the noise it explains, and
-    whether the offset is kept (``applied``: both rules and at least ``CLOCK_SHARE``)."""
-    rules = rules_on_blocks(without.block_mse, read_later.block_mse, floor)
-    excess = without.gap**2 - floor**2
-    share = (without.gap**2 - read_later.gap**2) / excess if excess > 0 else 0.0
-    return {"mocap_late_s": round(late, 6),
-            "applied": bool(late > 0.0 and rules["significant"] and share >= CLOCK_SHARE),
-            "gap_without": round(without.gap, 6), "gap_with": round(read_later.gap, 6),
-            "share_of_excess": round(share, 4), **rules}
-
-
-def _clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
-                  floor: float) -> tuple[Trial, Inputs, Fit, dict | None]:
-    """The trial read with the motion capture's clock offset where the readings run ahead
-    of it, with its scaled inputs and static map; the evidence (None: nothing ahead).
-
-    A suit cannot answer a move before it is made, so readings ahead of the motion capture
-    mean its samples are stamped late: calibration, like a gain or an offset, not an effect
-    of the suit. (Readings behind it are a lag or a clock offset the other way, which the
-    data cannot tell apart: ``lag`` is the candidate for both.) The lead is estimated from
-    the static map's residual (:func:`_lead_s`); where removing it to first order clears
-    rules 1 and 2, the motion capture is read that much later and the map refitted
-    (:func:`_read_later`). The offset is kept where the refitted map clears rules 1 and 2
-    over the first and explains at least ``CLOCK_SHARE`` of what the first map left above
-    the noise: an offset moves every sensor by its own speed alike and, where it is the
-    cause, explains nearly all of it, while an effect whose loop reads a little ahead (a
-    Bouc–Wen loop on the hidden suite reads 7 ms ahead) keeps most of its residual.
-    """
-    lead = _first_order_lead(trial, static, floor)
-    if lead is None:
-        return trial, scaled, static, None
-    shifted, inputs, refit = _read_later(
-        rec, name, trial, lead, None, lambda tr, inp: _static_map(tr, inp, floor))
-    evidence = _offset_evidence(shifted.mocap_late_s, static, refit, floor)
-    if evidence["applied"]:
-        return shifted, inputs, refit, evidence
-    return trial, scaled, static, evidence
-
-
-def _lead_after_effects(rec: Recording, name: str, outcome: Outcome) -> dict | None:
-    """Where the readings still run ahead of the motion capture once the effects are added,
-    the clock offset and its evidence (:func:`_offset_evidence`); None where they do not.
-
-    A lead that a larger effect hid from the static map's residual (:func:`_clock_offset`)
-    shows in the final model's, and is found the same way, the final model refitted with
-    the motion capture read later (its effects' shapes kept, the coefficients refitted).
-    Judged on that refit, not to first order: the effects were fitted against the lead."""
-    trial, final = outcome.trial, outcome.after
-    floor = pooled_noise(trial)
-    lead = _first_order_lead(trial, final, floor)
-    if lead is None:
-        return None
-    shifted, _, refit = _read_later(rec, name, trial, lead, final.spec,
-                                    lambda tr, inp: fit(tr, inp, final.spec))
-    return _offset_evidence(shifted.mocap_late_s, final, refit, floor)
-
-
-def clock_words(clock: dict, units: str) -> str:
-    """The clock offset's evidence (:func:`_clock_offset`, :func:`_lead_after_effects`) as
-    one sentence."""
-    ms = 1000.0 * clock["mocap_late_s"]
-    head = f"the readings run {ms:.3g} ms ahead of the motion capture"
-    later = clock.get("after_effects")
-    if later is not None:
-        head += (f" (found once the effects were modelled: read so late, the model explained "
-                 f"{later['share_of_excess']:.0%} of what it left above the noise)")
-    if clock["applied"]:
-        gaps = (f" (the static map's held-out gap {clock['gap_without']:.4g} -> "
-                f"{clock['gap_with']:.4g} {units})" if "gap_without" in clock else "")
-        return (f"{head}, which no suit can do: its clock is taken as {ms:.3g} ms late and "
-                f"read so{gaps}; the recording's timing, not the suit's")
-    if clock["share_of_excess"] < CLOCK_SHARE:
-        why = (f"reading the motion capture so much later explains only "
-               f"{clock['share_of_excess']:.0%} of what the static map leaves above the noise")
-    else:
-        why = (f"reading the motion capture so much later does not clear rules 1 and 2 "
-               f"(removed RMS {clock['removed_rms']:.4g} {units}, {clock['blocks_improved']} "
-               f"blocks improved of {clock['blocks_needed']} needed)")
-    return f"{head} to first order, but {why}: left to the effects"
 
 
 def _map_of(spec: Spec) -> tuple:
@@ -927,7 +754,8 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     with one_blas_thread():
         first = _run(rec, name, in_model, progress, processes)
         first = _filter_again(rec, name, in_model, progress, processes, first)
-        found = _lead_after_effects(rec, name, first)
+        found = lead_after_effects(rec, name, first.trial, first.after,
+                                   pooled_noise(first.trial))
         if found is None:
             return first
         effects = ", ".join(first.summary["effects"]) or "nothing"
@@ -966,7 +794,7 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
     noise variance counts, as it would not to name an effect: this only chooses how to read
     the data), and the second run ends lower.
 
-    The choice of :func:`_mocap_filter` is made on the static map, before any effect: a
+    The choice of :func:`~.timing.mocap_filter` is made on the static map, before any effect: a
     suit whose lag smooths what the tendons feel prefers the low-passed angles there, yet
     once the lag is modelled a pure delay passes what the motion capture holds above the
     cutoff (real human motion, a delayed suit: 0.19 mm low-passed, 0.155 as sampled)."""
@@ -975,7 +803,7 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
         return first
     trial, final = first.trial, first.after
     other = None if chosen["applied"] else MOCAP_CUTOFF_HZ
-    read, inputs = _read(rec, name, trial.mocap_late_s, other, final.spec)
+    read, inputs = read_trial(rec, name, trial.mocap_late_s, other, final.spec)
     refit = fit(read, inputs, final.spec)
     rules = rules_on_blocks(final.block_mse, refit.block_mse, pooled_noise(trial))
     if refit.gap >= final.gap or rules["blocks_improved"] < rules["blocks_needed"]:
@@ -996,9 +824,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
          progress: Callable[[str], None], workers: int, mocap_late_s: float = 0.0,
          after_effects: dict | None = None, filter_found: dict | None = None) -> Outcome:
     """:func:`run` with ``workers`` processes for a step's candidates, the motion capture
-    read ``mocap_late_s`` late (found by :func:`_lead_after_effects`, whose evidence is
+    read ``mocap_late_s`` late (found by :func:`~.timing.lead_after_effects`, whose evidence is
     ``after_effects``) and, given ``filter_found`` (by :func:`_filter_again`), filtered as
-    it says instead of as :func:`_mocap_filter` would choose."""
+    it says instead of as :func:`~.timing.mocap_filter` would choose."""
     low_pass = filter_found is not None and filter_found["applied"]
     trial = prepare_trial(rec, name, mocap_late_s, MOCAP_CUTOFF_HZ if low_pass else None)
     floors = trial.noise
@@ -1019,14 +847,19 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     if uncovered > 0:
         progress(f"    {uncovered:.1%} of frames are poses no other fold covers: not scored")
     static_fit = _static_map(trial, scaled, floor)
+
+    def static_map(other: Trial, inputs: Inputs) -> Fit:
+        """The static map chosen for ``other``, the trial read another way."""
+        return _static_map(other, inputs, floor)
+
     if filter_found is None:
-        trial, scaled, static_fit, mocap_filter = _mocap_filter(rec, name, trial, scaled,
-                                                                static_fit, floor)
+        trial, scaled, static_fit, filtered = mocap_filter(rec, name, trial, scaled,
+                                                           static_fit, static_map)
     else:
-        mocap_filter = filter_found
-    progress(f"    {filter_words(mocap_filter, trial.units)}")
-    trial, scaled, static_fit, clock = _clock_offset(rec, name, trial, scaled, static_fit,
-                                                     floor)
+        filtered = filter_found
+    progress(f"    {filter_words(filtered, trial.units)}")
+    trial, scaled, static_fit, clock = clock_offset(rec, name, trial, scaled, static_fit,
+                                                    floor, static_map)
     if clock is not None:
         progress(f"    {clock_words(clock, trial.units)}")
     if after_effects is not None:  # read late from the start: found after the effects
@@ -1138,7 +971,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "joint": trial.joint,
         "angles": list(trial.angle_names),
         "mocap_low_pass_hz": trial.mocap_low_pass_hz,
-        "mocap_filter": mocap_filter,
+        "mocap_filter": filtered,
         "rate_hz": round(trial.rate_hz, 4),
         "frames": trial.n,
         "frames_placed_by": trial.placed_by,

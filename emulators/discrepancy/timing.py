@@ -1,0 +1,211 @@
+"""How the motion capture is read against the readings: its clock offset and its filter.
+
+Both are calibration of the recording, not effects of the suit, and both are chosen by the
+sensors on held-out blocks. Readings that run ahead of the motion capture mean its clock is
+late (:func:`clock_offset`, and once the effects are modelled :func:`lead_after_effects`);
+angles that hold more above ``MOCAP_CUTOFF_HZ`` than the readings follow are a tracker's
+noise and are low-passed (:func:`mocap_filter`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from exohil.emulators.discrepancy.data import MOCAP_CUTOFF_HZ, Trial, prepare_trial
+from exohil.emulators.discrepancy.folds import block_mse
+from exohil.emulators.discrepancy.model import (
+    Fit,
+    Inputs,
+    Spec,
+    fit,
+    make_inputs,
+    restrict_to_coverage,
+)
+from exohil.emulators.discrepancy.rules import rules_on_blocks
+from exohil.formats.recording import Recording
+
+#: A static map chosen for a trial and its scaled inputs (the workflow's calibration step).
+MapFit = Callable[[Trial, Inputs], Fit]
+#: Readings that run ahead of the motion capture are a clock offset (:func:`clock_offset`),
+#: corrected when it explains at least this share of what the static map leaves above the
+#: noise, found in at most ``CLOCK_STEPS`` static refits.
+CLOCK_SHARE = 0.5
+CLOCK_STEPS = 3
+
+
+def lead_s(trial: Trial, model: Fit) -> tuple[float, np.ndarray]:
+    """How far the readings run ahead of the motion capture, s (negative: behind), and the
+    rate of change dŝ/dt (N, S) of ``model``'s full prediction ŝ, per second: the lead is
+    the least-squares d of the held-out residual on d·dŝ/dt over the scored frames, each
+    sensor weighted by the inverse of its noise variance. A reading ahead by d is
+    ŝ(t + d) ≈ ŝ + d·dŝ/dt."""
+    slope = np.gradient(model.prediction, axis=0) * trial.rate_hz
+    scored = np.isfinite(model.residual)
+    weight = 1.0 / np.maximum(trial.noise, np.finfo(float).tiny) ** 2
+    num = float(np.sum(np.where(scored, model.residual * slope, 0.0) * weight))
+    den = float(np.sum(np.where(scored, slope**2, 0.0) * weight))
+    return (num / den if den > 0 else 0.0), slope
+
+
+def first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
+    """The lead of ``model``'s readings (:func:`lead_s`) where it is positive and removing
+    it from the held-out residual to first order clears rules 1 and 2; else None."""
+    lead, slope = lead_s(trial, model)
+    if lead <= 0.0:
+        return None
+    shifted = block_mse(trial, model.residual - lead * slope)
+    return lead if rules_on_blocks(model.block_mse, shifted, floor)["significant"] else None
+
+
+def read_later(rec: Recording, name: str, trial: Trial, lead: float, spec: Spec | None,
+                refit: Callable[[Trial, Inputs], Fit]) -> tuple[Trial, Inputs, Fit]:
+    """The recording read as ``trial`` was (its motion capture filtered alike) but ``lead``
+    s later, and refitted (``refit``, on inputs scaled for ``spec``), up to ``CLOCK_STEPS``
+    times, each adding the lead that remains, until it is within a tenth of a frame."""
+    late = trial.mocap_late_s
+    for _ in range(CLOCK_STEPS):
+        late += lead
+        shifted, inputs = read_trial(rec, name, late, trial.mocap_low_pass_hz, spec)
+        model = refit(shifted, inputs)
+        lead, _ = lead_s(shifted, model)
+        if abs(lead) * shifted.rate_hz < 0.1:
+            break
+    return shifted, inputs, model
+
+
+def read_trial(rec: Recording, name: str, late: float, low_pass_hz: float | None,
+          spec: Spec | None) -> tuple[Trial, Inputs]:
+    """The recording on its grid with the motion capture read ``late`` s late and
+    low-passed at ``low_pass_hz`` (None: as sampled), and its inputs scaled for ``spec``,
+    held-out frames scored where the other folds cover their pose."""
+    trial = prepare_trial(rec, name, late, low_pass_hz)
+    inputs = make_inputs(trial, spec)
+    restrict_to_coverage(trial, inputs.u)
+    return trial, inputs
+
+
+def mocap_filter(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
+                 static_map: MapFit) -> tuple[Trial, Inputs, Fit, dict | None]:
+    """The trial with its motion capture low-passed at ``MOCAP_CUTOFF_HZ`` where that
+    predicts the held-out readings better, with its scaled inputs and static map; the
+    evidence (None: the motion capture samples too slowly to filter).
+
+    What the motion capture holds above the cutoff is either a tracker's noise, which the
+    suit never felt, or movement the tendons followed (a tremor; joint angles solved from
+    markers frame by frame and replayed). Only the sensors can tell: the map of
+    ``trial`` (read as sampled) is refitted on the low-passed angles, and whichever leaves
+    the smaller held-out gap is kept; the filtered trial then gets its static map chosen
+    again (``static_map``).
+    """
+    filtered = prepare_trial(rec, name, trial.mocap_late_s, MOCAP_CUTOFF_HZ)
+    if filtered.mocap_low_pass_hz is None:
+        return trial, scaled, static, None
+    inputs = make_inputs(filtered)
+    restrict_to_coverage(filtered, inputs.u)
+    same_map = fit(filtered, inputs, static.spec)
+    applied = same_map.gap < static.gap
+    evidence = {"low_pass_hz": filtered.mocap_low_pass_hz, "applied": applied,
+                "gap_as_sampled": round(static.gap, 6), "gap_low_passed": round(same_map.gap, 6)}
+    if not applied:
+        return trial, scaled, static, evidence
+    return filtered, inputs, static_map(filtered, inputs), evidence
+
+
+def filter_words(evidence: dict | None, units: str) -> str:
+    """How the motion capture was read (:func:`mocap_filter`, :func:`~.workflow._filter_again`), in
+    words."""
+    if evidence is None:
+        return "motion capture read as sampled (too slow to low-pass)"
+    model = "final model" if "after_effects" in evidence else "static map"
+    gaps = (f"the {model}'s held-out gap {evidence['gap_low_passed']:.4g} against "
+            f"{evidence['gap_as_sampled']:.4g} {units} as sampled")
+    if evidence["applied"]:
+        return (f"motion capture low-passed at {evidence['low_pass_hz']:g} Hz, zero phase: "
+                f"{gaps}; what it held above that the readings do not follow")
+    return (f"motion capture read as sampled: low-passed at {evidence['low_pass_hz']:g} Hz, "
+            f"{gaps}; the readings follow what it holds above that")
+
+
+def offset_evidence(late: float, without: Fit, later: Fit, floor: float) -> dict:
+    """Rules 1 and 2 for the motion capture read ``late`` s late (``later``) over
+    ``without``, the share of ``without``'s residual above the noise it explains, and
+    whether the offset is kept (``applied``: both rules and at least ``CLOCK_SHARE``)."""
+    rules = rules_on_blocks(without.block_mse, later.block_mse, floor)
+    excess = without.gap**2 - floor**2
+    share = (without.gap**2 - later.gap**2) / excess if excess > 0 else 0.0
+    return {"mocap_late_s": round(late, 6),
+            "applied": bool(late > 0.0 and rules["significant"] and share >= CLOCK_SHARE),
+            "gap_without": round(without.gap, 6), "gap_with": round(later.gap, 6),
+            "share_of_excess": round(share, 4), **rules}
+
+
+def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
+                 floor: float, static_map: MapFit) -> tuple[Trial, Inputs, Fit, dict | None]:
+    """The trial read with the motion capture's clock offset where the readings run ahead
+    of it, with its scaled inputs and static map (``static_map``, refitted on the trial read
+    later); the evidence (None: nothing ahead; ``floor``: the pooled noise floor).
+
+    A suit cannot answer a move before it is made, so readings ahead of the motion capture
+    mean its samples are stamped late: calibration, like a gain or an offset, not an effect
+    of the suit. (Readings behind it are a lag or a clock offset the other way, which the
+    data cannot tell apart: ``lag`` is the candidate for both.) The lead is estimated from
+    the static map's residual (:func:`lead_s`); where removing it to first order clears
+    rules 1 and 2, the motion capture is read that much later and the map refitted
+    (:func:`read_later`). The offset is kept where the refitted map clears rules 1 and 2
+    over the first and explains at least ``CLOCK_SHARE`` of what the first map left above
+    the noise: an offset moves every sensor by its own speed alike and, where it is the
+    cause, explains nearly all of it, while an effect whose loop reads a little ahead (a
+    Bouc–Wen loop on the hidden suite reads 7 ms ahead) keeps most of its residual.
+    """
+    lead = first_order_lead(trial, static, floor)
+    if lead is None:
+        return trial, scaled, static, None
+    shifted, inputs, refit = read_later(rec, name, trial, lead, None, static_map)
+    evidence = offset_evidence(shifted.mocap_late_s, static, refit, floor)
+    if evidence["applied"]:
+        return shifted, inputs, refit, evidence
+    return trial, scaled, static, evidence
+
+
+def lead_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floor: float
+                       ) -> dict | None:
+    """Where the readings of ``trial`` still run ahead of the motion capture once the
+    effects are added (``final``, the final model; ``floor``, the pooled noise floor), the
+    clock offset and its evidence (:func:`offset_evidence`); None where they do not.
+
+    A lead that a larger effect hid from the static map's residual (:func:`clock_offset`)
+    shows in the final model's, and is found the same way, the final model refitted with
+    the motion capture read later (its effects' shapes kept, the coefficients refitted).
+    Judged on that refit, not to first order: the effects were fitted against the lead."""
+    lead = first_order_lead(trial, final, floor)
+    if lead is None:
+        return None
+    shifted, _, refit = read_later(rec, name, trial, lead, final.spec,
+                                   lambda tr, inp: fit(tr, inp, final.spec))
+    return offset_evidence(shifted.mocap_late_s, final, refit, floor)
+
+
+def clock_words(clock: dict, units: str) -> str:
+    """The clock offset's evidence (:func:`clock_offset`, :func:`lead_after_effects`) as
+    one sentence."""
+    ms = 1000.0 * clock["mocap_late_s"]
+    head = f"the readings run {ms:.3g} ms ahead of the motion capture"
+    later = clock.get("after_effects")
+    if later is not None:
+        head += (f" (found once the effects were modelled: read so late, the model explained "
+                 f"{later['share_of_excess']:.0%} of what it left above the noise)")
+    if clock["applied"]:
+        gaps = (f" (the static map's held-out gap {clock['gap_without']:.4g} -> "
+                f"{clock['gap_with']:.4g} {units})" if "gap_without" in clock else "")
+        return (f"{head}, which no suit can do: its clock is taken as {ms:.3g} ms late and "
+                f"read so{gaps}; the recording's timing, not the suit's")
+    if clock["share_of_excess"] < CLOCK_SHARE:
+        why = (f"reading the motion capture so much later explains only "
+               f"{clock['share_of_excess']:.0%} of what the static map leaves above the noise")
+    else:
+        why = (f"reading the motion capture so much later does not clear rules 1 and 2 "
+               f"(removed RMS {clock['removed_rms']:.4g} {units}, {clock['blocks_improved']} "
+               f"blocks improved of {clock['blocks_needed']} needed)")
+    return f"{head} to first order, but {why}: left to the effects"
