@@ -14,6 +14,14 @@ from click.testing import CliRunner
 from scipy.signal import lfilter, lfilter_zi
 
 from exohil.emulators.discrepancy import DiscrepancyError, model, noise_floor, prepare_trial, run
+from exohil.emulators.discrepancy.candidates import (
+    CREEP_HOLD_S,
+    best_candidate,
+    creep_families,
+    drift_options,
+    flows_within_holds,
+    rate_limit_candidate,
+)
 from exohil.emulators.discrepancy.data import (
     N_BLOCKS,
     in_mocap_gap,
@@ -83,22 +91,16 @@ from exohil.emulators.discrepancy.rules import (
     SIGN_TEST_LEVEL,
     blocks_needed,
     candidate_evidence,
+    pooled_noise,
     rules_on_blocks,
     stops_leave_curve_nothing,
 )
 from exohil.emulators.discrepancy.stops import Stops
 from exohil.emulators.discrepancy.timing import clock_offset, filter_words
 from exohil.emulators.discrepancy.workflow import (
-    CREEP_HOLD_S,
     _against_curve,
-    _best,
     _counted_refined,
-    _creep_families,
-    _flows_within_holds,
-    _rate_limit,
     _static_map,
-    drift_options,
-    pooled_noise,
     steps_words,
 )
 from exohil.emulators.effects import Signal
@@ -855,7 +857,7 @@ def test_a_creep_that_flows_only_while_the_arm_holds_still_is_named_creep(clean_
     outcome = run(replace(rec, sensors=sensors), "hold creep")
     s = outcome.summary
     assert s["effects"][:1] == ["creep"], s["effects"]
-    families = _creep_families(outcome.trial, outcome.inputs, outcome.before.spec)
+    families = creep_families(outcome.trial, outcome.inputs, outcome.before.spec)
     held = [f.gap for f in families if f.spec.creep_hold_s]
     assert held and held[0] < min(f.gap for f in families if not f.spec.creep_hold_s), families
     assert outcome.after.spec.creep_hold_s, outcome.after.spec
@@ -911,8 +913,8 @@ def test_an_offset_while_still_that_does_not_flow_is_no_creep_during_holds(clean
     held = min((fit(trial, inputs, replace(spec, creep_hold_s=pair)) for pair in CREEP_HOLD_S),
                key=lambda f: f.gap)
     assert held.gap < fit(trial, inputs, spec).gap  # it follows part of the offset
-    assert not _flows_within_holds(trial, inputs, held)
-    families = _creep_families(trial, inputs, spec)
+    assert not flows_within_holds(trial, inputs, held)
+    families = creep_families(trial, inputs, spec)
     assert not any(f.spec.creep_hold_s for f in families), families
 
 
@@ -1117,7 +1119,7 @@ def _stops_against_curve(bend: Callable[[np.ndarray], np.ndarray]) -> tuple[Fit,
     inputs = make_inputs(trial, quadratic)
     floor = pooled_noise(trial)
     base = fit(trial, inputs, quadratic)
-    cand = _best(trial, inputs, "saturation", quadratic)
+    cand = best_candidate(trial, inputs, "saturation", quadratic)
     evidence = candidate_evidence(trial, base, cand, floor)
     assert evidence["significant"], evidence  # each bends the map by more than the noise
     judged = _against_curve(trial, inputs, quadratic, cand, evidence, floor)
@@ -1262,7 +1264,7 @@ def test_a_drift_is_counted_on_the_drift_it_would_become():
     restrict_to_coverage(trial, scaled.u)
     base = _static_map(trial, scaled, floor)
     inputs = make_inputs(trial, base.spec)
-    cand = _best(trial, inputs, "drift", base.spec)
+    cand = best_candidate(trial, inputs, "drift", base.spec)
     pooled = rules_on_blocks(base.block_mse, cand.block_mse, floor)
     assert pooled["beyond_noise"] and not pooled["significant"], pooled
     counted = _counted_refined(trial, inputs, base, cand, pooled, floor)
@@ -1382,7 +1384,7 @@ def _slew_limited_recording(seed: int, duration_s: float, sign: float = 1.0) -> 
 
 def test_a_reading_that_runs_ahead_gets_no_rate_limit():
     trial = prepare_trial(_slew_limited_recording(seed=7, duration_s=30.0, sign=-1.0))
-    found = _rate_limit(trial, make_inputs(trial, Spec(degree=3)), Spec(degree=3))
+    found = rate_limit_candidate(trial, make_inputs(trial, Spec(degree=3)), Spec(degree=3))
     assert found.spec.lag_rates == (math.inf,) * trial.n_sensors
     assert all(c[-1] == 0.0 for c in found.coef)
 
@@ -1395,7 +1397,7 @@ def test_the_rate_limit_search_ignores_frames_held_still():
     inputs.static[: int(0.8 * trial.n)] = inputs.static[0]  # held still for 80 % of frames
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        found = _rate_limit(trial, inputs, Spec(degree=3))
+        found = rate_limit_candidate(trial, inputs, Spec(degree=3))
     assert not np.isnan(found.spec.lag_rates).any() and min(found.spec.lag_rates) > 0
 
 

@@ -8,6 +8,7 @@ See docs/discrepancy.md. Entry points: :func:`run` (the workflow), :func:`prepar
 calibrated profile).
 """
 
+from exohil.emulators.discrepancy.candidates import VOCABULARY
 from exohil.emulators.discrepancy.data import DiscrepancyError, Trial, noise_floor, prepare_trial
 from exohil.emulators.discrepancy.profile import (
     CalibratedSuit,
@@ -16,7 +17,7 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated_recording,
 )
 from exohil.emulators.discrepancy.report import write_outputs
-from exohil.emulators.discrepancy.workflow import VOCABULARY, Outcome, run
+from exohil.emulators.discrepancy.workflow import Outcome, run
 
 __all__ = ["VOCABULARY", "CalibratedSuit", "DiscrepancyError", "Outcome", "Trial",
            "load_calibrated_profile", "noise_floor", "prepare_trial", "run",

@@ -187,6 +187,28 @@ class Spec:
             return self
         return self.without_lag()
 
+    def columns(self, n_static: int, n_play: int) -> dict[str, slice]:
+        """Where each effect term's coefficients sit in a sensor's coefficient vector, after
+        ``n_static`` static columns (``n_play``: the hysteresis term's play operators)."""
+        out, at = {}, n_static
+        for kind, width in (("hysteresis", n_play if self.hysteresis else 0),
+                            ("creep", len(self.creep_tau_s) * (2 if self.creep_quadratic else 1)
+                             + (1 if self.creep_asym_s else 0)
+                             + (2 if self.creep_hold_s else 0)),
+                            ("lag", 1 if self.lag_kind == "rate_limit" else 0),
+                            ("drift", self.drift_degree)):
+            out[kind] = slice(at, at + width)
+            at += width
+        return out
+
+    def drift_term(self) -> tuple[int, bool]:
+        """The drift term's count and basis (to tell whether a refit changed it)."""
+        return self.drift_degree, self.drift_piecewise
+
+    def lag_term(self) -> tuple:
+        """The lag term's model and parameters (to tell whether a refit changed it)."""
+        return self.lag_kind, self.lag_s, self.lag_delay_s, self.lag_rates, self.lag_sensors
+
     def rate_limits(self) -> list[float | None]:
         """The rate limits per sensor for JSON: null where a sensor has none (+inf)."""
         return [r if math.isfinite(r) else None for r in self.lag_rates]

@@ -201,3 +201,8 @@ def stops_leave_curve_nothing(stops: Fit, curve: Fit, curve_adds: dict, floor: f
     return (bool(not curve_adds["beyond_noise"] and stops.gap < curve.gap
                  and stops_vs_curve["blocks_improved"] >= stops_vs_curve["blocks_needed"]),
             stops_vs_curve)
+
+
+def pooled_noise(trial: Trial) -> float:
+    """The recording's noise RMS over its sensors (the naming rule's σ), sensor units."""
+    return float(np.sqrt(np.mean(trial.noise**2)))
