@@ -1,7 +1,11 @@
 """The discrepancy workflow: calibrate, simulate, localise, name the missing effect, add it,
 repeat until nothing significant remains.
 
-Why an effect is named, and when nothing is: the decision rule (:mod:`.rules`).
+:func:`run` reads the recording onto its grid (:mod:`.data`) with the motion capture's clock
+and filter chosen by the readings (:mod:`.timing`), calibrates the static map, then at each
+step fits every candidate of the vocabulary not yet in the model (:mod:`.candidates`),
+judges each by the decision rule (:mod:`.rules`: why an effect is named, and when nothing
+is), names the best, refines it and goes on; its summary is ``discrepancy.json``'s content.
 """
 
 from __future__ import annotations
