@@ -63,6 +63,7 @@ from exohil.emulators.discrepancy.localise import (
     motion,
     reading_steps,
     signatures,
+    steps_words,
 )
 from exohil.emulators.discrepancy.model import (
     Fit,
@@ -101,7 +102,6 @@ from exohil.emulators.discrepancy.workflow import (
     _against_curve,
     _counted_refined,
     _static_map,
-    steps_words,
 )
 from exohil.emulators.effects import Signal
 from exohil.emulators.protocols import Trajectory

@@ -112,8 +112,9 @@ class Trial:
         mocap_low_pass_hz: the cutoff the motion capture's angles were low-passed at
             (:func:`smooth_angles`), Hz; None: read as sampled.
         cache: what the fits derive from this trial (its fit rows, from ``valid`` and
-            ``blocks``; the average of the last shared design block). Not an argument: a
-            copy made with ``dataclasses.replace`` starts with an empty one.
+            ``blocks``; the average of the last shared design block; the joint's motion
+            and the frames it moves fast). Not an argument: a copy made with
+            ``dataclasses.replace`` starts with an empty one.
     """
 
     t: np.ndarray

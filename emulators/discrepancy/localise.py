@@ -229,6 +229,14 @@ def reading_steps(trial: Trial, residual: np.ndarray) -> list[dict]:
     return out
 
 
+def steps_words(steps: list[dict], units: str) -> str:
+    """The sudden changes of the reading (:func:`reading_steps`) in words."""
+    return "sudden changes of the reading no effect follows: " + "; ".join(
+        f"{e['sensor']} {e['count']} ({e['at_a_recurring_pose']} at a pose of another, median "
+        f"{e['median_size']:.4g} {units}, joint at {e['median_speed_deg_s']:.4g} deg/s)"
+        for e in steps)
+
+
 def _peaks(hits: np.ndarray, strength: np.ndarray, w: int) -> np.ndarray:
     """The strongest index of each run of ``hits`` (sorted indices) whose members lie
     within ``w`` of the next: one step is seen from every window that straddles it."""

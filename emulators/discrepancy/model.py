@@ -749,7 +749,7 @@ def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
             red = reduce(trial, x, y)
             plain = fold_coefs(red, red.rows.usable(trial.valid), ridge)
             stop = (spec.stops[j] if spec.stops
-                    else choose_stops(trial, inputs, y, ridge, j, red, plain))
+                    else choose_stops(trial, y, ridge, j, red, plain))
             c = fit_with_stops(trial, y, ridge, stop, float(trial.noise[j]), red, plain)
         else:
             c, stop = fit_coefs(trial, x, y, ridge), NO_STOPS

@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,9 +23,6 @@ from exohil.emulators.discrepancy.folds import (
     fold_coefs,
     ridge_solve,
 )
-
-if TYPE_CHECKING:  # the model's inputs hold the cache plateaus() fills; model imports this
-    from exohil.emulators.discrepancy.model import Inputs
 
 #: Share of moving frames a sensor must sit at an end of its range to count as a stop.
 PLATEAU_SHARE = 0.02
@@ -117,16 +113,17 @@ NO_STOPS = Stops()
 
 
 
-def plateaus(trial: Trial, inputs: Inputs, j: int) -> tuple[float, float]:
+def plateaus(trial: Trial, j: int) -> tuple[float, float]:
     """Stop levels of sensor j: an end of its range where it sits (within 6 σ of noise) on
     at least ``PLATEAU_SHARE`` of the frames while the joint moves faster than 10 °/s.
     A sensor that only reaches its extreme at one pose does so for a few moving frames; a
-    stop holds it there over a range of poses. ±inf where there is none."""
-    if "moving" not in inputs.cache:
+    stop holds it there over a range of poses. ±inf where there is none. The moving frames
+    depend on the trial alone and are found once per trial (cached)."""
+    if "moving_fast" not in trial.cache:
         speed = np.linalg.norm(np.gradient(low_pass(trial.angles, 0.05, trial.rate_hz),
                                            axis=0), axis=1) * trial.rate_hz
-        inputs.cache["moving"] = trial.valid & (speed > 10.0)
-    moving = inputs.cache["moving"]
+        trial.cache["moving_fast"] = trial.valid & (speed > 10.0)
+    moving = trial.cache["moving_fast"]
     y = trial.y[:, j]
     band = 6.0 * trial.noise[j]  # the extreme sample sits ~3.5 σ beyond a plateau's level
     lo_level, hi_level = np.min(y[trial.valid]), np.max(y[trial.valid])
@@ -185,8 +182,8 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
 
 
 
-def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: int,
-                 red: Reduced, plain: np.ndarray) -> Stops:
+def choose_stops(trial: Trial, y: np.ndarray, ridge: Ridge, j: int, red: Reduced,
+                 plain: np.ndarray) -> Stops:
     """Sensor j's stops, chosen on the held-out blocks.
 
     Each end's stop is one of: none, the plateau the sensor sits on while the joint moves (a
@@ -271,7 +268,7 @@ def choose_stops(trial: Trial, inputs: Inputs, y: np.ndarray, ridge: Ridge, j: i
                     at(math.sqrt(grid[k] * grid[n]), [shape])
 
     consider([NO_STOPS])
-    consider([Stops(*plateaus(trial, inputs, j))])
+    consider([Stops(*plateaus(trial, j))])
     assert best is not None
     start = best
     firsts = []

@@ -35,7 +35,7 @@ from exohil.emulators.discrepancy.data import (
     prepare_trial,
     spike_counts,
 )
-from exohil.emulators.discrepancy.localise import localise, motion, signatures
+from exohil.emulators.discrepancy.localise import localise, motion, signatures, steps_words
 from exohil.emulators.discrepancy.model import (
     LOCAL_DEGREE,
     LOCAL_RIDGES,
@@ -119,14 +119,6 @@ def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
     bent = best_candidate(trial, inputs, "saturation", polynomial.spec)
     bends = rules_on_blocks(bent.block_mse, best.block_mse, floor)["beyond_noise"]
     return best if bends else polynomial
-
-
-def steps_words(steps: list[dict], units: str) -> str:
-    """The sudden changes of the reading (:func:`~.localise.reading_steps`) in words."""
-    return "sudden changes of the reading no effect follows: " + "; ".join(
-        f"{e['sensor']} {e['count']} ({e['at_a_recurring_pose']} at a pose of another, median "
-        f"{e['median_size']:.4g} {units}, joint at {e['median_speed_deg_s']:.4g} deg/s)"
-        for e in steps)
 
 
 def _map_of(spec: Spec) -> tuple:
