@@ -351,6 +351,39 @@ def test_white_noise_in_the_motion_capture_is_no_effect_of_the_suit():
     assert outcome.summary["effects"] == []
 
 
+def test_what_the_model_leaves_beyond_the_noise_is_said_with_what_may_cause_it():
+    """A clean suit whose motion capture gives the elevation alone: the readings also follow
+    the plane of elevation and the axial rotation, which no static map of the elevation and
+    no effect can follow. Whatever is named, the summary and the report say that the model
+    leaves many noise variances that none of the five effects explains, and name the angles
+    missing. With every angle the same suit leaves only noise, and says so."""
+    rec = make_recording(Case("clean", "lib", 1, seed=100, duration_s=30.0))
+    stream = rec.mocap["shoulder"]
+    full = run(rec, "full").summary
+    assert full["effects"] == [] and not full["remainder"]["beyond_noise"]
+    assert full["conclusion"] == "no candidate effect beats the noise; nothing added"
+    assert "What remains is noise: with the calibrated static map the model leaves" in \
+        markdown(full)
+    only = replace(stream, names=("shoulder_elv",),
+                   angles=stream.angles[:, [stream.names.index("shoulder_elv")]])
+    summary = run(replace(rec, mocap={"shoulder": only}), "elevation only").summary
+    left, floor = summary["remainder"], summary["noise_floor"]
+    assert left["beyond_noise"] and left["noise_variances"] > 100
+    assert left["noise_variances"] == pytest.approx(
+        (summary["gap_after"] ** 2 - floor**2) / floor**2, rel=1e-3)
+    assert left["gap_over_floor"] == pytest.approx(summary["gap_after"] / floor, rel=1e-3)
+    assert set(left["beyond_noise_sensors"]) <= set(summary["sensors"])
+    times = f"({left['gap_over_floor']:.3g}× the noise floor)"
+    assert summary["conclusion"] in {
+        f"no candidate effect explains what the model leaves {times}; nothing added",
+        f"named {', '.join(summary['effects'])}; what remains {times} none of the five "
+        "effects explains"}
+    report = markdown(summary)
+    assert "## What remains" in report and "What remains is noise" not in report
+    assert "no moving `elv_angle`" in report and "no moving `shoulder_rot`" in report
+    assert "`shoulder_elv`" not in report
+
+
 class _Tremor(Trajectory):
     """A trajectory with a 0.4° tremor of θ and φ at 17 Hz and 23 Hz on top."""
 
@@ -1672,6 +1705,10 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     assert set(summary["effects"]) <= {"hysteresis", "creep", "saturation", "lag", "drift"}
     for step in summary["steps"]:
         assert set(step) == {"effect", "gap", "params", "evidence"}
+    assert set(summary["remainder"]) == {"gap_over_floor", "noise_variances", "beyond_noise",
+                                         "sensor_noise_variances", "beyond_noise_sensors"}
+    assert result.stderr.strip().splitlines()[-1].startswith(
+        f"{summary['conclusion']}: held-out gap ")
     report = (out / "report.md").read_text()
     assert report.startswith("# Discrepancy report")
     assert "## Sudden changes of the reading" in report

@@ -298,6 +298,53 @@ def _signature_lines(steps: list[dict]) -> list[str]:
     return lines
 
 
+#: MoBL-ARMS shoulder angles (docs/conventions.md) and what each adds to the pose.
+SHOULDER_ANGLES = {"elv_angle": "the plane of elevation, without which the arm's direction "
+                                "is not known once it rises",
+                   "shoulder_elv": "the elevation",
+                   "shoulder_rot": "the axial rotation, which changes the path of a tendon "
+                                   "that wraps the upper arm"}
+
+
+def _remainder_lines(summary: dict) -> list[str]:
+    """What the final model leaves: within the noise in one line, or beyond it with what it
+    may be (:func:`~.rules.remainder`)."""
+    left, u = summary["remainder"], summary["units"]
+    gap, floor = summary["gap_after"], summary["noise_floor"]
+    if left["gap_over_floor"] is None:
+        return []
+    variances = left["noise_variances"]
+    beyond = ("nothing beyond the noise" if variances <= 0 else
+              f"{f'{variances:,.0f}' if variances >= 1000 else f'{variances:.3g}'} noise "
+              "variances beyond the noise")
+    head = (f"{gap:.4g} {u}, {left['gap_over_floor']:.3g}× the noise floor ({floor:.4g} {u}): "
+            f"{beyond}")
+    model = "the effects named" if summary["steps"] else "the calibrated static map"
+    if not left["beyond_noise"]:
+        return ["", f"What remains is noise: with {model} the model leaves {head}, under the "
+                    "one noise variance an effect must remove to be named."]
+    shoulder = [f"`{name}`, {meaning}" for name, meaning in SHOULDER_ANGLES.items()
+                if summary["joint"] == "shoulder" and name not in summary["angles"]]
+    sensors = left["beyond_noise_sensors"]
+    where = ("every sensor" if len(sensors) == len(summary["sensors"])
+             else ", ".join(sensors) if sensors else "no sensor alone")
+    return ["", "## What remains", "",
+            f"With {model} the model leaves {head}, more than the one noise variance an "
+            f"effect must remove to be named; beyond its own noise on {where}. "
+            + ("None of the five effects explains it (each candidate of the last step stayed "
+               "under the noise or improved too few held-out blocks: \"Not added\" below)."
+               if summary["not_added"] else "All five effects are in the model.")
+            + " It is systematic error of another kind: "
+            "the recorded angles may not determine the readings"
+            + (" (the recording has no moving " + "; no moving ".join(shoulder) + ")"
+               if shoulder else "")
+            + ", the suit may shift on the skin or slip over a bony prominence, the motion "
+              "capture's own angle noise reaches the readings through the suit (the noise "
+              "floor counts only the sensors'), or the suit has an effect outside the five, or "
+              "one of them in a form the candidates do not follow. \"Where the residual was\" "
+              "and \"Sudden changes of the reading\" below show where it lies."]
+
+
 def _before_after(head: str, rows: list[tuple[str, float | None, float | None]]
                   ) -> list[str]:
     """A before/after table of residual RMS, the largest before in bold."""
@@ -432,6 +479,7 @@ def markdown(summary: dict) -> str:
                       + (f"; beyond its own noise on {', '.join(beyond)} alone, on too few "
                          f"blocks there" if beyond else "") + ". " + _refined_count(
                              step["evidence"]["refined"], u)]
+    lines += _remainder_lines(summary)
     lines += _parameter_lines(summary)
     lines += _signature_lines(summary["steps"])
     if summary["not_added"]:

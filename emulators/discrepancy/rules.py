@@ -206,3 +206,31 @@ def stops_leave_curve_nothing(stops: Fit, curve: Fit, curve_adds: dict, floor: f
 def pooled_noise(trial: Trial) -> float:
     """The recording's noise RMS over its sensors (the naming rule's σ), sensor units."""
     return float(np.sqrt(np.mean(trial.noise**2)))
+
+
+def remainder(trial: Trial, fit: Fit, floor: float) -> dict:
+    """What ``fit`` (the final model) leaves on the held-out blocks beyond the noise, in
+    noise variances, rule 1's unit: (gap² − σ²) / σ², pooled over the sensors against the
+    pooled floor ``floor`` and per sensor against its own. ``beyond_noise`` where the pooled
+    figure is more than one, the bar an effect must clear to be named: the model then leaves
+    systematic error that no candidate explained (the static map's, an effect outside the
+    vocabulary's, or the motion capture's angle noise seen through the suit, which the
+    sensors' floor does not count). None where a sensor has no scored frame."""
+
+    def variances(gap: float, sigma: float) -> float | None:
+        if not (np.isfinite(gap) and sigma > 0):
+            return None
+        return round(float((gap**2 - sigma**2) / sigma**2), 3)
+
+    pooled = variances(fit.gap, floor)
+    per_sensor = [variances(float(g), float(s)) for g, s in zip(fit.sensor_gap(), trial.noise,
+                                                                 strict=True)]
+    return {
+        "gap_over_floor": round(fit.gap / floor, 3) if floor > 0 else None,
+        "noise_variances": pooled,
+        "sensor_noise_variances": per_sensor,
+        "beyond_noise": bool(pooled is not None and pooled > 1.0),
+        "beyond_noise_sensors": [name for name, v in zip(trial.sensor_names, per_sensor,
+                                                         strict=True)
+                                 if v is not None and v > 1.0],
+    }

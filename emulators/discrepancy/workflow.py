@@ -54,6 +54,7 @@ from exohil.emulators.discrepancy.rules import (
     beyond_noise_somewhere,
     candidate_evidence,
     pooled_noise,
+    remainder,
     rules_on_blocks,
     stops_leave_curve_nothing,
 )
@@ -296,12 +297,20 @@ def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
     return np.nanmean(slow**2, axis=0)  # every sensor analysed has finite frames
 
 
-def _conclusion(steps: list[dict], spec: Spec) -> str:
+def _conclusion(steps: list[dict], spec: Spec, left: dict) -> str:
+    """One line: what was named, and whether the model leaves more than the noise
+    (``left``, :func:`~.rules.remainder`), which none of the five effects explains."""
+    times = f"{left['gap_over_floor']:.3g}× the noise floor"
     if steps:
-        return f"named {', '.join(s['effect'] for s in steps)}"
-    if not [k for k in VOCABULARY if k not in spec.effects()]:
-        return "every effect of the vocabulary is already in the model; nothing to add"
-    return "no candidate effect beats the noise; nothing added"
+        head = f"named {', '.join(s['effect'] for s in steps)}"
+    elif not [k for k in VOCABULARY if k not in spec.effects()]:
+        head = "every effect of the vocabulary is already in the model; nothing to add"
+    elif left["beyond_noise"]:
+        return f"no candidate effect explains what the model leaves ({times}); nothing added"
+    else:
+        return "no candidate effect beats the noise; nothing added"
+    return f"{head}; what remains ({times}) none of the five effects explains" \
+        if left["beyond_noise"] else head
 
 
 def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float, kind: str
@@ -549,6 +558,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                               for k, p in refit.items()))
         step += 1
     after = base
+    left = remainder(trial, after, floor)
     local_after = localise(trial, after.residual, mot)
     if local_after["steps"]:
         progress(f"    {steps_words(local_after['steps'], trial.units)}; see report.md")
@@ -584,6 +594,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "localisation_after": local_after,
         "steps": steps,
         "not_added": rejected,
-        "conclusion": _conclusion(steps, spec),
+        "remainder": left,
+        "conclusion": _conclusion(steps, spec, left),
     }
     return Outcome(trial=trial, inputs=inputs, before=before, after=after, summary=summary)
