@@ -323,26 +323,29 @@ def _remainder_lines(summary: dict) -> list[str]:
     if not left["beyond_noise"]:
         return ["", f"What remains is noise: with {model} the model leaves {head}, under the "
                     "one noise variance an effect must remove to be named."]
-    shoulder = [f"`{name}`, {meaning}" for name, meaning in SHOULDER_ANGLES.items()
-                if summary["joint"] == "shoulder" and name not in summary["angles"]]
     sensors = left["beyond_noise_sensors"]
     where = ("every sensor" if len(sensors) == len(summary["sensors"])
              else ", ".join(sensors) if sensors else "no sensor alone")
-    return ["", "## What remains", "",
-            f"With {model} the model leaves {head}, more than the one noise variance an "
-            f"effect must remove to be named; beyond its own noise on {where}. "
-            + ("None of the five effects explains it (each candidate of the last step stayed "
-               "under the noise or improved too few held-out blocks: \"Not added\" below)."
-               if summary["not_added"] else "All five effects are in the model.")
-            + " It is systematic error of another kind: "
-            "the recorded angles may not determine the readings"
-            + (" (the recording has no moving " + "; no moving ".join(shoulder) + ")"
-               if shoulder else "")
-            + ", the suit may shift on the skin or slip over a bony prominence, the motion "
-              "capture's own angle noise reaches the readings through the suit (the noise "
-              "floor counts only the sensors'), or the suit has an effect outside the five, or "
-              "one of them in a form the candidates do not follow. \"Where the residual was\" "
-              "and \"Sudden changes of the reading\" below show where it lies."]
+    lines = ["", "## What remains", "",
+             f"With {model} the model leaves {head}, more than the one noise variance an "
+             f"effect must remove to be named; beyond its own noise on {where}. "
+             + ("None of the five effects explains it (each candidate of the last step "
+                "stayed under the noise or improved too few held-out blocks: \"Not added\" "
+                "below)." if summary["not_added"] else "All five effects are in the model."),
+             ""]
+    shoulder = [f"`{name}`, {meaning}" for name, meaning in SHOULDER_ANGLES.items()
+                if summary["joint"] == "shoulder" and name not in summary["angles"]]
+    return lines + [
+        "What it is, the recording alone cannot say. It may be: the calibrated map's form "
+        "falling short of this suit's geometry; angles the readings follow that are not "
+        "recorded" + (" (the recording has no moving " + "; no moving ".join(shoulder) + ")"
+                      if shoulder else "")
+        + "; the suit shifting on the skin or slipping over a bony prominence; the movement's "
+        "history, through an effect outside the five or one of them in a form the candidates "
+        "do not follow; noise the floor does not count (the floor is the sensors' "
+        "frame-to-frame noise: slower noise, and the motion capture's angle noise seen "
+        "through the suit, are not in it). \"Where the residual was\" and \"Sudden changes "
+        "of the reading\" below show where it lies."]
 
 
 def _before_after(head: str, rows: list[tuple[str, float | None, float | None]]
