@@ -384,6 +384,29 @@ def test_what_the_model_leaves_beyond_the_noise_is_said_with_what_may_cause_it()
     assert "`shoulder_elv`" not in report
 
 
+def test_a_recording_in_other_units_names_the_same_effects_with_the_same_figures():
+    """Readings in metres, in micrometres or with their sign turned (a sensor wired the
+    other way) are the same recording: the same effects, in the same order, and every gap,
+    floor and candidate's drop in mean square the same figure in the new unit. Figures were
+    written to six decimals, so a recording in farads (picofarads read as 1e-12 F) had every
+    gap 0.0 and its candidates ranked on zeros: the first effect named followed the
+    vocabulary's order."""
+    rec = make_recording(Case("hysteresis", "alt", 2, seed=100, duration_s=30.0))
+
+    def figures(summary: dict, scale: float) -> list:
+        return [*[summary[k] / scale for k in ("gap_before", "gap_after", "noise_floor")],
+                *[s["evidence"]["delta_mse"] / scale**2 for s in summary["steps"]],
+                *[s["gap"] / scale for s in summary["steps"]]]
+
+    mm = run(rec, "mm").summary
+    assert mm["effects"]
+    for scale in (1e-12, 1e-3, -1.0):
+        other = run(replace(rec, sensors=replace(rec.sensors, values=rec.sensors.values * scale)),
+                    "scaled").summary
+        assert other["effects"] == mm["effects"], scale
+        assert figures(other, abs(scale)) == pytest.approx(figures(mm, 1.0), rel=1e-6), scale
+
+
 class _Tremor(Trajectory):
     """A trajectory with a 0.4° tremor of θ and φ at 17 Hz and 23 Hz on top."""
 

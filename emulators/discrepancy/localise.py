@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from exohil.emulators.discrepancy.data import Trial
+from exohil.emulators.discrepancy.figures import significant
 from exohil.emulators.discrepancy.filters import low_pass
 from exohil.emulators.discrepancy.model import map_inputs, trial_motion
 
@@ -71,10 +72,10 @@ def motion(trial: Trial, static: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def _rms(x: np.ndarray) -> float | None:
-    """RMS of the finite values, rounded to 5 decimals; None (JSON null) when there are none
+    """RMS of the finite values, to significant digits; None (JSON null) when there are none
     (a time window or angle bin with no scored frame, a recording without holds)."""
     x = x[np.isfinite(x)]
-    return round(float(np.sqrt(np.mean(x**2))), 5) if x.size else None
+    return significant(np.sqrt(np.mean(x**2))) if x.size else None
 
 
 def _holds(still: np.ndarray, valid: np.ndarray, rate_hz: float) -> list[tuple[int, int]]:
@@ -218,11 +219,11 @@ def reading_steps(trial: Trial, residual: np.ndarray) -> list[dict]:
         largest = at[np.argsort(-np.abs(size[at]), kind="stable")[:STEPS_LISTED]]
         out.append({
             "sensor": name, "count": int(at.size),
-            "median_size": round(float(np.median(np.abs(size[at]))), 5),
+            "median_size": significant(np.median(np.abs(size[at]))),
             "at_a_recurring_pose": recurring,
             "median_speed_deg_s": round(float(np.median(speed[k[at]])), 1),
             "largest": [{"t_s": round(float(trial.t[k[i]]), 3),
-                         "size": round(float(size[i]), 5),
+                         "size": significant(size[i]),
                          "angles_deg": [round(float(a), 1) for a in trial.angles[k[i]]],
                          "speed_deg_s": round(float(speed[k[i]]), 1)}
                         for i in largest]})
@@ -307,8 +308,8 @@ def signatures(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray],
     extreme = (float(np.sqrt(np.mean(excess_out) / max(np.mean(excess_mid), 1e-300)))
                if excess_out else 1.0)
     return {
-        "direction_split_slow": round(slow, 5),
-        "direction_split_fast": round(fast, 5),
+        "direction_split_slow": significant(slow),
+        "direction_split_fast": significant(fast),
         "rate_independence": round(slow / fast, 4) if fast > 0 else 0.0,
         "velocity_correlation": round(corr_num / corr_den, 4) if corr_den else 0.0,
         "hold_relaxation": round(relax, 4),

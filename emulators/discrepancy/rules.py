@@ -60,6 +60,7 @@ import math
 import numpy as np
 
 from exohil.emulators.discrepancy.data import Trial
+from exohil.emulators.discrepancy.figures import MSE_DIGITS, significant
 from exohil.emulators.discrepancy.folds import block_mse
 from exohil.emulators.discrepancy.model import Fit
 from exohil.emulators.discrepancy.stops import PLATEAU_SHARE
@@ -92,12 +93,12 @@ def rules_on_blocks(base_mse: np.ndarray, cand_mse: np.ndarray, floor: float,
     improved, needed = int(np.sum(delta > 0)), blocks_needed(delta.size, level)
     beyond_noise = bool(dmse > floor**2 and robust > 0)
     return {
-        "delta_mse": round(dmse, 8),
-        "removed_rms": round(float(np.sqrt(max(dmse, 0.0))), 6),
-        "noise_floor": round(floor, 6),
+        "delta_mse": significant(dmse, MSE_DIGITS),
+        "removed_rms": significant(np.sqrt(max(dmse, 0.0))),
+        "noise_floor": significant(floor),
         "blocks_improved": improved,
         "blocks_needed": needed,
-        "delta_mse_without_best_block": round(robust, 8),
+        "delta_mse_without_best_block": significant(robust, MSE_DIGITS),
         "beyond_noise": beyond_noise,
         "significant": beyond_noise and improved >= needed,
     }
@@ -181,7 +182,7 @@ def candidate_evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict
         if extra is not None:
             rules["significant"] = rules["significant"] or extra["significant"]
     return {
-        "heldout_gap": round(cand.gap, 6),
+        "heldout_gap": significant(cand.gap),
         "gap_reduction": round((base.gap - cand.gap) / base.gap, 4) if base.gap > 0 else 0.0,
         **rules,
         "config": cand.spec.config(),

@@ -14,6 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from exohil.emulators.discrepancy.data import MOCAP_CUTOFF_HZ, Trial, prepare_trial
+from exohil.emulators.discrepancy.figures import significant
 from exohil.emulators.discrepancy.folds import block_mse
 from exohil.emulators.discrepancy.model import (
     Fit,
@@ -107,7 +108,8 @@ def mocap_filter(rec: Recording, name: str, trial: Trial, scaled: Inputs, static
     same_map = fit(filtered, inputs, static.spec)
     applied = same_map.gap < static.gap
     evidence = {"low_pass_hz": filtered.mocap_low_pass_hz, "applied": applied,
-                "gap_as_sampled": round(static.gap, 6), "gap_low_passed": round(same_map.gap, 6)}
+                "gap_as_sampled": significant(static.gap),
+                "gap_low_passed": significant(same_map.gap)}
     if not applied:
         return trial, scaled, static, evidence
     return filtered, inputs, static_map(filtered, inputs), evidence
@@ -137,7 +139,7 @@ def offset_evidence(late: float, without: Fit, later: Fit, floor: float) -> dict
     share = (without.gap**2 - later.gap**2) / excess if excess > 0 else 0.0
     return {"mocap_late_s": round(late, 6),
             "applied": bool(late > 0.0 and rules["significant"] and share >= CLOCK_SHARE),
-            "gap_without": round(without.gap, 6), "gap_with": round(later.gap, 6),
+            "gap_without": significant(without.gap), "gap_with": significant(later.gap),
             "share_of_excess": round(share, 4), **rules}
 
 

@@ -35,6 +35,7 @@ from exohil.emulators.discrepancy.data import (
     prepare_trial,
     spike_counts,
 )
+from exohil.emulators.discrepancy.figures import LEVEL_DIGITS, significant, significant_list
 from exohil.emulators.discrepancy.localise import localise, motion, signatures, steps_words
 from exohil.emulators.discrepancy.model import (
     LOCAL_DEGREE,
@@ -171,8 +172,8 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
         # (falling − rising) after a large excursion is −2 Σ w·r
         width = [float(-2.0 * np.dot(w, r)) for w, r in zip(weights, inputs.thresholds,
                                                               strict=True)]
-        return {"loop_width": [round(w, 5) for w in width],
-                "play_thresholds": np.round(inputs.thresholds, 5).tolist(),
+        return {"loop_width": [significant(w) for w in width],
+                "play_thresholds": significant_list(inputs.thresholds),
                 "weights": [np.round(w, 5).tolist() for w in weights]}
     if kind == "creep":  # columns: a low-pass of ŝ per τ, of (ŝ − centre)² per τ, asymmetric,
         # held (driven by ŝ, by 1)
@@ -182,10 +183,11 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
                 "hold_grow_recover_s": list(spec.creep_hold_s),
                 "gain": [np.round(np.r_[c[cols][:n], c[cols][quadratic.stop:]], 5).tolist()
                          for c in result.coef],
-                "quadratic_gain_per_unit": ([np.round(c[cols][quadratic], 8).tolist()
+                "quadratic_gain_per_unit": ([significant_list(c[cols][quadratic])
                                              for c in result.coef]
                                             if spec.creep_quadratic else None),
-                "centre": np.round(inputs.centre, 5).tolist() if spec.creep_quadratic else None}
+                "centre": (significant_list(inputs.centre, LEVEL_DIGITS) if spec.creep_quadratic
+                           else None)}
     if kind == "lag":
         if spec.lag_kind == "rate_limit":
             return {"model": spec.lag_kind, "rate_per_s": spec.rate_limits(),
@@ -205,21 +207,21 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
                   "knots_every_s": round(span / spec.drift_degree, 3)}
                  if spec.drift_piecewise else
                  {"basis": "legendre_polynomial", "degree": spec.drift_degree})
-        return {**shape, "change": [round(c, 5) for c in change],
-                "mean_rate_per_s": [round(c / span, 7) for c in change]}
+        return {**shape, "change": [significant(c) for c in change],
+                "mean_rate_per_s": [significant(c / span) for c in change]}
     if kind == "saturation":
         pred = result.prediction[trial.valid]
 
         def level(v: float) -> float | None:
-            return round(v, 5) if np.isfinite(v) else None
+            return significant(v, LEVEL_DIGITS) if np.isfinite(v) else None
 
         return {"stops": [[level(st.lo), level(st.hi)] for st in result.stops],
-                "softness": [[round(st.soft_lo, 5), round(st.soft_hi, 5)]
+                "softness": [[significant(st.soft_lo), significant(st.soft_hi)]
                              for st in result.stops],
                 "shape": [[st.shape_lo if st.soft_lo > 0 else None,
                            st.shape_hi if st.soft_hi > 0 else None] for st in result.stops],
-                "lower": np.round(pred.min(axis=0), 5).tolist(),
-                "upper": np.round(pred.max(axis=0), 5).tolist()}
+                "lower": significant_list(pred.min(axis=0), LEVEL_DIGITS),
+                "upper": significant_list(pred.max(axis=0), LEVEL_DIGITS)}
     raise ValueError(kind)
 
 
@@ -242,7 +244,7 @@ def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence
     encompassed, stops_vs_curve = stops_leave_curve_nothing(cand, curve, curve_adds, floor)
     return {**evidence, "significant": over["significant"] or encompassed,
             "against_smooth_curve": {
-                "curve_gap": round(curve.gap, 6), **over,
+                "curve_gap": significant(curve.gap), **over,
                 "curve_over_stops": {k: curve_adds[k] for k in (
                     "delta_mse", "removed_rms", "blocks_improved", "beyond_noise")},
                 "stops_alone_over_curve_alone": {k: stops_vs_curve[k] for k in (
@@ -416,7 +418,7 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
         return first
     gaps = (refit.gap, final.gap) if other is None else (final.gap, refit.gap)
     found = {"low_pass_hz": MOCAP_CUTOFF_HZ, "applied": other is not None,
-             "gap_as_sampled": round(gaps[0], 6), "gap_low_passed": round(gaps[1], 6),
+             "gap_as_sampled": significant(gaps[0]), "gap_low_passed": significant(gaps[1]),
              "after_effects": True}
     effects = ", ".join(first.summary["effects"]) or "nothing"
     how = "low-passed" if other is not None else "read as sampled"
@@ -548,7 +550,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                  (("lag", cand.spec.lag_term() != lag_before),
                   ("drift", cand.spec.drift_term() != drift_before))
                  if changed}
-        steps.append({"effect": kind, "gap": round(cand.gap, 6),
+        steps.append({"effect": kind, "gap": significant(cand.gap),
                       "params": effect_params(kind, cand, inputs, trial),
                       "evidence": {**evidence, "signature": sig, "refitted": refit,
                                    "alternatives": {k: e["heldout_gap"] for k, _, e in scored
@@ -565,16 +567,16 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     summary = {
         "recording": name,
         "effects": [s["effect"] for s in steps],
-        "gap_before": round(before.gap, 6),
-        "gap_after": round(after.gap, 6),
+        "gap_before": significant(before.gap),
+        "gap_after": significant(after.gap),
         "units": trial.units,
         "sensors": list(trial.sensor_names),
         "sensors_ignored": [{"sensor": sensor, "reason": reason}
                             for sensor, reason in trial.ignored],
-        "sensor_gap_before": np.round(before.sensor_gap(), 6).tolist(),
-        "sensor_gap_after": np.round(after.sensor_gap(), 6).tolist(),
-        "noise_floor": round(floor, 6),
-        "noise_floor_per_sensor": np.round(floors, 6).tolist(),
+        "sensor_gap_before": significant_list(before.sensor_gap()),
+        "sensor_gap_after": significant_list(after.sensor_gap()),
+        "noise_floor": significant(floor),
+        "noise_floor_per_sensor": significant_list(floors),
         "joint": trial.joint,
         "angles": list(trial.angle_names),
         "mocap_low_pass_hz": trial.mocap_low_pass_hz,
