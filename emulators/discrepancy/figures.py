@@ -28,9 +28,9 @@ def significant(x: float, digits: int = DIGITS) -> float:
 
 
 def significant_list(values: Iterable[float] | np.ndarray, digits: int = DIGITS) -> list:
-    """Each number of ``values`` (any nesting) to ``digits`` significant digits, as lists."""
-    plain = np.asarray(values, dtype=np.float64).tolist()
-    return _each(plain, digits)
+    """Each number of ``values`` (one or more dimensions) to ``digits`` significant digits,
+    as (nested) lists."""
+    return [_each(v, digits) for v in np.asarray(values, dtype=np.float64).tolist()]
 
 
 def _each(value: list | float, digits: int) -> list | float:
