@@ -93,6 +93,7 @@ from exohil.emulators.discrepancy.rules import (
     blocks_needed,
     candidate_evidence,
     pooled_noise,
+    remainder,
     rules_on_blocks,
     stops_leave_curve_nothing,
 )
@@ -100,6 +101,7 @@ from exohil.emulators.discrepancy.stops import Stops
 from exohil.emulators.discrepancy.timing import clock_offset, filter_words
 from exohil.emulators.discrepancy.workflow import (
     _against_curve,
+    _conclusion,
     _counted_refined,
     _static_map,
 )
@@ -382,6 +384,17 @@ def test_what_the_model_leaves_beyond_the_noise_is_said_with_what_may_cause_it()
     assert "## What remains" in report and "What remains is noise" not in report
     assert "no moving `elv_angle`" in report and "no moving `shoulder_rot`" in report
     assert "`shoulder_elv`" not in report
+
+
+def test_a_floor_of_zero_leaves_no_ratio_and_the_conclusion_still_reads(hysteresis_outcome):
+    """A noise floor of zero (readings without noise) has no ratio to it: the remainder is
+    null there, not beyond the noise, and the conclusion does not format the missing ratio."""
+    _, outcome = hysteresis_outcome
+    left = remainder(outcome.trial, outcome.after, 0.0)
+    assert left["gap_over_floor"] is None and left["noise_variances"] is None
+    assert not left["beyond_noise"]
+    assert _conclusion(outcome.summary["steps"], outcome.after.spec, left) == \
+        f"named {', '.join(outcome.summary['effects'])}"
 
 
 def test_a_recording_in_other_units_names_the_same_effects_with_the_same_figures():

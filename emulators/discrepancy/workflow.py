@@ -302,7 +302,8 @@ def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
 def _conclusion(steps: list[dict], spec: Spec, left: dict) -> str:
     """One line: what was named, and whether the model leaves more than the noise
     (``left``, :func:`~.rules.remainder`), which none of the five effects explains."""
-    times = f"{left['gap_over_floor']:.3g}× the noise floor"
+    # beyond the noise only with a floor above zero, so only then is there a ratio to it
+    times = f"{left['gap_over_floor']:.3g}× the noise floor" if left["beyond_noise"] else ""
     if steps:
         head = f"named {', '.join(s['effect'] for s in steps)}"
     elif not [k for k in VOCABULARY if k not in spec.effects()]:
