@@ -12,6 +12,7 @@ own ``.toml``::
     faults = "drop:rate=0.002"   # emulator faults when the target names none ("" for none)
     conversion_examples = 400    # hypothesis examples per conversion property
     seed = 0                     # hypothesis and fault seed
+    latency_attempts = 1         # real-time segments the latency check may take (see below)
 
     [checks.accuracy]            # one table per check; its keys are measurement limits
     "accuracy.rmse.elv_angle" = "< 3.0 deg"
@@ -54,7 +55,8 @@ CHECKS: dict[str, dict[str, str]] = {
                  "accuracy.frames_scored": "count"},
     "latency": {"latency.end_to_end.*": "ms", "latency.estimator.*": "ms",
                 "latency.device_to_host.*": "ms", "latency.decode.*": "ms",
-                "latency.queue_and_estimate.*": "ms", "latency.command.*": "ms"},
+                "latency.queue_and_estimate.*": "ms", "latency.command.*": "ms",
+                "latency.host.*": "ratio", "latency.attempts": "count"},
     "link": {"link.frames": "count", "link.rate": "Hz", "link.dropped": "count",
              "link.crc_errors": "count", "link.decode_errors": "count",
              "link.overflow": "count", "link.lost_on_host": "count",
@@ -80,10 +82,12 @@ BUILTIN_LIMITS: dict[str, dict[str, Limit]] = {
 SETTINGS: dict[str, type] = {"realtime_seconds": float, "replay": str, "faults": str,
                              "conversion_examples": int, "seed": int,
                              "regression_accuracy_margin_deg": float,
-                             "regression_latency_factor": float}
+                             "regression_latency_factor": float, "latency_attempts": int}
+_KIND_NAMES = {int: "an integer", float: "a number", str: "a string"}
 DEFAULT_SETTINGS: dict[str, Any] = {
     "realtime_seconds": 30.0, "replay": "full", "faults": "", "conversion_examples": 400,
     "seed": 0, "regression_accuracy_margin_deg": 0.25, "regression_latency_factor": 1.5,
+    "latency_attempts": 1,
 }
 _LIMIT = re.compile(r"^\s*(?:(<=|<|>=|>)\s*(\S+)|(\S+)\s*\.\.\s*(\S+))\s+(\S+)\s*$")
 
@@ -140,7 +144,7 @@ class Profile:
 _SETTING_RANGES: dict[str, tuple[float, float]] = {
     "realtime_seconds": (0.0, MAX_DURATION_S), "conversion_examples": (1, 100_000),
     "seed": (0, SEED_MAX), "regression_accuracy_margin_deg": (0.0, 360.0),
-    "regression_latency_factor": (1.0, 1000.0),
+    "regression_latency_factor": (1.0, 1000.0), "latency_attempts": (1, 10),
 }
 
 
@@ -191,7 +195,7 @@ def load_profile(name_or_path: str) -> Profile:
         if kind is float and isinstance(value, int) and not isinstance(value, bool):
             settings[key] = value = float(value)
         if not isinstance(value, kind) or isinstance(value, bool):
-            raise ProfileError(f"{path}: setting {key} must be a {kind.__name__}")
+            raise ProfileError(f"{path}: setting {key} must be {_KIND_NAMES[kind]}")
     if settings.get("replay", "full") not in ("full", "none"):
         raise ProfileError(f"{path}: replay must be 'full' or 'none'")
     problem = _settings_problem(settings)

@@ -22,6 +22,7 @@ from click.testing import CliRunner
 
 from exohil.conformance.profile import ProfileError, load_profile, parse_limit
 from exohil.estimator.checkpoint import load_checkpoint, save_checkpoint
+from exohil.formats.measurement import Measurement
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
@@ -77,6 +78,10 @@ def verdicts(report: dict) -> dict[str, str]:
     return {c["name"]: c["verdict"] for c in report["checks"]}
 
 
+def measurements(report: dict) -> dict[str, dict]:
+    return {m["name"]: m for c in report["checks"] for m in c["measurements"]}
+
+
 # ---- profiles ------------------------------------------------------------------------------
 def test_bundled_profiles_load():
     for name in ("default", "bench", "ci"):
@@ -100,6 +105,8 @@ def test_bundled_profiles_load():
     ('[settings]\nrealtime_seconds = nan\n', "setting realtime_seconds must be within"),
     ('[settings]\nrealtime_seconds = inf\n', "setting realtime_seconds must be within"),
     ('[settings]\nconversion_examples = 0\n', "setting conversion_examples must be within"),
+    ('[settings]\nlatency_attempts = 0\n', "setting latency_attempts must be within"),
+    ('[settings]\nlatency_attempts = 2.5\n', "setting latency_attempts must be an integer"),
     ('[settings]\nfaults = "drop:rate=nan"\n', "setting faults: drop"),
 ])
 def test_bad_profiles_are_clear_errors(tmp_path, text, message):
@@ -261,14 +268,59 @@ def test_a_slow_estimator_fails_latency(tmp_path, fast_profile, monkeypatch):
 
     monkeypatch.setattr(StreamingEstimator, "push", slow_push)
     profile = tmp_path / "latency.toml"
-    # 1 s of device time: 250 frames at 20 ms each drain in 5 s (the fast profile's 3 s: 15 s)
-    profile.write_text(FAST_PROFILE.replace("realtime_seconds = 3", "realtime_seconds = 1")
+    # 1 s of device time: 250 frames at 20 ms each drain in 5 s (the fast profile's 3 s: 15 s);
+    # a second attempt is as slow: measuring again does not hide a slow estimator
+    profile.write_text(FAST_PROFILE.replace("realtime_seconds = 3",
+                                            "realtime_seconds = 1\nlatency_attempts = 2")
                        .replace("[checks.latency]",
                                 '[checks.latency]\n"latency.end_to_end.max" = "< 12 ms"'),
                        encoding="utf-8")
     code, output, report = conform(tmp_path / "out", profile, "-k", "latency")
     assert code != 0 and verdicts(report)["latency"] == "fail"
     assert last_line(output).startswith("FAIL: latency: latency.end_to_end.max")
+    attempts = measurements(report)["latency.attempts"]
+    assert attempts["value"] == 2 and attempts["note"].count("(failed)") == 2
+    assert "measuring a fresh segment" in output
+
+
+def test_a_latency_failure_is_measured_again_and_every_attempt_reported(tmp_path, fast_profile,
+                                                                         monkeypatch):
+    """The first segment's latency is made to fail (1 s added to every frame's figures, as a
+    stalled host would); the check measures a fresh segment and is judged on it, so it passes
+    with two attempts, the first one's failure in the note. The limit, 1 s at p50 against
+    about 1 ms measured, asserts no timing of these machines."""
+    from exohil.conformance import context
+
+    real = context.latency_measurements
+    calls = []
+
+    def stalled_first(run, limits=None):
+        calls.append(run)
+        out = real(run, limits)
+        if len(calls) > 1:
+            return out
+        return [Measurement.judge(m.name, m.value + 1000.0, m.unit, m.limit, m.note)
+                if m.name.startswith("latency.end_to_end.") else m for m in out]
+
+    monkeypatch.setattr(context, "latency_measurements", stalled_first)
+    profile = tmp_path / "attempts.toml"
+    profile.write_text(FAST_PROFILE.replace("realtime_seconds = 3",
+                                            "realtime_seconds = 1\nlatency_attempts = 3")
+                       .replace("[checks.latency]",
+                                '[checks.latency]\n"latency.end_to_end.p50" = "< 1000 ms"'),
+                       encoding="utf-8")
+    code, output, report = conform(tmp_path / "out", profile, "-k", "latency")
+    assert code == 0, output
+    assert len(calls) == 2 and calls[0] is not calls[1]
+    measured = measurements(report)
+    assert measured["latency.attempts"]["value"] == 2
+    first, second = measured["latency.attempts"]["note"].split("; 2: ")
+    assert first.startswith("1: end to end p50 ") and "(failed)" in first
+    assert "(met every limit)" in second
+    assert measured["latency.end_to_end.p50"]["value"] < 1000
+    for name in ("latency.host.cpu_pressure", "latency.host.cpu_steal"):
+        assert measured[name]["verdict"] in ("info", "skip")
+        assert measured[name]["verdict"] == "skip" or 0 <= measured[name]["value"] <= 1
 
 
 def test_a_sign_error_in_the_elevation_conversion_fails_conversions(tmp_path, fast_profile,
