@@ -173,7 +173,8 @@ class ConformanceRun:
 
         meter = HostLoadMeter()
         try:
-            result = run_session(self.config, seconds, progress=progress)
+            result = run_session(self.config, seconds, progress=progress,
+                                 reference=self.reference)
         except SessionError as err:
             raise CheckBlocked(f"the real-time segment could not run: {err}") from None
         load = meter.stop()

@@ -288,8 +288,8 @@ class SessionResult:
 def run_session(config: BenchConfig, seconds: float | None, *,
                 progress: Progress | None = None,
                 stop: threading.Event | None = None, extra_sinks: Sequence[Sink] = (),
-                realtime: bool = False, keep_frames: tuple[int, int] | None = None
-                ) -> SessionResult:
+                realtime: bool = False, keep_frames: tuple[int, int] | None = None,
+                reference: Recording | None = None) -> SessionResult:
     """Stream ``seconds`` of the bench's device through its model into its sinks.
 
     An emulator streams exactly ``seconds`` of device time and the run ends once every frame
@@ -299,7 +299,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     a reference, until the device's clock passes the reference's end). Setting ``stop`` ends
     any run early, and the result covers what was processed. ``keep_frames`` = (first, last)
     sets how many per-frame rows the run keeps (default: the pipeline's); every figure covers
-    every frame regardless.
+    every frame regardless. ``reference``: the bench's reference recording when the caller
+    has already read it (else it is read here).
     """
     if config.device is None:
         raise SessionError("no device: give a target (emulator:RECORDING or a serial URL)")
@@ -311,7 +312,10 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         raise SessionError(f"the bench's sensors {list(config.sensor_names)} are not the "
                            f"model's {list(est.sensor_names)}")
     ref_path = reference_path(config)
-    reference = None if ref_path is None else read_reference(ref_path)
+    if ref_path is None:
+        reference = None
+    elif reference is None:
+        reference = read_reference(ref_path)
     if reference is not None:
         try:
             ensure_fits(est, reference, str(ref_path))
