@@ -82,6 +82,15 @@ def measurements(report: dict) -> dict[str, dict]:
     return {m["name"]: m for c in report["checks"] for m in c["measurements"]}
 
 
+def latency_profile(tmp_path: Path, attempts: int, limit: str) -> Path:
+    """The fast profile with a 1 s segment, ``attempts`` latency attempts and ``limit``."""
+    path = tmp_path / "latency.toml"
+    path.write_text(FAST_PROFILE.replace("realtime_seconds = 3",
+                                         f"realtime_seconds = 1\nlatency_attempts = {attempts}")
+                    .replace("[checks.latency]", f"[checks.latency]\n{limit}"), encoding="utf-8")
+    return path
+
+
 # ---- profiles ------------------------------------------------------------------------------
 def test_bundled_profiles_load():
     for name in ("default", "bench", "ci"):
@@ -267,14 +276,9 @@ def test_a_slow_estimator_fails_latency(tmp_path, fast_profile, monkeypatch):
         return push(self, values)
 
     monkeypatch.setattr(StreamingEstimator, "push", slow_push)
-    profile = tmp_path / "latency.toml"
     # 1 s of device time: 250 frames at 20 ms each drain in 5 s (the fast profile's 3 s: 15 s);
     # a second attempt is as slow: measuring again does not hide a slow estimator
-    profile.write_text(FAST_PROFILE.replace("realtime_seconds = 3",
-                                            "realtime_seconds = 1\nlatency_attempts = 2")
-                       .replace("[checks.latency]",
-                                '[checks.latency]\n"latency.end_to_end.max" = "< 12 ms"'),
-                       encoding="utf-8")
+    profile = latency_profile(tmp_path, 2, '"latency.end_to_end.max" = "< 12 ms"')
     code, output, report = conform(tmp_path / "out", profile, "-k", "latency")
     assert code != 0 and verdicts(report)["latency"] == "fail"
     assert last_line(output).startswith("FAIL: latency: latency.end_to_end.max")
@@ -283,8 +287,7 @@ def test_a_slow_estimator_fails_latency(tmp_path, fast_profile, monkeypatch):
     assert "measuring a fresh segment" in output
 
 
-def test_a_latency_failure_is_measured_again_and_every_attempt_reported(tmp_path, fast_profile,
-                                                                         monkeypatch):
+def test_a_latency_failure_is_measured_again_and_every_attempt_reported(tmp_path, monkeypatch):
     """The first segment's latency is made to fail (1 s added to every frame's figures, as a
     stalled host would); the check measures a fresh segment and is judged on it, so it passes
     with two attempts, the first one's failure in the note. The limit, 1 s at p50 against
@@ -303,12 +306,7 @@ def test_a_latency_failure_is_measured_again_and_every_attempt_reported(tmp_path
                 if m.name.startswith("latency.end_to_end.") else m for m in out]
 
     monkeypatch.setattr(context, "latency_measurements", stalled_first)
-    profile = tmp_path / "attempts.toml"
-    profile.write_text(FAST_PROFILE.replace("realtime_seconds = 3",
-                                            "realtime_seconds = 1\nlatency_attempts = 3")
-                       .replace("[checks.latency]",
-                                '[checks.latency]\n"latency.end_to_end.p50" = "< 1000 ms"'),
-                       encoding="utf-8")
+    profile = latency_profile(tmp_path, 3, '"latency.end_to_end.p50" = "< 1000 ms"')
     code, output, report = conform(tmp_path / "out", profile, "-k", "latency")
     assert code == 0, output
     assert len(calls) == 2 and calls[0] is not calls[1]
