@@ -93,6 +93,12 @@ def summary_markdown(run: Any, results: list[Any]) -> str:
             limit = m.limit.describe() if m.limit else ""
             lines.append(f"| {r.name} | {m.verdict.value} | {m.name} | {_fmt(m.value)} | "
                          f"{m.unit} | {limit} |")
+    retried = [m for r in results for m in r.measurements
+               if m.name == "latency.attempts" and m.value > 1]
+    for m in retried:
+        lines += ["", f"Latency took {_fmt(m.value)} real-time segments (a failing one is "
+                  "measured again: a busy host only adds time); the table gives the last. "
+                  f"Each: {m.note}."]
     return "\n".join(lines) + "\n"
 
 

@@ -315,6 +315,8 @@ def test_a_latency_failure_is_measured_again_and_every_attempt_reported(tmp_path
     first, second = measured["latency.attempts"]["note"].split("; 2: ")
     assert first.startswith("1: end to end p50 ") and "(failed)" in first
     assert "(met every limit)" in second
+    summary = (tmp_path / "out" / "summary.md").read_text()
+    assert "Latency took 2 real-time segments" in summary and first in summary
     assert measured["latency.end_to_end.p50"]["value"] < 1000
     for name in ("latency.host.cpu_pressure", "latency.host.cpu_steal"):
         assert measured[name]["verdict"] in ("info", "skip")
