@@ -35,7 +35,7 @@ from exohil.harness.bench import (
     SerialDevice,
     parse_target,
 )
-from exohil.harness.machine import HostLoad, HostLoadMeter
+from exohil.harness.machine import HostLoad
 from exohil.harness.pipeline import Status
 from exohil.harness.session import (
     LoadedModel,
@@ -87,7 +87,6 @@ class ConformanceRun:
         self.config = BenchConfig(device=device, model=self.model_path, backend=backend)
         self.say = say  #: progress lines for long steps
         self.started = time.time()
-        self.session_load: HostLoad | None = None  #: set by :attr:`session`
 
     # ---- shared pieces ---------------------------------------------------------------
     @cached_property
@@ -152,13 +151,11 @@ class ConformanceRun:
     def session(self) -> SessionResult:
         """The real-time segment: ``realtime_seconds`` of the emulator, or of a serial device
         without reference; a serial device with a reference streams until its clock passes the
-        reference's end, so accuracy covers the whole reference session. How busy the host
-        was meanwhile is :attr:`session_load`."""
-        result, self.session_load = self._segment()
-        return result
+        reference's end, so accuracy covers the whole reference session."""
+        return self._segment()
 
-    def _segment(self, attempt: str = "") -> tuple[SessionResult, HostLoad]:
-        """Run one real-time segment (see :attr:`session`) and measure the host's load."""
+    def _segment(self, attempt: str = "") -> SessionResult:
+        """Run one real-time segment (see :attr:`session`); ``attempt`` labels a repeat."""
         self._require_compatible()
         seconds = self.profile.setting("realtime_seconds")
         if isinstance(self.device, SerialDevice) and self.reference is not None:
@@ -171,15 +168,13 @@ class ConformanceRun:
             self.say(f"  {status.frames} frames, dropped {link.dropped}, crc errors "
                      f"{link.crc_errors}")
 
-        meter = HostLoadMeter()
         try:
             result = run_session(self.config, seconds, progress=progress,
                                  reference=self.reference)
         except SessionError as err:
             raise CheckBlocked(f"the real-time segment could not run: {err}") from None
-        load = meter.stop()
-        self.say(f"segment done; the host meanwhile: {load.describe()}")
-        return result, load
+        self.say(f"segment done; the host meanwhile: {result.host_load.describe()}")
+        return result
 
     # ---- checks ----------------------------------------------------------------------
     def compatibility_measurements(self) -> list[Measurement]:
@@ -241,19 +236,18 @@ class ConformanceRun:
         ``latency.attempts`` counts the segments; its note gives each one's figures."""
         limits = self.profile.limits("latency")
         attempts = self.profile.setting("latency_attempts")
-        result, load = self.session, self.session_load
+        result = self.session
         tried: list[str] = []
         while True:
             measured = latency_measurements(result.run, limits)
-            measured += _host_measurements(load, limits)
+            measured += _host_measurements(result.host_load, limits)
             failed = next((m for m in measured if m.failed), None)
-            tried.append(_attempt_summary(measured, load))
+            tried.append(_attempt_summary(measured, failed is not None, result.host_load))
             if failed is None or len(tried) >= attempts:
                 break
-            host = "unknown host load" if load is None else load.describe()
-            self.say(f"latency: {failed.describe()}; {host} during the segment, and a busy "
-                     "host only adds time: measuring a fresh segment")
-            result, load = self._segment(f" (latency attempt {len(tried) + 1} of {attempts})")
+            self.say(f"latency: {failed.describe()}; {result.host_load.describe()} during the "
+                     "segment, and a busy host only adds time: measuring a fresh segment")
+            result = self._segment(f" (latency attempt {len(tried) + 1} of {attempts})")
         note = "; ".join(f"{i}: {line}" for i, line in enumerate(tried, 1))
         return measured + [Measurement.judge("latency.attempts", len(tried), "count",
                                              limits.get("latency.attempts"), note)]
@@ -352,12 +346,12 @@ def _paced_p99_ms(a: LoadedModel, b: LoadedModel, values: np.ndarray, frames: in
     return pa, pb
 
 
-def _host_measurements(load: HostLoad | None, limits: dict[str, Limit]) -> list[Measurement]:
+def _host_measurements(load: HostLoad, limits: dict[str, Limit]) -> list[Measurement]:
     """``latency.host.cpu_pressure`` and ``latency.host.cpu_steal`` (ratios) of ``load``."""
     out = []
     for name in ("cpu_pressure", "cpu_steal"):
         key = f"latency.host.{name}"
-        value = None if load is None else getattr(load, name)
+        value = getattr(load, name)
         if value is None:
             out.append(Measurement.skipped(key, "ratio", "the kernel does not report it",
                                            limits.get(key)))
@@ -367,10 +361,9 @@ def _host_measurements(load: HostLoad | None, limits: dict[str, Limit]) -> list[
     return out
 
 
-def _attempt_summary(measured: list[Measurement], load: HostLoad | None) -> str:
+def _attempt_summary(measured: list[Measurement], failed: bool, load: HostLoad) -> str:
     """One segment's end-to-end figures, its verdict and the host's load, on one line."""
     figures = ", ".join(f"{m.name.rsplit('.', 1)[1]} {m.value:.4g} {m.unit}" for m in measured
-                        if m.name.startswith("latency.end_to_end.") and m.value is not None)
-    verdict = "failed" if any(m.failed for m in measured) else "met every limit"
-    host = "" if load is None else f"; {load.describe()}"
-    return f"end to end {figures} ({verdict}){host}"
+                        if m.name.startswith("latency.end_to_end."))
+    verdict = "failed" if failed else "met every limit"
+    return f"end to end {figures} ({verdict}); {load.describe()}"

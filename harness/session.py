@@ -47,6 +47,7 @@ from exohil.formats.errors import InputError, RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import Recording
 from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, SerialDevice, open_device
+from exohil.harness.machine import HostLoad, HostLoadMeter
 from exohil.harness.pipeline import FrameRows, Pipeline, PipelineRun, RowsObserver, Sink, Status
 from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.robot_trace import RobotTrace, RobotTraceSink
@@ -269,6 +270,8 @@ class SessionResult:
     fault_log: list[Any] | None
     emulator_seq0: int | None
     clipped_values: int
+    #: how busy the host's CPUs were while the session streamed
+    host_load: HostLoad
     robots: list[Any] = field(default_factory=list)
     robot_trace: RobotTrace | None = None
     #: why the device stopped before the run's end (a device that never came back), or None
@@ -350,6 +353,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         if reference is not None:
             scoring = TruthTally(reference, est, teleop=bool(robots))
             observers.append(scoring)
+        meter = HostLoadMeter()
         with open_device(config.device, len(est.sensor_names), realtime=realtime,
                          duration_s=seconds, recording=reference) as opened:
             if opened.emulator is not None:
@@ -383,6 +387,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
             fault_log = None if emulator is None else emulator.fault_log
             seq0 = None if emulator is None else emulator.seq0
             clipped = 0 if emulator is None else emulator.clipped_values
+        host_load = meter.stop()
     except (ValueError, RecordingError) as err:
         raise SessionError(str(err)) from None
     finally:
@@ -402,7 +407,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         angles = truth_at(reference, est, trace.device_time_s)
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
-    return SessionResult(config, model, run, truth, fault_log, seq0, clipped, robots,
+    return SessionResult(config, model, run, truth, fault_log, seq0, clipped, host_load, robots,
                          trace, device_lost, scoring, link_tally)
 
 
