@@ -92,6 +92,7 @@ from exohil.emulators.discrepancy.rules import (
     SIGN_TEST_LEVEL,
     blocks_needed,
     candidate_evidence,
+    held_at_stops,
     pooled_noise,
     remainder,
     rules_on_blocks,
@@ -1028,12 +1029,18 @@ def _twelve_sensors() -> tuple[np.ndarray, tuple[str, ...], Callable[[np.ndarray
 def test_a_stop_on_one_sensor_of_twelve_is_judged_on_that_sensor():
     """A clamp on 10 % of one sensor's frames removes about 5 σ² from that sensor, under one
     σ² pooled over twelve: named on the sensor it holds (rule 1 on the sensors at a hard
-    stop), while the same suit without the clamp gets nothing."""
+    stop), while the same suit without the clamp gets nothing. A hard stop the map never
+    passes holds nothing: its sensor is not among those held."""
     y, names, suit = _twelve_sensors()
     assert run(suit(y), "twelve sensors").summary["effects"] == []
     clamped = y.copy()
     clamped[:, 0] = np.minimum(y[:, 0], np.quantile(y[:, 0], 0.90))
-    s = run(suit(clamped), "one clamped").summary
+    outcome = run(suit(clamped), "one clamped")
+    s = outcome.summary
+    stops = list(outcome.after.stops)
+    stops[3] = Stops(lo=float(np.nanmin(outcome.after.prediction[:, 3])) - 1.0)  # a copy of T0
+    idle = held_at_stops(outcome.trial, outcome.before, replace(outcome.after, stops=stops))
+    assert idle is not None and idle["sensors"] == [names[0]], idle
     assert s["effects"][:1] == ["saturation"], s["effects"]
     evidence = s["steps"][0]["evidence"]
     assert evidence["delta_mse"] < evidence["noise_floor"] ** 2  # not by the pooled rule

@@ -112,21 +112,25 @@ def adds_stops(base: Fit, cand: Fit) -> bool:
 def held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
     """Rules 1 and 2 on the sensors ``cand`` holds at a hard stop, against their own noise,
     over all their frames and over the frames it holds (see the module's docstring); None
-    unless ``cand`` adds the stops and holds a sensor."""
+    unless ``cand`` adds the stops and holds a sensor at one on as many frames as a plateau
+    spans (``PLATEAU_SHARE`` of the scored frames)."""
     if not adds_stops(base, cand):
         return None
-    held = [j for j, st in enumerate(cand.stops) if st.hard]
-    if not held:
+    hard = [j for j, st in enumerate(cand.stops) if st.hard]
+    at_stop = np.zeros((trial.n, len(hard)), dtype=bool)
+    for k, j in enumerate(hard):  # frames the fitted map takes beyond a hard stop
+        st, p = cand.stops[j], cand.prediction[:, j]
+        at_stop[:, k] = ((st.soft_lo == 0) & (p == st.lo)) | ((st.soft_hi == 0) & (p == st.hi))
+    # a stop the map reaches on fewer frames than a plateau spans holds no plateau there:
+    # its sensor is not held (a stop at the end of a copy's range that binds on no frame
+    # would add that sensor's noise to the held sensors' and name it as held)
+    holds = at_stop[trial.scored].mean(axis=0) >= PLATEAU_SHARE
+    if not holds.any():
         return None
+    held, at_stop = [j for j, h in zip(hard, holds, strict=True) if h], at_stop[:, holds]
     noise = float(np.sqrt(np.mean(trial.noise[held] ** 2)))
     sensors = rules_on_blocks(block_mse(trial, base.residual[:, held]),
                      block_mse(trial, cand.residual[:, held]), noise)
-    at_stop = np.zeros((trial.n, len(held)), dtype=bool)
-    for k, j in enumerate(held):  # frames the fitted map takes beyond a hard stop
-        st, p = cand.stops[j], cand.prediction[:, j]
-        at_stop[:, k] = ((st.soft_lo == 0) & (p == st.lo)) | ((st.soft_hi == 0) & (p == st.hi))
-    # a stop the map reaches on fewer frames than a plateau spans holds no plateau there
-    at_stop &= at_stop[trial.scored].mean(axis=0) >= PLATEAU_SHARE
     frames = rules_on_blocks(block_mse(trial, np.where(at_stop, base.residual[:, held], np.nan)),
                     block_mse(trial, np.where(at_stop, cand.residual[:, held], np.nan)), noise)
     return {"sensors": [trial.sensor_names[j] for j in held], **sensors,
