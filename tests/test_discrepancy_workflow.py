@@ -398,27 +398,40 @@ def test_a_floor_of_zero_leaves_no_ratio_and_the_conclusion_still_reads(hysteres
         f"named {', '.join(outcome.summary['effects'])}"
 
 
-def test_a_recording_in_other_units_names_the_same_effects_with_the_same_figures():
-    """Readings in metres, in micrometres or with their sign turned (a sensor wired the
-    other way) are the same recording: the same effects, in the same order, and every gap,
-    floor and candidate's drop in mean square the same figure in the new unit. Figures were
-    written to six decimals, so a recording in farads (picofarads read as 1e-12 F) had every
-    gap 0.0 and its candidates ranked on zeros: the first effect named followed the
-    vocabulary's order."""
+@pytest.fixture(scope="module")
+def hysteresis_in_mm() -> tuple[Recording, dict]:
+    """A 30 s recording of the alt family's large hysteresis (seed 100) and its summary."""
     rec = make_recording(Case("hysteresis", "alt", 2, seed=100, duration_s=30.0))
+    return rec, run(rec, "mm").summary
+
+
+@pytest.mark.parametrize("scale, offset", [
+    (1e-12, 0.0), (1e-3, 0.0), (-1.0, 0.0),
+    pytest.param(1.0, 1e4, marks=pytest.mark.xfail(strict=True, reason=(
+        "an offset leaks into the static map: the ridge shrinks the map's constant like its "
+        "other columns (10⁴ mm leaves 0.835 mm after the static map instead of 0.604); "
+        "leaving it unshrunk fixes this and changes four other tests' outcomes "
+        "(docs/discrepancy.md, Outputs)")))])
+def test_a_recording_in_other_units_names_the_same_effects_with_the_same_figures(
+        hysteresis_in_mm, scale, offset):
+    """Readings in metres, in micrometres, with their sign turned (a sensor wired the
+    other way) or from another zero (10⁴ mm added) are the same recording: the same
+    effects, in the same order, and every gap, floor and candidate's drop in mean square the
+    same figure in the new unit. Figures were written to six decimals, so a recording in
+    farads (picofarads read as 1e-12 F) had every gap 0.0 and its candidates ranked on
+    zeros: the first effect named followed the vocabulary's order."""
+    rec, mm = hysteresis_in_mm
 
     def figures(summary: dict, scale: float) -> list:
         return [*[summary[k] / scale for k in ("gap_before", "gap_after", "noise_floor")],
                 *[s["evidence"]["delta_mse"] / scale**2 for s in summary["steps"]],
                 *[s["gap"] / scale for s in summary["steps"]]]
 
-    mm = run(rec, "mm").summary
     assert mm["effects"]
-    for scale in (1e-12, 1e-3, -1.0):
-        other = run(replace(rec, sensors=replace(rec.sensors, values=rec.sensors.values * scale)),
-                    "scaled").summary
-        assert other["effects"] == mm["effects"], scale
-        assert figures(other, abs(scale)) == pytest.approx(figures(mm, 1.0), rel=1e-6), scale
+    values = rec.sensors.values * scale + offset
+    other = run(replace(rec, sensors=replace(rec.sensors, values=values)), "other").summary
+    assert other["effects"] == mm["effects"]
+    assert figures(other, abs(scale)) == pytest.approx(figures(mm, 1.0), rel=1e-6)
 
 
 class _Tremor(Trajectory):
