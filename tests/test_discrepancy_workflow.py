@@ -1050,10 +1050,6 @@ def test_a_stop_on_one_sensor_of_twelve_is_judged_on_that_sensor():
     clamped[:, 0] = np.minimum(y[:, 0], np.quantile(y[:, 0], 0.90))
     outcome = run(suit(clamped), "one clamped")
     s = outcome.summary
-    stops = list(outcome.after.stops)
-    stops[3] = Stops(lo=float(np.nanmin(outcome.after.prediction[:, 3])) - 1.0)  # a copy of T0
-    idle = held_at_stops(outcome.trial, outcome.before, replace(outcome.after, stops=stops))
-    assert idle is not None and idle["sensors"] == [names[0]], idle
     assert s["effects"][:1] == ["saturation"], s["effects"]
     evidence = s["steps"][0]["evidence"]
     assert evidence["delta_mse"] < evidence["noise_floor"] ** 2  # not by the pooled rule
@@ -1061,6 +1057,10 @@ def test_a_stop_on_one_sensor_of_twelve_is_judged_on_that_sensor():
     assert held["sensors"] == [names[0]] and held["significant"], held
     assert held["delta_mse"] > held["noise_floor"] ** 2
     assert f"holds at hard stops ({names[0]}) alone" in markdown(s)
+    stops = list(outcome.after.stops)
+    stops[3] = Stops(lo=float(np.nanmin(outcome.after.prediction[:, 3])) - 1.0)  # a copy of T0
+    idle = held_at_stops(outcome.trial, outcome.before, replace(outcome.after, stops=stops))
+    assert idle is not None and idle["sensors"] == [names[0]], idle
 
 
 def test_a_drift_of_one_sensor_of_twelve_is_judged_on_each_sensor():
