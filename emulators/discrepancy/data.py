@@ -26,6 +26,9 @@ N_BLOCKS = 8
 BLOCK_S = 2.5
 #: Shortest usable recording, s: every fold must hold out at least one block.
 MIN_BLOCK_S = BLOCK_S
+#: Invalid runs longer than this, s, do not count towards a held-out block's length
+#: (:func:`held_out_blocks`): a dropout, not frames lost here and there.
+SKIPPED_RUN_S = 0.1
 #: Motion-capture samples further apart than this many median intervals are a dropout.
 MOCAP_GAP_INTERVALS = 4.0
 #: The motion capture's angles may be low-passed at this cutoff, Hz, with a Butterworth
@@ -233,22 +236,45 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
             f"{name}: too short to hold out a block: {math.floor(covered * 100) / 100:.2f} s "
             f"of sensors with motion capture, need at least {N_BLOCKS * MIN_BLOCK_S:.0f} s "
             f"({N_BLOCKS} held-out blocks of {MIN_BLOCK_S:g} s)")
-    # Contiguous held-out blocks of BLOCK_S seconds of valid frames, dealt to the N_BLOCKS
-    # folds in turn: each fold holds out stretches spread over the whole recording, so a
-    # fold's training data cover the poses it must predict (no extrapolation in pose space)
-    # while every held-out stretch is long compared with the noise's correlation (none).
-    rank = np.cumsum(valid) - 1
-    per_block = max(1, int(round(BLOCK_S * rate)))
-    blocks = (rank // per_block) % N_BLOCKS
+    blocks = held_out_blocks(valid, rate)
     trial = Trial(t=t, y=y, valid=valid, angles=angles,
                   angle_names=tuple(stream.names[k] for k in moving), joint=joint,
                   sensor_names=tuple(rec.sensor_names[j] for j in keep),
-                  units=rec.sensor_units, rate_hz=rate, blocks=blocks.astype(np.int64),
+                  units=rec.sensor_units, rate_hz=rate, blocks=blocks,
                   scored=valid.copy(), ignored=ignored, spikes=spiked.sum(axis=0),
                   placed_by=placed_by, mocap_late_s=mocap_late_s,
                   mocap_low_pass_hz=low_pass_hz)
     trial.noise = noise_floor(trial)
     return trial
+
+
+def held_out_blocks(valid: np.ndarray, rate_hz: float) -> np.ndarray:
+    """(N,) int: the fold (0 … ``N_BLOCKS`` − 1) that holds out each grid frame.
+
+    Contiguous blocks of ``BLOCK_S`` seconds are dealt to the folds in turn, so each fold
+    holds out stretches spread over the whole recording: a fold's training data cover the
+    poses it must predict (no extrapolation in pose space) while every held-out stretch is
+    long compared with the noise's correlation (none).
+
+    Blocks are counted in grid time, so frames lost here and there (a lossy link) leave the
+    layout of the whole recording; only invalid runs longer than ``SKIPPED_RUN_S`` (a
+    dropout, a mocap gap) are not counted, so that every block holds about ``BLOCK_S`` of
+    data. Counting valid frames instead stretched each block of a link losing 30 % of its
+    frames to 3.6 s: a 30 s recording then dealt 9 stretches to the 8 folds, and the fold
+    holding poses no other fold reached made a degree-4 map look like overfitting
+    (2.5 mm held out against 0.34 mm on the whole recording). Invalid frames take the fold
+    of the frame before them.
+    """
+    valid = np.asarray(valid, dtype=bool)
+    counted = np.ones(len(valid), dtype=bool)
+    longest = int(round(SKIPPED_RUN_S * rate_hz))
+    edges = np.flatnonzero(np.diff(np.concatenate([[1], valid.astype(np.int8), [1]])))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):  # runs of invalid frames
+        if stop - start > longest:
+            counted[start:stop] = False
+    rank = np.maximum(np.cumsum(counted) - 1, 0)
+    per_block = max(1, int(round(BLOCK_S * rate_hz)))
+    return ((rank // per_block) % N_BLOCKS).astype(np.int64)
 
 
 def frame_grid(seq: np.ndarray) -> tuple[np.ndarray, str]:
