@@ -441,7 +441,7 @@ def hysteresis_in_mm() -> tuple[Recording, dict]:
     pytest.param(1.0, 1e4, marks=pytest.mark.xfail(strict=True, reason=(
         "an offset leaks into the static map: the ridge shrinks the map's constant like its "
         "other columns (10⁴ mm leaves 0.835 mm after the static map instead of 0.604); "
-        "leaving it unshrunk fixes this and changes four other tests' outcomes "
+        "leaving it unshrunk fixes this and changes three other tests' outcomes "
         "(docs/discrepancy.md, Outputs)")))])
 def test_a_recording_in_other_units_names_the_same_effects_with_the_same_figures(
         hysteresis_in_mm, scale, offset):
