@@ -30,6 +30,7 @@ from exohil.emulators.discrepancy.data import (
     in_mocap_gap,
     quantisation_step,
     smooth_angles,
+    true_runs,
 )
 from exohil.emulators.discrepancy.filters import (
     NEGLIGIBLE,
@@ -205,6 +206,13 @@ def test_seq_that_is_not_a_plain_counter_still_places_one_frame_per_grid_point(w
     np.testing.assert_array_equal(trial.y, counted.y)
     assert trial.rate_hz == pytest.approx(250.0, rel=1e-3)
     assert "4 per frame" in trial.placed_by and counted.placed_by == "frame counter"
+
+
+def test_true_runs_are_the_runs_of_true_with_their_ends():
+    mask = np.array([1, 1, 0, 1, 0, 0, 1, 1, 1], dtype=bool)
+    assert true_runs(mask) == [(0, 2), (3, 4), (6, 9)]
+    assert true_runs(~mask) == [(2, 3), (4, 6)]
+    assert true_runs(np.zeros(0, dtype=bool)) == []
 
 
 def test_frames_lost_here_and_there_leave_the_held_out_blocks_where_they_were():

@@ -268,13 +268,18 @@ def held_out_blocks(valid: np.ndarray, rate_hz: float) -> np.ndarray:
     valid = np.asarray(valid, dtype=bool)
     counted = np.ones(len(valid), dtype=bool)
     longest = int(round(SKIPPED_RUN_S * rate_hz))
-    edges = np.flatnonzero(np.diff(np.concatenate([[1], valid.astype(np.int8), [1]])))
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):  # runs of invalid frames
+    for start, stop in true_runs(~valid):
         if stop - start > longest:
             counted[start:stop] = False
     rank = np.maximum(np.cumsum(counted) - 1, 0)
     per_block = max(1, int(round(BLOCK_S * rate_hz)))
     return ((rank // per_block) % N_BLOCKS).astype(np.int64)
+
+
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) index ranges of the runs of True in the 1-D bool ``mask``, in order."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def frame_grid(seq: np.ndarray) -> tuple[np.ndarray, str]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from exohil.emulators.discrepancy.data import Trial
+from exohil.emulators.discrepancy.data import Trial, true_runs
 from exohil.emulators.discrepancy.figures import significant
 from exohil.emulators.discrepancy.filters import low_pass
 from exohil.emulators.discrepancy.model import map_inputs, trial_motion
@@ -80,12 +80,9 @@ def _rms(x: np.ndarray) -> float | None:
 
 def _holds(still: np.ndarray, valid: np.ndarray, rate_hz: float) -> list[tuple[int, int]]:
     """(start, stop) frame ranges of holds lasting ≥ MIN_HOLD_S that follow a movement."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(np.int8), [0]])))
-    out = []
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):
-        if start > 0 and stop - start >= MIN_HOLD_S * rate_hz and valid[start:stop].mean() > 0.9:
-            out.append((int(start), int(stop)))
-    return out
+    return [(start, stop) for start, stop in true_runs(still)
+            if start > 0 and stop - start >= MIN_HOLD_S * rate_hz
+            and valid[start:stop].mean() > 0.9]
 
 
 def localise(trial: Trial, residual: np.ndarray, mot: dict[str, np.ndarray]) -> dict:

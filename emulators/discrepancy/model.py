@@ -45,7 +45,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.signal import savgol_filter
 
-from exohil.emulators.discrepancy.data import N_BLOCKS, Trial
+from exohil.emulators.discrepancy.data import N_BLOCKS, Trial, true_runs
 from exohil.emulators.discrepancy.filters import apply_lag, low_pass, play, rate_limit
 from exohil.emulators.discrepancy.folds import (
     FIT_RATE_HZ,
@@ -366,10 +366,8 @@ def holding_still(speed: np.ndarray) -> np.ndarray:
     every frame of a run below ``MOVING_DEG_S`` that reaches a still frame (a two-threshold
     switch, as a debounced button): a held arm sways, and its sway's peaks would split a
     hold into pieces too short to count; a movement passes the upper threshold."""
-    low = speed < MOVING_DEG_S
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], low.astype(np.int8), [0]])))
     still = np.zeros(speed.shape[0], dtype=bool)
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+    for start, stop in true_runs(speed < MOVING_DEG_S):
         if np.any(speed[start:stop] < STILL_DEG_S):
             still[start:stop] = True
     return still
