@@ -450,7 +450,7 @@ def hysteresis_in_mm() -> tuple[Recording, dict]:
         "an offset leaks into the static map: the ridge shrinks the map's constant like its "
         "other columns (10⁴ mm leaves 0.835 mm after the static map instead of 0.604); "
         "leaving it unshrunk fixes this and changes three other tests' outcomes "
-        "(docs/discrepancy.md, Outputs)")))])
+        "(docs/discrepancy.md, Known limitations)")))])
 def test_a_recording_in_other_units_names_the_same_effects_with_the_same_figures(
         hysteresis_in_mm, scale, offset):
     """Readings in metres, in micrometres, with their sign turned (a sensor wired the
