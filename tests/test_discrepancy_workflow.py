@@ -885,6 +885,52 @@ def test_readings_ahead_of_the_motion_capture_are_a_clock_offset_not_an_effect(c
     assert "ahead of the motion capture, which no suit can do" in markdown(outcome.summary)
 
 
+def _clock_rate(rec: Recording, ppm: float) -> Recording:
+    """``rec`` with its motion capture stamped by a clock ``ppm`` parts per million fast
+    (negative: slow) against the sensors', the two clocks together at its first sample."""
+    stream = rec.mocap["shoulder"]
+    t = stream.t[0] + (stream.t - stream.t[0]) * (1.0 + ppm * 1e-6)
+    return replace(rec, mocap={"shoulder": replace(stream, t=t)})
+
+
+def test_motion_capture_read_at_another_rate_is_read_along_the_grid():
+    """``mocap_skew`` reads the angles at grid time t at t + late + skew·(t − t₀): a trial so
+    read from a recording stamped by a clock that fast is the trial of the recording on
+    time."""
+    rec = make_recording(Case("clean", "lib", 1, seed=101, duration_s=30.0))
+    on_time = prepare_trial(rec, "on time")
+    skew = 300e-6
+    read = prepare_trial(_clock_rate(rec, 300.0), "fast", 0.0, None, skew)
+    assert read.mocap_skew == skew
+    np.testing.assert_allclose(read.angles, on_time.angles, atol=1e-9)
+    unread = prepare_trial(_clock_rate(rec, 300.0), "fast")
+    assert np.max(np.abs(unread.angles - on_time.angles)) > 0.1  # degrees, 9 ms at the end
+
+
+@pytest.mark.parametrize("ppm", [300.0, -300.0])
+def test_motion_capture_on_a_clock_of_another_rate_is_read_at_that_rate(clean_101, ppm):
+    """Motion capture whose clock runs 300 ppm fast or slow against the sensors' (18 ms over
+    the minute): the readings' lead grows or falls through the recording, which neither a
+    clock offset nor a suit's lag follows. Read at the rate the lead gives, the static map
+    leaves what it leaves on time, and nothing is named; without it a fast clock left 0.241
+    mm for 0.161 and a slow one was named lag from 0.427 mm."""
+    rec, gap_on_time = clean_101
+    outcome = run(_clock_rate(rec, ppm), "drifting")
+    skew = outcome.summary["clock_skew"]
+    assert skew["applied"] and skew["mocap_skew_ppm"] == pytest.approx(ppm, rel=0.05)
+    assert outcome.summary["effects"] == []
+    assert outcome.before.gap < 1.02 * gap_on_time
+    assert "ppm" in markdown(outcome.summary)
+
+
+def test_a_clock_on_time_is_read_at_its_rate(clean_101):
+    """A recording whose two clocks agree has no trend in its readings' lead to read away:
+    ``clock_skew`` is None, as is the offset."""
+    rec, _ = clean_101
+    summary = run(rec, "on time").summary
+    assert summary["clock_skew"] is None and summary["clock_offset"] is None
+
+
 def test_a_relaxation_that_reads_ahead_is_left_to_the_effects(clean_101):
     """Readings that overshoot a move and relax back over 1 s (y + 0.1·(y − its 1 s
     low-pass)) run 20 ms ahead of the pose to first order, and reading the motion capture

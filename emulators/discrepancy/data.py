@@ -112,6 +112,9 @@ class Trial:
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
         mocap_late_s: s, how much later than the sensors' clock the motion capture stamps
             its samples (a clock offset); ``angles`` are read that much later.
+        mocap_skew: s per s, how much faster the motion capture's clock runs than the
+            sensors' (a clock rate difference): ``angles`` at grid time t are read a further
+            ``mocap_skew`` · (t − the grid's first time) late.
         mocap_low_pass_hz: the cutoff the motion capture's angles were low-passed at
             (:func:`smooth_angles`), Hz; None: read as sampled.
         cache: what the fits derive from this trial (its fit rows, from ``valid`` and
@@ -137,6 +140,7 @@ class Trial:
     placed_by: str = FRAME_COUNTER
     mocap_late_s: float = 0.0
     mocap_low_pass_hz: float | None = None
+    mocap_skew: float = 0.0
     cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
@@ -156,13 +160,14 @@ def _joint(rec: Recording) -> str:
 
 
 def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float = 0.0,
-                  mocap_low_pass_hz: float | None = None) -> Trial:
+                  mocap_low_pass_hz: float | None = None, mocap_skew: float = 0.0) -> Trial:
     """Put a recording on its uniform frame grid and split it into held-out blocks.
 
     ``mocap_late_s``: a clock offset, s: the pose at sensor time t is the mocap's at
-    t + ``mocap_late_s``. ``mocap_low_pass_hz``: low-pass the mocap's angles at this
-    cutoff (:func:`smooth_angles`); None: as sampled. Either way they are made continuous
-    across wraps (:func:`continuous_angles`).
+    t + ``mocap_late_s`` + ``mocap_skew`` · (t − t₀), t₀ the first time of the sensors'
+    grid (``mocap_skew``: a clock rate difference, s per s). ``mocap_low_pass_hz``:
+    low-pass the mocap's angles at this cutoff (:func:`smooth_angles`); None: as sampled.
+    Either way they are made continuous across wraps (:func:`continuous_angles`).
 
     Sensors without usable readings (:func:`unusable_sensors`) are left out and listed in
     ``Trial.ignored``: one dead channel should not hide what the others show.
@@ -215,7 +220,7 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
             f"{name}: motion capture ({t_mocap[0]:.6g}–{t_mocap[-1]:.6g} s) and sensors "
             f"({t[0]:.6g}–{t[-1]:.6g} s) do not overlap in time; the workflow needs both on "
             "one clock")
-    read = t + mocap_late_s  # the mocap's clock
+    read = t + mocap_late_s + mocap_skew * (t - t[0])  # the mocap's clock
     inside = (read >= t_mocap[0]) & (read <= t_mocap[-1]) & ~in_mocap_gap(read, t_mocap)
     moving = [k for k in range(raw.shape[1]) if np.ptp(raw[:, k]) > 1e-6]
     if not moving:
@@ -243,7 +248,7 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
                   units=rec.sensor_units, rate_hz=rate, blocks=blocks,
                   scored=valid.copy(), ignored=ignored, spikes=spiked.sum(axis=0),
                   placed_by=placed_by, mocap_late_s=mocap_late_s,
-                  mocap_low_pass_hz=low_pass_hz)
+                  mocap_low_pass_hz=low_pass_hz, mocap_skew=mocap_skew)
     trial.noise = noise_floor(trial)
     return trial
 

@@ -22,7 +22,7 @@ from exohil.emulators.discrepancy.localise import (
     motion,
 )
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
-from exohil.emulators.discrepancy.timing import clock_words, filter_words
+from exohil.emulators.discrepancy.timing import clock_words, filter_words, skew_words
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import Outcome, map_words
 from exohil.formats.atomic import write_bytes
@@ -151,13 +151,16 @@ def _refined_count(refined: dict, units: str) -> str:
             f"{refined['blocks_needed']}){alone}.")
 
 
-def _clock_lines(clock: dict | None, u: str) -> list[str]:
-    """The clock offset's evidence (``clock_offset`` of the JSON) as a paragraph; none where
-    the readings do not run ahead of the motion capture."""
-    if clock is None:
-        return []
-    words = clock_words(clock, u)
-    return [words[0].upper() + words[1:] + ".", ""]
+def _clock_lines(summary: dict, u: str) -> list[str]:
+    """The clock offset's and the clock rate's evidence (``clock_offset`` and
+    ``clock_skew`` of the JSON) as a paragraph each; none where the readings do not run
+    ahead of the motion capture, nor their lead change with time."""
+    lines = []
+    for key, say in (("clock_offset", clock_words), ("clock_skew", skew_words)):
+        if summary.get(key) is not None:
+            words = say(summary[key], u)
+            lines += [words[0].upper() + words[1:] + ".", ""]
+    return lines
 
 
 def _filter_sentence(summary: dict, units: str) -> str:
@@ -443,7 +446,7 @@ def markdown(summary: dict) -> str:
              f"{summary['heldout_blocks']}-fold blocked cross-validation): "
              f"{summary['gap_before']:.4g} {u} before, {summary['gap_after']:.4g} {u} after; "
              f"noise floor {summary['noise_floor']:.4g} {u}.", "",
-             *_clock_lines(summary.get("clock_offset"), u),
+             *_clock_lines(summary, u),
              f"| step | effect | held-out gap ({u}) | removed RMS ({u}) | blocks improved |",
              "|---|---|---|---|---|",
              f"| 0 | calibrated static map ({map_words(calibrated)}) | "

@@ -1,8 +1,11 @@
-"""How the motion capture is read against the readings: its clock offset and its filter.
+"""How the motion capture is read against the readings: its clock offset, its clock rate
+and its filter.
 
-Both are calibration of the recording, not effects of the suit, and both are chosen by the
+Each is calibration of the recording, not an effect of the suit, and each is chosen by the
 sensors on held-out blocks. Readings that run ahead of the motion capture mean its clock is
 late (:func:`clock_offset`, and once the effects are modelled :func:`lead_after_effects`);
+a lead that grows or shrinks steadily over the recording means the two clocks run at
+different rates (:func:`clock_skew`);
 angles that hold more above ``MOCAP_CUTOFF_HZ`` than the readings follow are a tracker's
 noise and are low-passed (:func:`mocap_filter`).
 """
@@ -50,6 +53,57 @@ def lead_s(trial: Trial, model: Fit) -> tuple[float, np.ndarray]:
     return (num / den if den > 0 else 0.0), slope
 
 
+def _lead_terms(trial: Trial, model: Fit) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                   np.ndarray]:
+    """What the readings' lead is fitted from: the rate dŝ/dt (N, S) of ``model``'s
+    prediction, τ (N,) = t − the grid's first time (s), and per frame Σ w·(dŝ/dt)² and
+    Σ w·(dŝ/dt)·r (N,) over the sensors of its scored held-out residual r, each sensor
+    weighted by the inverse of its noise variance (as in :func:`lead_s`)."""
+    slope = np.gradient(model.prediction, axis=0) * trial.rate_hz
+    tau = trial.t - trial.t[0]
+    scored = np.isfinite(model.residual)
+    weight = 1.0 / np.maximum(trial.noise, np.finfo(float).tiny) ** 2
+    a = np.where(scored, slope, 0.0)
+    aa = np.sum(a * a * weight, axis=1)
+    ar = np.sum(a * np.where(scored, model.residual, 0.0) * weight, axis=1)
+    return slope, tau, aa, ar
+
+
+def _line(tau: np.ndarray, aa: np.ndarray, ar: np.ndarray) -> tuple[float, float]:
+    """Least-squares d0, d1 of the lead d0 + d1·τ from the per-frame sums of the rows given
+    (0, 0 where they cannot tell a line)."""
+    gram = np.array([[aa.sum(), (aa * tau).sum()], [(aa * tau).sum(), (aa * tau**2).sum()]])
+    if np.linalg.det(gram) <= 1e-12 * gram[0, 0] * gram[1, 1]:
+        return 0.0, 0.0
+    d0, d1 = np.linalg.solve(gram, np.array([ar.sum(), (ar * tau).sum()]))
+    return float(d0), float(d1)
+
+
+def lead_trend(trial: Trial, model: Fit) -> tuple[float, float]:
+    """The readings' lead over the motion capture as a line in time, d0 + d1·τ (d0 in s, d1
+    in s per s, τ = t − the grid's first time, s): least squares of the held-out residual
+    on dŝ/dt and τ·dŝ/dt over the scored frames (:func:`_lead_terms`)."""
+    _, tau, aa, ar = _lead_terms(trial, model)
+    return _line(tau, aa, ar)
+
+
+def held_out_trend(trial: Trial, model: Fit, floor: float) -> dict:
+    """Rules 1 and 2 (``floor``: the pooled noise floor) for the lead as a line in time over
+    the lead as a constant, each fitted to first order on the other folds and removed from
+    each held-out block: whether the lead changes with time in most blocks, told apart from
+    the noise that a line fitted to the same frames would follow."""
+    slope, tau, aa, ar = _lead_terms(trial, model)
+    constant, line = np.zeros(trial.n), np.zeros(trial.n)
+    for b in range(int(trial.blocks.max()) + 1):
+        out = trial.blocks == b
+        train = ~out
+        constant[out] = ar[train].sum() / aa[train].sum() if aa[train].sum() > 0 else 0.0
+        d0, d1 = _line(tau[train], aa[train], ar[train])
+        line[out] = d0 + d1 * tau[out]
+    return rules_on_blocks(block_mse(trial, model.residual - constant[:, None] * slope),
+                           block_mse(trial, model.residual - line[:, None] * slope), floor)
+
+
 def first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
     """The lead of ``model``'s readings (:func:`lead_s`) where it is positive and removing
     it from the held-out residual to first order clears rules 1 and 2; else None."""
@@ -62,13 +116,15 @@ def first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
 
 def read_later(rec: Recording, name: str, trial: Trial, lead: float, spec: Spec | None,
                 refit: Callable[[Trial, Inputs], Fit]) -> tuple[Trial, Inputs, Fit]:
-    """The recording read as ``trial`` was (its motion capture filtered alike) but ``lead``
-    s later, and refitted (``refit``, on inputs scaled for ``spec``), up to ``CLOCK_STEPS``
-    times, each adding the lead that remains, until it is within a tenth of a frame."""
+    """The recording read as ``trial`` was (its motion capture filtered and its clock rate
+    taken alike) but ``lead`` s later, and refitted (``refit``, on inputs scaled for
+    ``spec``), up to ``CLOCK_STEPS`` times, each adding the lead that remains, until it is
+    within a tenth of a frame."""
     late = trial.mocap_late_s
     for _ in range(CLOCK_STEPS):
         late += lead
-        shifted, inputs = read_trial(rec, name, late, trial.mocap_low_pass_hz, spec)
+        shifted, inputs = read_trial(rec, name, late, trial.mocap_low_pass_hz, spec,
+                                     trial.mocap_skew)
         model = refit(shifted, inputs)
         lead, _ = lead_s(shifted, model)
         if abs(lead) * shifted.rate_hz < 0.1:
@@ -77,11 +133,12 @@ def read_later(rec: Recording, name: str, trial: Trial, lead: float, spec: Spec 
 
 
 def read_trial(rec: Recording, name: str, late: float, low_pass_hz: float | None,
-          spec: Spec | None) -> tuple[Trial, Inputs]:
-    """The recording on its grid with the motion capture read ``late`` s late and
-    low-passed at ``low_pass_hz`` (None: as sampled), and its inputs scaled for ``spec``,
-    held-out frames scored where the other folds cover their pose."""
-    trial = prepare_trial(rec, name, late, low_pass_hz)
+          spec: Spec | None, skew: float = 0.0) -> tuple[Trial, Inputs]:
+    """The recording on its grid with the motion capture read ``late`` s late, its clock
+    running ``skew`` s per s fast, low-passed at ``low_pass_hz`` (None: as sampled), and its
+    inputs scaled for ``spec``, held-out frames scored where the other folds cover their
+    pose."""
+    trial = prepare_trial(rec, name, late, low_pass_hz, skew)
     inputs = make_inputs(trial, spec)
     restrict_to_coverage(trial, inputs.u)
     return trial, inputs
@@ -100,7 +157,7 @@ def mocap_filter(rec: Recording, name: str, trial: Trial, scaled: Inputs, static
     the smaller held-out gap is kept; the filtered trial then gets its static map chosen
     again (``static_map``).
     """
-    filtered = prepare_trial(rec, name, trial.mocap_late_s, MOCAP_CUTOFF_HZ)
+    filtered = prepare_trial(rec, name, trial.mocap_late_s, MOCAP_CUTOFF_HZ, trial.mocap_skew)
     if filtered.mocap_low_pass_hz is None:
         return trial, scaled, static, None
     inputs = make_inputs(filtered)
@@ -130,17 +187,24 @@ def filter_words(evidence: dict | None, units: str) -> str:
             f"{gaps}; the readings follow what it holds above that")
 
 
-def offset_evidence(late: float, without: Fit, later: Fit, floor: float) -> dict:
-    """Rules 1 and 2 for the motion capture read ``late`` s late (``later``) over
-    ``without``, the share of ``without``'s residual above the noise it explains, and
-    whether the offset is kept (``applied``: both rules and at least ``CLOCK_SHARE``)."""
-    rules = rules_on_blocks(without.block_mse, later.block_mse, floor)
+def reread_evidence(without: Fit, reread: Fit, floor: float) -> dict:
+    """Rules 1 and 2 for the motion capture read another way (``reread``) over ``without``,
+    the share of ``without``'s residual above the noise it explains, and whether that
+    reading is kept (``applied``: both rules and at least ``CLOCK_SHARE``)."""
+    rules = rules_on_blocks(without.block_mse, reread.block_mse, floor)
     excess = without.gap**2 - floor**2
-    share = (without.gap**2 - later.gap**2) / excess if excess > 0 else 0.0
-    return {"mocap_late_s": round(late, 6),
-            "applied": bool(late > 0.0 and rules["significant"] and share >= CLOCK_SHARE),
-            "gap_without": significant(without.gap), "gap_with": significant(later.gap),
+    share = (without.gap**2 - reread.gap**2) / excess if excess > 0 else 0.0
+    return {"applied": bool(rules["significant"] and share >= CLOCK_SHARE),
+            "gap_without": significant(without.gap), "gap_with": significant(reread.gap),
             "share_of_excess": round(share, 4), **rules}
+
+
+def offset_evidence(late: float, without: Fit, later: Fit, floor: float) -> dict:
+    """:func:`reread_evidence` for the motion capture read ``late`` s late (``later``),
+    kept only where it is read later."""
+    evidence = reread_evidence(without, later, floor)
+    return {"mocap_late_s": round(late, 6), **evidence,
+            "applied": bool(late > 0.0 and evidence["applied"])}
 
 
 def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
@@ -169,6 +233,67 @@ def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static
     if evidence["applied"]:
         return shifted, inputs, refit, evidence
     return trial, scaled, static, evidence
+
+
+def clock_skew(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
+               floor: float, static_map: MapFit) -> tuple[Trial, Inputs, Fit, dict | None]:
+    """The trial read with the motion capture's clock rate where the readings' lead over it
+    changes steadily with time, with its scaled inputs and static map (``static_map``,
+    refitted on the trial so read); the evidence (None: no such trend).
+
+    Two devices that stamp their samples with clocks of their own (a sensor board that
+    counts its frames at a nominal rate, a camera system with its own crystal) drift apart
+    by their rate difference: 100 ppm is 24 ms over four minutes, a lead that grows through
+    the recording where a suit's lag stays the same. The lead is fitted as a line in time
+    (:func:`lead_trend`); where removing that line to first order improves most held-out
+    blocks over removing a constant lead (:func:`held_out_trend`; the first order can fall
+    well short of what reading the motion capture so would remove, so rule 1 waits for the
+    refit), the motion capture is read with that rate (its offset at the start moved with
+    it, but never read earlier than stamped, as in :func:`clock_offset`: readings behind
+    the motion capture may be a lag), the map
+    refitted, up to ``CLOCK_STEPS`` times until what remains is within a tenth of a frame
+    at the recording's ends. The rate is kept where the refitted map clears rules 1
+    and 2 over the first and explains at least ``CLOCK_SHARE`` of what it left above the
+    noise (:func:`reread_evidence`).
+    """
+    trend = held_out_trend(trial, static, floor)
+    if trend["blocks_improved"] < trend["blocks_needed"] or not (
+            trend["delta_mse_without_best_block"] > 0):
+        return trial, scaled, static, None
+    d0, d1 = lead_trend(trial, static)
+    late, skew = trial.mocap_late_s, trial.mocap_skew
+    span = float(trial.t[-1] - trial.t[0])
+    for _ in range(CLOCK_STEPS):
+        late = max(late + d0, 0.0)
+        skew += d1
+        shifted, inputs = read_trial(rec, name, late, trial.mocap_low_pass_hz, None, skew)
+        refit = static_map(shifted, inputs)
+        d0, d1 = lead_trend(shifted, refit)
+        if abs(max(late + d0, 0.0) - late) * shifted.rate_hz < 0.1 and (
+                abs(d1) * span * shifted.rate_hz < 0.1):
+            break
+    evidence = {"mocap_skew_ppm": round(1e6 * skew, 3), "mocap_late_s": round(late, 6),
+                **reread_evidence(static, refit, floor)}
+    if evidence["applied"]:
+        return shifted, inputs, refit, evidence
+    return trial, scaled, static, evidence
+
+
+def skew_words(skew: dict, units: str) -> str:
+    """The clock rate's evidence (:func:`clock_skew`) as one sentence."""
+    ppm = skew["mocap_skew_ppm"]
+    head = (f"the readings' lead over the motion capture changes with time: the motion "
+            f"capture's clock runs {abs(ppm):.3g} ppm {'fast' if ppm > 0 else 'slow'} against "
+            f"the sensors'")
+    if skew["applied"]:
+        start = 1000.0 * skew["mocap_late_s"]
+        return (f"{head}, and is read at that rate from {start:.3g} ms late at the start (the "
+                f"static map's held-out gap {skew['gap_without']:.4g} -> "
+                f"{skew['gap_with']:.4g} {units}); the recording's timing, not the suit's")
+    return (f"{head} to first order, but read so the static map explains "
+            f"{skew['share_of_excess']:.0%} of what it left above the noise "
+            f"({skew['blocks_improved']} blocks improved of {skew['blocks_needed']} needed): "
+            f"left to the effects")
 
 
 def lead_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floor: float

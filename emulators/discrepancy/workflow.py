@@ -61,11 +61,13 @@ from exohil.emulators.discrepancy.rules import (
 )
 from exohil.emulators.discrepancy.timing import (
     clock_offset,
+    clock_skew,
     clock_words,
     filter_words,
     lead_after_effects,
     mocap_filter,
     read_trial,
+    skew_words,
 )
 from exohil.emulators.discrepancy.workers import forked_map, one_blas_thread, workers_for
 from exohil.formats.recording import Recording
@@ -412,7 +414,8 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
         return first
     trial, final = first.trial, first.after
     other = None if chosen["applied"] else MOCAP_CUTOFF_HZ
-    read, inputs = read_trial(rec, name, trial.mocap_late_s, other, final.spec)
+    read, inputs = read_trial(rec, name, trial.mocap_late_s, other, final.spec,
+                              trial.mocap_skew)
     refit = fit(read, inputs, final.spec)
     rules = rules_on_blocks(final.block_mse, refit.block_mse, pooled_noise(trial))
     if refit.gap >= final.gap or rules["blocks_improved"] < rules["blocks_needed"]:
@@ -471,6 +474,10 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                                     floor, static_map)
     if clock is not None:
         progress(f"    {clock_words(clock, trial.units)}")
+    trial, scaled, static_fit, skew = clock_skew(rec, name, trial, scaled, static_fit, floor,
+                                                 static_map)
+    if skew is not None:
+        progress(f"    {skew_words(skew, trial.units)}")
     if after_effects is not None:  # read late from the start: found after the effects
         here = clock if clock is not None and clock["applied"] else {
             "mocap_late_s": round(trial.mocap_late_s, 6), "applied": True}
@@ -590,6 +597,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
         "clock_offset": clock,
+        "clock_skew": skew,
         "static_map": _map_summary(spec, inputs, runs),
         "static_map_calibrated": calibrated,
         "heldout_blocks": int(trial.blocks.max()) + 1,
