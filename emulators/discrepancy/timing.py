@@ -45,12 +45,9 @@ def lead_s(trial: Trial, model: Fit) -> tuple[float, np.ndarray]:
     the least-squares d of the held-out residual on d·dŝ/dt over the scored frames, each
     sensor weighted by the inverse of its noise variance. A reading ahead by d is
     ŝ(t + d) ≈ ŝ + d·dŝ/dt."""
-    slope = np.gradient(model.prediction, axis=0) * trial.rate_hz
-    scored = np.isfinite(model.residual)
-    weight = 1.0 / np.maximum(trial.noise, np.finfo(float).tiny) ** 2
-    num = float(np.sum(np.where(scored, model.residual * slope, 0.0) * weight))
-    den = float(np.sum(np.where(scored, slope**2, 0.0) * weight))
-    return (num / den if den > 0 else 0.0), slope
+    slope, _, aa, ar = _lead_terms(trial, model)
+    den = float(aa.sum())
+    return (float(ar.sum()) / den if den > 0 else 0.0), slope
 
 
 def _lead_terms(trial: Trial, model: Fit) -> tuple[np.ndarray, np.ndarray, np.ndarray,
@@ -58,7 +55,7 @@ def _lead_terms(trial: Trial, model: Fit) -> tuple[np.ndarray, np.ndarray, np.nd
     """What the readings' lead is fitted from: the rate dŝ/dt (N, S) of ``model``'s
     prediction, τ (N,) = t − the grid's first time (s), and per frame Σ w·(dŝ/dt)² and
     Σ w·(dŝ/dt)·r (N,) over the sensors of its scored held-out residual r, each sensor
-    weighted by the inverse of its noise variance (as in :func:`lead_s`)."""
+    weighted by the inverse of its noise variance."""
     slope = np.gradient(model.prediction, axis=0) * trial.rate_hz
     tau = trial.t - trial.t[0]
     scored = np.isfinite(model.residual)
