@@ -253,27 +253,52 @@ def clock_skew(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: 
     and 2 over the first and explains at least ``CLOCK_SHARE`` of what it left above the
     noise (:func:`reread_evidence`).
     """
-    trend = held_out_trend(trial, static, floor)
-    if trend["blocks_improved"] < trend["blocks_needed"] or not (
-            trend["delta_mse_without_best_block"] > 0):
+    if not trend_passes(held_out_trend(trial, static, floor)):
         return trial, scaled, static, None
-    d0, d1 = lead_trend(trial, static)
-    late, skew = trial.mocap_late_s, trial.mocap_skew
-    span = float(trial.t[-1] - trial.t[0])
-    for _ in range(CLOCK_STEPS):
-        late = max(late + d0, 0.0)
-        skew += d1
-        shifted, inputs = read_trial(rec, name, late, trial.mocap_low_pass_hz, None, skew)
-        refit = static_map(shifted, inputs)
-        d0, d1 = lead_trend(shifted, refit)
-        if abs(max(late + d0, 0.0) - late) * shifted.rate_hz < 0.1 and (
-                abs(d1) * span * shifted.rate_hz < 0.1):
-            break
+    shifted, inputs, refit = read_at_rate(rec, name, trial, static, None, static_map,
+                                          earlier=False)
+    skew, late = shifted.mocap_skew, shifted.mocap_late_s
     evidence = {"mocap_skew_ppm": round(1e6 * skew, 3), "mocap_late_s": round(late, 6),
                 **reread_evidence(static, refit, floor)}
     if evidence["applied"]:
         return shifted, inputs, refit, evidence
     return trial, scaled, static, evidence
+
+
+def trend_passes(trend: dict) -> bool:
+    """Whether a lead that changes with time (:func:`held_out_trend`) passes the screen:
+    it improves most held-out blocks over a constant lead, also without its best block (rule
+    2; rule 1 waits for the refit, since the first order can fall well short of it)."""
+    return trend["blocks_improved"] >= trend["blocks_needed"] and bool(
+        trend["delta_mse_without_best_block"] > 0)
+
+
+def read_at_rate(rec: Recording, name: str, trial: Trial, model: Fit, spec: Spec | None,
+                 refit: MapFit, earlier: bool) -> tuple[Trial, Inputs, Fit]:
+    """The recording read as ``trial`` was (its motion capture filtered alike), with the
+    motion capture's clock rate and offset moved by ``model``'s lead line
+    (:func:`lead_trend`), and refitted (``refit``, on inputs scaled for ``spec``), up to
+    ``CLOCK_STEPS`` times, each adding the line that remains, until it is within a tenth of
+    a frame at the recording's ends. ``earlier``: whether the motion capture may be read
+    earlier than it is stamped (never before any effect: readings behind it may be a lag;
+    once a lag is modelled, it took the line's mean, so the line is read whole)."""
+    d0, d1 = lead_trend(trial, model)
+    late, skew = trial.mocap_late_s, trial.mocap_skew
+    span = float(trial.t[-1] - trial.t[0])
+
+    def moved(late: float, d0: float) -> float:
+        return late + d0 if earlier else max(late + d0, 0.0)
+
+    for _ in range(CLOCK_STEPS):
+        late = moved(late, d0)
+        skew += d1
+        shifted, inputs = read_trial(rec, name, late, trial.mocap_low_pass_hz, spec, skew)
+        fitted = refit(shifted, inputs)
+        d0, d1 = lead_trend(shifted, fitted)
+        if abs(moved(late, d0) - late) * shifted.rate_hz < 0.1 and (
+                abs(d1) * span * shifted.rate_hz < 0.1):
+            break
+    return shifted, inputs, fitted
 
 
 def skew_words(skew: dict, units: str) -> str:
@@ -282,11 +307,16 @@ def skew_words(skew: dict, units: str) -> str:
     head = (f"the readings' lead over the motion capture changes with time: the motion "
             f"capture's clock runs {abs(ppm):.3g} ppm {'fast' if ppm > 0 else 'slow'} against "
             f"the sensors'")
+    later = skew.get("after_effects")
+    if later is not None:
+        head += (f" (found once the effects were modelled: read so, the model explained "
+                 f"{later['share_of_excess']:.0%} of what it left above the noise)")
     if skew["applied"]:
         start = 1000.0 * skew["mocap_late_s"]
-        return (f"{head}, and is read at that rate from {start:.3g} ms late at the start (the "
-                f"static map's held-out gap {skew['gap_without']:.4g} -> "
-                f"{skew['gap_with']:.4g} {units}); the recording's timing, not the suit's")
+        gaps = (f" (the static map's held-out gap {skew['gap_without']:.4g} -> "
+                f"{skew['gap_with']:.4g} {units})" if "gap_without" in skew else "")
+        return (f"{head}, and is read at that rate from {start:.3g} ms late at the "
+                f"start{gaps}; the recording's timing, not the suit's")
     return (f"{head} to first order, but read so the static map explains "
             f"{skew['share_of_excess']:.0%} of what it left above the noise "
             f"({skew['blocks_improved']} blocks improved of {skew['blocks_needed']} needed): "
@@ -309,6 +339,28 @@ def lead_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floo
     shifted, _, refit = read_later(rec, name, trial, lead, final.spec,
                                    lambda tr, inp: fit(tr, inp, final.spec))
     return offset_evidence(shifted.mocap_late_s, final, refit, floor)
+
+
+def rate_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floor: float
+                       ) -> dict | None:
+    """Where the readings' lead over the motion capture of ``trial`` still changes steadily
+    with time once the effects are added (``final``, the final model; ``floor``, the pooled
+    noise floor), the clock rate and its evidence (:func:`reread_evidence`); None where no
+    trend passes the screen (:func:`trend_passes`).
+
+    A rate that a larger effect hid from the static map's residual (:func:`clock_skew`)
+    shows in the final model's, and is found the same way, the final model refitted with
+    the motion capture read at that rate (its effects' shapes kept, the coefficients
+    refitted). The line is read whole, earlier than stamped where it says so: a lag fitted
+    against a rate took the mean of its lead, which the refit keeps. Judged on that refit;
+    where kept, the workflow starts again with the rate alone (the offset at the start as
+    it was), so that the effects are fitted on the recording read at its rate."""
+    if not trend_passes(held_out_trend(trial, final, floor)):
+        return None
+    shifted, _, refit = read_at_rate(rec, name, trial, final, final.spec,
+                                     lambda tr, inp: fit(tr, inp, final.spec), earlier=True)
+    return {"mocap_skew_ppm": round(1e6 * shifted.mocap_skew, 3),
+            **reread_evidence(final, refit, floor)}
 
 
 def clock_words(clock: dict, units: str) -> str:

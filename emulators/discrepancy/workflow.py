@@ -66,6 +66,7 @@ from exohil.emulators.discrepancy.timing import (
     filter_words,
     lead_after_effects,
     mocap_filter,
+    rate_after_effects,
     read_trial,
     skew_words,
 )
@@ -365,26 +366,67 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
     with one_blas_thread():
         first = _run(rec, name, in_model, progress, processes)
         first = _filter_again(rec, name, in_model, progress, processes, first)
-        found = lead_after_effects(rec, name, first.trial, first.after,
-                                   pooled_noise(first.trial))
-        if found is None:
-            return first
-        effects = ", ".join(first.summary["effects"]) or "nothing"
-        late = 1000.0 * found["mocap_late_s"]
-        if not found["applied"]:
-            progress(f"    with {effects} added the readings run {late:.3g} ms ahead of the "
-                     f"motion capture to first order, but read so late the model explains "
-                     f"{found['share_of_excess']:.0%} of what it left above the noise "
-                     f"({found['blocks_improved']} blocks improved): left as it is")
-            return first
-        progress(f"    with {effects} added the readings run {late:.3g} ms ahead of the motion "
-                 f"capture (read so late the model leaves {found['gap_with']:.4g} against "
-                 f"{found['gap_without']:.4g} {first.trial.units}): again from the start, "
-                 f"with its clock {late:.3g} ms late")
-        kept_filter = first.summary["mocap_filter"]
-        again = _run(rec, name, in_model, progress, processes, found["mocap_late_s"], found,
-                     kept_filter if kept_filter and "after_effects" in kept_filter else None)
-        return _lower(first, again, progress)
+        first = _offset_again(rec, name, in_model, progress, processes, first)
+        return _rate_again(rec, name, in_model, progress, processes, first)
+
+
+def _offset_again(rec: Recording, name: str, in_model: tuple[str, ...],
+                  progress: Callable[[str], None], workers: int, first: Outcome) -> Outcome:
+    """``first``, or the workflow run again from the start with the motion capture read
+    later where the readings still run ahead of it once the effects are added
+    (:func:`~.timing.lead_after_effects`) and the second run ends lower."""
+    found = lead_after_effects(rec, name, first.trial, first.after, pooled_noise(first.trial))
+    if found is None:
+        return first
+    effects = ", ".join(first.summary["effects"]) or "nothing"
+    late = 1000.0 * found["mocap_late_s"]
+    if not found["applied"]:
+        progress(f"    with {effects} added the readings run {late:.3g} ms ahead of the "
+                 f"motion capture to first order, but read so late the model explains "
+                 f"{found['share_of_excess']:.0%} of what it left above the noise "
+                 f"({found['blocks_improved']} blocks improved): left as it is")
+        return first
+    progress(f"    with {effects} added the readings run {late:.3g} ms ahead of the motion "
+             f"capture (read so late the model leaves {found['gap_with']:.4g} against "
+             f"{found['gap_without']:.4g} {first.trial.units}): again from the start, "
+             f"with its clock {late:.3g} ms late")
+    again = _run(rec, name, in_model, progress, workers, found["mocap_late_s"], found,
+                 _filter_after_effects(first))
+    return _lower(first, again, progress)
+
+
+def _rate_again(rec: Recording, name: str, in_model: tuple[str, ...],
+                progress: Callable[[str], None], workers: int, first: Outcome) -> Outcome:
+    """``first``, or the workflow run again from the start with the motion capture read at
+    another clock rate where the readings' lead over it still changes with time once the
+    effects are added (:func:`~.timing.rate_after_effects`) and the second run ends lower.
+    The start's offset is kept as ``first`` read it: the effects took the lead's mean."""
+    found = rate_after_effects(rec, name, first.trial, first.after, pooled_noise(first.trial))
+    if found is None:
+        return first
+    effects = ", ".join(first.summary["effects"]) or "nothing"
+    ppm = found["mocap_skew_ppm"]
+    head = (f"    with {effects} added the readings' lead over the motion capture changes with "
+            f"time: its clock runs {abs(ppm):.3g} ppm {'fast' if ppm > 0 else 'slow'}")
+    if not found["applied"]:
+        progress(f"{head} to first order, but read so the model explains "
+                 f"{found['share_of_excess']:.0%} of what it left above the noise "
+                 f"({found['blocks_improved']} blocks improved): left as it is")
+        return first
+    progress(f"{head} (read so the model leaves {found['gap_with']:.4g} against "
+             f"{found['gap_without']:.4g} {first.trial.units}): again from the start, read at "
+             f"that rate")
+    again = _run(rec, name, in_model, progress, workers, first.trial.mocap_late_s,
+                 filter_found=_filter_after_effects(first), mocap_skew=1e-6 * ppm,
+                 rate_found=found)
+    return _lower(first, again, progress)
+
+
+def _filter_after_effects(first: Outcome) -> dict | None:
+    """How ``first`` read its motion capture where that was chosen with the effects in place
+    (:func:`_filter_again`), for a run again from the start; None: chosen again there."""
+    kept = first.summary["mocap_filter"]
+    return kept if kept and "after_effects" in kept else None
 
 
 def _lower(first: Outcome, again: Outcome, progress: Callable[[str], None]) -> Outcome:
@@ -434,13 +476,17 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
 
 def _run(rec: Recording, name: str, in_model: tuple[str, ...],
          progress: Callable[[str], None], workers: int, mocap_late_s: float = 0.0,
-         after_effects: dict | None = None, filter_found: dict | None = None) -> Outcome:
+         after_effects: dict | None = None, filter_found: dict | None = None,
+         mocap_skew: float = 0.0, rate_found: dict | None = None) -> Outcome:
     """:func:`run` with ``workers`` processes for a step's candidates, the motion capture
     read ``mocap_late_s`` late (found by :func:`~.timing.lead_after_effects`, whose evidence is
-    ``after_effects``) and, given ``filter_found`` (by :func:`_filter_again`), filtered as
-    it says instead of as :func:`~.timing.mocap_filter` would choose."""
+    ``after_effects``) on a clock ``mocap_skew`` s per s fast (found by
+    :func:`~.timing.rate_after_effects`, whose evidence is ``rate_found``) and, given
+    ``filter_found`` (by :func:`_filter_again`), filtered as it says instead of as
+    :func:`~.timing.mocap_filter` would choose."""
     low_pass = filter_found is not None and filter_found["applied"]
-    trial = prepare_trial(rec, name, mocap_late_s, MOCAP_CUTOFF_HZ if low_pass else None)
+    trial = prepare_trial(rec, name, mocap_late_s, MOCAP_CUTOFF_HZ if low_pass else None,
+                          mocap_skew)
     floors = trial.noise
     floor = pooled_noise(trial)
     placed = "" if trial.placed_by == FRAME_COUNTER else f" (placed by {trial.placed_by})"
@@ -478,6 +524,11 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                                  static_map)
     if skew is not None:
         progress(f"    {skew_words(skew, trial.units)}")
+    if rate_found is not None:  # read at its rate from the start: found after the effects
+        here = skew if skew is not None and skew["applied"] else {
+            "mocap_skew_ppm": round(1e6 * trial.mocap_skew, 3),
+            "mocap_late_s": round(trial.mocap_late_s, 6), "applied": True}
+        skew = {**here, "after_effects": rate_found}
     if after_effects is not None:  # read late from the start: found after the effects
         here = clock if clock is not None and clock["applied"] else {
             "mocap_late_s": round(trial.mocap_late_s, 6), "applied": True}
