@@ -22,7 +22,12 @@ from exohil.emulators.discrepancy.localise import (
     motion,
 )
 from exohil.emulators.discrepancy.profile import calibrated_suit, profile_dict, to_toml
-from exohil.emulators.discrepancy.timing import clock_words, filter_words, skew_words
+from exohil.emulators.discrepancy.timing import (
+    after_effects_words,
+    clock_words,
+    filter_words,
+    skew_words,
+)
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import Outcome, map_words
 from exohil.formats.atomic import write_bytes
@@ -154,12 +159,16 @@ def _refined_count(refined: dict, units: str) -> str:
 def _clock_lines(summary: dict, u: str) -> list[str]:
     """The clock offset's and the clock rate's evidence (``clock_offset`` and
     ``clock_skew`` of the JSON) as a paragraph each; none where the readings do not run
-    ahead of the motion capture, nor their lead change with time."""
+    ahead of the motion capture, nor their lead change with time. Then what the final
+    model's screens found (``timing_after_effects``) where it was not read so."""
     lines = []
     for key, say in (("clock_offset", clock_words), ("clock_skew", skew_words)):
         if summary.get(key) is not None:
             words = say(summary[key], u)
             lines += [words[0].upper() + words[1:] + ".", ""]
+    for key, found in summary.get("timing_after_effects", {}).items():
+        if found is not None and not (found["applied"] and found["run_again"]["kept"]):
+            lines += [f"With the effects in place {after_effects_words(key, found, u)}.", ""]
     return lines
 
 

@@ -363,6 +363,34 @@ def rate_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floo
             **reread_evidence(final, refit, floor)}
 
 
+def after_effects_words(key: str, found: dict, units: str) -> str:
+    """What a screen of the final model's timing found (``key``: ``clock_offset``,
+    :func:`lead_after_effects`, or ``clock_skew``, :func:`rate_after_effects`), in words,
+    from "the readings" on: how far the motion capture would be read, and whether that was
+    kept."""
+    if key == "clock_offset":
+        head = (f"the readings run {1000.0 * found['mocap_late_s']:.3g} ms ahead of the motion "
+                f"capture")
+    else:
+        ppm = found["mocap_skew_ppm"]
+        head = (f"the readings' lead over the motion capture changes with time: its clock runs "
+                f"{abs(ppm):.3g} ppm {'fast' if ppm > 0 else 'slow'}")
+    if not found["applied"]:
+        return (f"{head} to first order, but read so the model explains "
+                f"{found['share_of_excess']:.0%} of what it left above the noise "
+                f"({found['blocks_improved']} blocks improved of {found['blocks_needed']} "
+                f"needed): left as it is")
+    gaps = (f"read so the model leaves {found['gap_with']:.4g} against "
+            f"{found['gap_without']:.4g} {units}")
+    again = found.get("run_again")
+    if again is None:
+        return f"{head} ({gaps})"
+    if again["kept"]:
+        return f"{head} ({gaps}); the workflow ran again from the start, so read"
+    return (f"{head} ({gaps}), but the workflow run again from the start, so read, ended at "
+            f"{again['gap_after']:.4g} {units}: the first run was kept")
+
+
 def clock_words(clock: dict, units: str) -> str:
     """The clock offset's evidence (:func:`clock_offset`, :func:`lead_after_effects`) as
     one sentence."""

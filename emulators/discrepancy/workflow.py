@@ -60,6 +60,7 @@ from exohil.emulators.discrepancy.rules import (
     stops_leave_curve_nothing,
 )
 from exohil.emulators.discrepancy.timing import (
+    after_effects_words,
     clock_offset,
     clock_skew,
     clock_words,
@@ -378,21 +379,12 @@ def _offset_again(rec: Recording, name: str, in_model: tuple[str, ...],
     found = lead_after_effects(rec, name, first.trial, first.after, pooled_noise(first.trial))
     if found is None:
         return first
-    effects = ", ".join(first.summary["effects"]) or "nothing"
-    late = 1000.0 * found["mocap_late_s"]
     if not found["applied"]:
-        progress(f"    with {effects} added the readings run {late:.3g} ms ahead of the "
-                 f"motion capture to first order, but read so late the model explains "
-                 f"{found['share_of_excess']:.0%} of what it left above the noise "
-                 f"({found['blocks_improved']} blocks improved): left as it is")
-        return first
-    progress(f"    with {effects} added the readings run {late:.3g} ms ahead of the motion "
-             f"capture (read so late the model leaves {found['gap_with']:.4g} against "
-             f"{found['gap_without']:.4g} {first.trial.units}): again from the start, "
-             f"with its clock {late:.3g} ms late")
+        return _screened(first, first, "clock_offset", found, progress)
+    _screened(first, first, "clock_offset", found, progress, ": again from the start")
     again = _run(rec, name, in_model, progress, workers, found["mocap_late_s"], found,
                  _filter_after_effects(first))
-    return _lower(first, again, progress)
+    return _screened(_lower(first, again, progress), first, "clock_offset", found, again=again)
 
 
 def _rate_again(rec: Recording, name: str, in_model: tuple[str, ...],
@@ -404,22 +396,32 @@ def _rate_again(rec: Recording, name: str, in_model: tuple[str, ...],
     found = rate_after_effects(rec, name, first.trial, first.after, pooled_noise(first.trial))
     if found is None:
         return first
-    effects = ", ".join(first.summary["effects"]) or "nothing"
-    ppm = found["mocap_skew_ppm"]
-    head = (f"    with {effects} added the readings' lead over the motion capture changes with "
-            f"time: its clock runs {abs(ppm):.3g} ppm {'fast' if ppm > 0 else 'slow'}")
     if not found["applied"]:
-        progress(f"{head} to first order, but read so the model explains "
-                 f"{found['share_of_excess']:.0%} of what it left above the noise "
-                 f"({found['blocks_improved']} blocks improved): left as it is")
-        return first
-    progress(f"{head} (read so the model leaves {found['gap_with']:.4g} against "
-             f"{found['gap_without']:.4g} {first.trial.units}): again from the start, read at "
-             f"that rate")
+        return _screened(first, first, "clock_skew", found, progress)
+    _screened(first, first, "clock_skew", found, progress, ": again from the start")
     again = _run(rec, name, in_model, progress, workers, first.trial.mocap_late_s,
-                 filter_found=_filter_after_effects(first), mocap_skew=1e-6 * ppm,
-                 rate_found=found)
-    return _lower(first, again, progress)
+                 filter_found=_filter_after_effects(first),
+                 mocap_skew=1e-6 * found["mocap_skew_ppm"], rate_found=found)
+    return _screened(_lower(first, again, progress), first, "clock_skew", found, again=again)
+
+
+def _screened(outcome: Outcome, first: Outcome, key: str, found: dict,
+              progress: Callable[[str], None] | None = None, then: str = "",
+              again: Outcome | None = None) -> Outcome:
+    """``outcome`` with what a screen of ``first``'s final model found (``key``, JSON
+    ``timing_after_effects``; with ``run_again`` where the workflow ran again, ``again``)
+    recorded beside the screens ``first`` had, and said in a progress line (``then``: what
+    follows)."""
+    evidence = found if again is None else {
+        **found, "run_again": {"gap_after": significant(again.after.gap),
+                               "kept": outcome is again}}
+    outcome.summary["timing_after_effects"] = {
+        **first.summary["timing_after_effects"], key: evidence}
+    if progress is not None:
+        effects = ", ".join(first.summary["effects"]) or "nothing"
+        progress(f"    with {effects} added "
+                 f"{after_effects_words(key, evidence, first.trial.units)}{then}")
+    return outcome
 
 
 def _filter_after_effects(first: Outcome) -> dict | None:
@@ -649,6 +651,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "already_in_model": list(in_model),
         "clock_offset": clock,
         "clock_skew": skew,
+        "timing_after_effects": {"clock_offset": None, "clock_skew": None},
         "static_map": _map_summary(spec, inputs, runs),
         "static_map_calibrated": calibrated,
         "heldout_blocks": int(trial.blocks.max()) + 1,
