@@ -379,12 +379,9 @@ def _offset_again(rec: Recording, name: str, in_model: tuple[str, ...],
     found = lead_after_effects(rec, name, first.trial, first.after, pooled_noise(first.trial))
     if found is None:
         return first
-    if not found["applied"]:
-        return _screened(first, first, "clock_offset", found, progress)
-    _screened(first, first, "clock_offset", found, progress, ": again from the start")
-    again = _run(rec, name, in_model, progress, workers, found["mocap_late_s"], found,
-                 _filter_after_effects(first))
-    return _screened(_lower(first, again, progress), first, "clock_offset", found, again=again)
+    return _again_if_read_so(first, "clock_offset", found, progress, lambda: _run(
+        rec, name, in_model, progress, workers, found["mocap_late_s"], found,
+        _filter_after_effects(first)))
 
 
 def _rate_again(rec: Recording, name: str, in_model: tuple[str, ...],
@@ -396,13 +393,23 @@ def _rate_again(rec: Recording, name: str, in_model: tuple[str, ...],
     found = rate_after_effects(rec, name, first.trial, first.after, pooled_noise(first.trial))
     if found is None:
         return first
+    return _again_if_read_so(first, "clock_skew", found, progress, lambda: _run(
+        rec, name, in_model, progress, workers, first.trial.mocap_late_s,
+        filter_found=_filter_after_effects(first), mocap_skew=1e-6 * found["mocap_skew_ppm"],
+        rate_found=found))
+
+
+def _again_if_read_so(first: Outcome, key: str, found: dict, progress: Callable[[str], None],
+                      again: Callable[[], Outcome]) -> Outcome:
+    """``first`` with what a screen of its final model found (``found``, JSON
+    ``timing_after_effects[key]``) recorded and said; where the motion capture is to be read
+    so (``applied``), the lower of ``first`` and the workflow run again from the start so
+    read (``again``)."""
     if not found["applied"]:
-        return _screened(first, first, "clock_skew", found, progress)
-    _screened(first, first, "clock_skew", found, progress, ": again from the start")
-    again = _run(rec, name, in_model, progress, workers, first.trial.mocap_late_s,
-                 filter_found=_filter_after_effects(first),
-                 mocap_skew=1e-6 * found["mocap_skew_ppm"], rate_found=found)
-    return _screened(_lower(first, again, progress), first, "clock_skew", found, again=again)
+        return _screened(first, first, key, found, progress)
+    _screened(first, first, key, found, progress, ": again from the start")
+    rerun = again()
+    return _screened(_lower(first, rerun, progress), first, key, found, again=rerun)
 
 
 def _screened(outcome: Outcome, first: Outcome, key: str, found: dict,
