@@ -395,8 +395,7 @@ def _rate_again(rec: Recording, name: str, in_model: tuple[str, ...],
         return first
     return _again_if_read_so(first, "clock_skew", found, progress, lambda: _run(
         rec, name, in_model, progress, workers, first.trial.mocap_late_s,
-        filter_found=_filter_after_effects(first), mocap_skew=1e-6 * found["mocap_skew_ppm"],
-        rate_found=found))
+        filter_found=_filter_after_effects(first), rate_found=found))
 
 
 def _again_if_read_so(first: Outcome, key: str, found: dict, progress: Callable[[str], None],
@@ -404,30 +403,24 @@ def _again_if_read_so(first: Outcome, key: str, found: dict, progress: Callable[
     """``first`` with what a screen of its final model found (``found``, JSON
     ``timing_after_effects[key]``) recorded and said; where the motion capture is to be read
     so (``applied``), the lower of ``first`` and the workflow run again from the start so
-    read (``again``)."""
+    read (``again``), with that run's final gap and whether it was kept."""
+    said = (f"    with {', '.join(first.summary['effects']) or 'nothing'} added "
+            f"{after_effects_words(key, found, first.trial.units)}")
     if not found["applied"]:
-        return _screened(first, first, key, found, progress)
-    _screened(first, first, key, found, progress, ": again from the start")
+        progress(said)
+        return _recorded(first, first, key, found)
+    progress(f"{said}: again from the start")
     rerun = again()
-    return _screened(_lower(first, rerun, progress), first, key, found, again=rerun)
+    kept = _lower(first, rerun, progress)
+    return _recorded(kept, first, key, {**found, "run_again": {
+        "gap_after": significant(rerun.after.gap), "kept": kept is rerun}})
 
 
-def _screened(outcome: Outcome, first: Outcome, key: str, found: dict,
-              progress: Callable[[str], None] | None = None, then: str = "",
-              again: Outcome | None = None) -> Outcome:
-    """``outcome`` with what a screen of ``first``'s final model found (``key``, JSON
-    ``timing_after_effects``; with ``run_again`` where the workflow ran again, ``again``)
-    recorded beside the screens ``first`` had, and said in a progress line (``then``: what
-    follows)."""
-    evidence = found if again is None else {
-        **found, "run_again": {"gap_after": significant(again.after.gap),
-                               "kept": outcome is again}}
+def _recorded(outcome: Outcome, first: Outcome, key: str, evidence: dict) -> Outcome:
+    """``outcome`` with ``evidence`` of a screen of ``first``'s final model as its JSON
+    ``timing_after_effects[key]``, beside the screens ``first`` had."""
     outcome.summary["timing_after_effects"] = {
         **first.summary["timing_after_effects"], key: evidence}
-    if progress is not None:
-        effects = ", ".join(first.summary["effects"]) or "nothing"
-        progress(f"    with {effects} added "
-                 f"{after_effects_words(key, evidence, first.trial.units)}{then}")
     return outcome
 
 
@@ -483,19 +476,28 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
                   progress)
 
 
+def _read_from_the_start(evidence: dict | None, reading: dict, after_effects: dict) -> dict:
+    """The evidence of how a run from the start read its motion capture as found once the
+    effects were modelled (``after_effects``): its own static step's (``evidence``) where
+    that read it so too, else how it was read (``reading``), with ``after_effects``."""
+    here = evidence if evidence is not None and evidence["applied"] else {
+        **reading, "applied": True}
+    return {**here, "after_effects": after_effects}
+
+
 def _run(rec: Recording, name: str, in_model: tuple[str, ...],
          progress: Callable[[str], None], workers: int, mocap_late_s: float = 0.0,
          after_effects: dict | None = None, filter_found: dict | None = None,
-         mocap_skew: float = 0.0, rate_found: dict | None = None) -> Outcome:
+         rate_found: dict | None = None) -> Outcome:
     """:func:`run` with ``workers`` processes for a step's candidates, the motion capture
     read ``mocap_late_s`` late (found by :func:`~.timing.lead_after_effects`, whose evidence is
-    ``after_effects``) on a clock ``mocap_skew`` s per s fast (found by
-    :func:`~.timing.rate_after_effects`, whose evidence is ``rate_found``) and, given
+    ``after_effects``) on a clock as fast as ``rate_found`` says (its evidence, found by
+    :func:`~.timing.rate_after_effects`; None: the sensors' rate) and, given
     ``filter_found`` (by :func:`_filter_again`), filtered as it says instead of as
     :func:`~.timing.mocap_filter` would choose."""
     low_pass = filter_found is not None and filter_found["applied"]
     trial = prepare_trial(rec, name, mocap_late_s, MOCAP_CUTOFF_HZ if low_pass else None,
-                          mocap_skew)
+                          0.0 if rate_found is None else 1e-6 * rate_found["mocap_skew_ppm"])
     floors = trial.noise
     floor = pooled_noise(trial)
     placed = "" if trial.placed_by == FRAME_COUNTER else f" (placed by {trial.placed_by})"
@@ -533,15 +535,12 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                                  static_map)
     if skew is not None:
         progress(f"    {skew_words(skew, trial.units)}")
+    late = {"mocap_late_s": round(trial.mocap_late_s, 6)}
     if rate_found is not None:  # read at its rate from the start: found after the effects
-        here = skew if skew is not None and skew["applied"] else {
-            "mocap_skew_ppm": round(1e6 * trial.mocap_skew, 3),
-            "mocap_late_s": round(trial.mocap_late_s, 6), "applied": True}
-        skew = {**here, "after_effects": rate_found}
+        skew = _read_from_the_start(skew, {"mocap_skew_ppm": round(1e6 * trial.mocap_skew, 3),
+                                           **late}, rate_found)
     if after_effects is not None:  # read late from the start: found after the effects
-        here = clock if clock is not None and clock["applied"] else {
-            "mocap_late_s": round(trial.mocap_late_s, 6), "applied": True}
-        clock = {**here, "after_effects": after_effects}
+        clock = _read_from_the_start(clock, late, after_effects)
     spec = static_fit.spec
     inputs = make_inputs(trial, spec)
     for kind in in_model:
