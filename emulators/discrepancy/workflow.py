@@ -234,19 +234,24 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     raise ValueError(kind)
 
 
-def _static_input_again(trial: Trial, inputs: Inputs, cand: Fit) -> tuple[Fit, Inputs]:
+def _static_input_again(trial: Trial, inputs: Inputs, cand: Fit
+                        ) -> tuple[Fit, Inputs, dict | None]:
     """``cand`` refitted, up to ``STATIC_INPUT_ROUNDS`` times, with its history terms driven
     by its own static part (:func:`~.model.with_static_of`) for as long as that lowers the
-    held-out gap, and the inputs it was fitted with."""
+    held-out gap, the inputs it was fitted with, and what that did (JSON
+    ``evidence.own_static_input``: the rounds kept and the gap before them; None where no
+    term of ``cand`` reads ŝ)."""
     if not cand.spec.reads_static():
-        return cand, inputs
+        return cand, inputs, None
+    done = {"rounds": 0, "gap_before": significant(cand.gap)}
     for _ in range(STATIC_INPUT_ROUNDS):
         other = with_static_of(inputs, cand)
         refit = fit(trial, other, cand.spec)
         if refit.gap >= cand.gap:
             break
         cand, inputs = refit, other
-    return cand, inputs
+        done["rounds"] += 1
+    return cand, inputs, done
 
 
 def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence: dict,
@@ -565,7 +570,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     inputs = make_inputs(trial, spec)
     for kind in in_model:
         spec = refine(trial, inputs, kind, best_candidate(trial, inputs, kind, spec)).spec
-    base = fit(trial, inputs, spec) if in_model else static_fit
+    base = static_fit
+    if in_model:
+        base, inputs, _ = _static_input_again(trial, inputs, fit(trial, inputs, spec))
     before = base
     runs = [trial.sensor_names[j] for j in inputs.segment_sensors]
     calibrated = _map_summary(spec, inputs, runs)
@@ -620,11 +627,13 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         if previous == "lag":  # a lag named while a larger effect was
             # still missing was fitted against it: refit it once, with the next effect added
             cand = refine_lag_delay(trial, inputs, cand)
-        cand, inputs = _static_input_again(trial, inputs, cand)
+        cand, inputs, own_input = _static_input_again(trial, inputs, cand)
         previous = kind
         evidence = candidate_evidence(trial, base, cand, floor)
         if kind == "saturation":  # judged against the smooth curve when it was named
             evidence["against_smooth_curve"] = winners[0][2]["against_smooth_curve"]
+        if own_input is not None:
+            evidence["own_static_input"] = own_input
         if "refined" in winners[0][2]:  # a drift counted on the drift it would become
             low = winners[0][2]
             evidence["low_degrees"] = {
@@ -643,9 +652,11 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                       "evidence": {**evidence, "signature": sig, "refitted": refit,
                                    "alternatives": {k: e["heldout_gap"] for k, _, e in scored
                                                     if k != kind}}})
+        own = (f"; driven by its own static part: {own_input['gap_before']:.4g} before"
+               if own_input and own_input["rounds"] else "")
         progress(f"[{step}] added {kind}: held-out gap {cand.gap:.4g} {trial.units} "
-                 f"(tried {table})" + "".join(f"; {k} refitted: {_shape_words(p)}"
-                                              for k, p in refit.items()))
+                 f"(tried {table}){own}" + "".join(f"; {k} refitted: {_shape_words(p)}"
+                                                   for k, p in refit.items()))
         step += 1
     after = base
     left = remainder(trial, after, floor)
