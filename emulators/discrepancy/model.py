@@ -443,9 +443,14 @@ def static_terms(u: np.ndarray, degree: int, segments: np.ndarray,
     return np.hstack([legendre_products(u, degree)[0], local, segment_lengths(u, segments)])
 
 
+#: First element of the cache keys of :func:`static_basis` (which does not depend on ŝ, so
+#: :func:`with_static_of` keeps them).
+_BASIS = "B"
+
+
 def static_basis(inputs: Inputs, degree: int, local: bool = False) -> np.ndarray:
     """The static map's basis over the run's frames (cached per degree and local basis)."""
-    key = ("B", degree, local)
+    key = (_BASIS, degree, local)
     if key not in inputs.cache:
         inputs.cache[key] = static_terms(inputs.u, degree, inputs.segments,
                                          inputs.centres if local else None)
@@ -788,7 +793,7 @@ def with_static_of(inputs: Inputs, result: Fit) -> Inputs:
     basis = static_basis(inputs, spec.degree, spec.local)
     coef = np.column_stack([c[:basis.shape[1]] for c in result.coef])
     cache: dict = {key: kept for key, kept in inputs.cache.items()
-                   if isinstance(key, tuple) and key[0] == "B"}
+                   if isinstance(key, tuple) and key[0] == _BASIS}
     cache["lagged_terms"] = {lag: {key: kept for key, kept in terms.items()
                                    if key[0] == static_basis.__name__}
                              for lag, terms in inputs.cache.get("lagged_terms", {}).items()}

@@ -80,6 +80,7 @@ from exohil.formats.recording import Recording
 #: case in :func:`~.model.with_static_of`).
 STATIC_INPUT_ROUNDS = 2
 
+
 @dataclass
 class Outcome:
     """Everything the workflow found.
