@@ -15,7 +15,9 @@ held fixed as the *input* of the history-dependent terms) the model is
   direction it may instead be a cubic plus compact functions on the sphere (``local``),
   and with axial rotation it ends with the lengths of straight tendon runs.
 * H (``hysteresis``): Prandtl–Ishlinskii basis, ŝ − play_r(ŝ) for play operators of thresholds
-  r spread over the sensor's range; any weighted sum is a rate-independent loop.
+  r spread over the sensor's range; any weighted sum is a rate-independent loop. A named loop
+  may also take powers of each play's output (:func:`hysteresis_columns`): a loop whose
+  width changes with the level, as a Preisach operator's does.
 * C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
   relaxation toward the current stretch), an asymmetric build/recover state, or states
   that flow toward the stretch only while the joint holds still and recover while it
@@ -118,6 +120,9 @@ class Spec:
         local: the static map also has the local basis (:func:`local_terms`).
         local_ridge: the local functions' ridge (:class:`~.folds.Ridge`).
         hysteresis: play-operator term on.
+        hysteresis_degree: the degree of the hysteresis term in each play operator's output
+            (:func:`hysteresis_columns`): 1, a Prandtl–Ishlinskii loop of the same width at
+            every level; higher, a loop whose width changes with the level.
         creep_tau_s: time constants of the creep low-passes, s (empty = none).
         creep_quadratic: each low-pass also of (ŝ − centre)², a driver that is not
             proportional to the stretch (a fabric whose load stiffens, or eases, with it).
@@ -152,6 +157,7 @@ class Spec:
     local: bool = False
     local_ridge: float = LOCAL_RIDGES[0]
     hysteresis: bool = False
+    hysteresis_degree: int = 1
     creep_tau_s: tuple[float, ...] = ()
     creep_quadratic: bool = False
     creep_asym_s: tuple[float, ...] = ()
@@ -196,7 +202,8 @@ class Spec:
         """Where each effect term's coefficients sit in a sensor's coefficient vector, after
         ``n_static`` static columns (``n_play``: the hysteresis term's play operators)."""
         out, at = {}, n_static
-        for kind, width in (("hysteresis", n_play if self.hysteresis else 0),
+        for kind, width in (("hysteresis",
+                             n_play * self.hysteresis_degree if self.hysteresis else 0),
                             ("creep", len(self.creep_tau_s) * (2 if self.creep_quadratic else 1)
                              + (1 if self.creep_asym_s else 0)
                              + (2 if self.creep_hold_s else 0)),
@@ -223,7 +230,7 @@ class Spec:
         evidence)."""
         return {"degree": self.degree, "local": self.local,
                 **({"local_ridge": self.local_ridge} if self.local else {}),
-                "hysteresis": self.hysteresis,
+                "hysteresis": self.hysteresis, "hysteresis_degree": self.hysteresis_degree,
                 "creep_tau_s": list(self.creep_tau_s), "creep_quadratic": self.creep_quadratic,
                 "creep_asym_s": list(self.creep_asym_s),
                 "creep_hold_s": list(self.creep_hold_s),
@@ -533,11 +540,30 @@ def _segment_offset(z: np.ndarray, quad: np.ndarray, abc: np.ndarray) -> np.ndar
     return q_of(best[1])
 
 
-def hysteresis_columns(inputs: Inputs) -> np.ndarray:
-    """(N, S, K) Prandtl–Ishlinskii basis ŝ − play_r(ŝ)."""
-    if "H" not in inputs.cache:
-        inputs.cache["H"] = inputs.static[:, :, None] - play(inputs.static, inputs.thresholds)
-    return inputs.cache["H"]
+def hysteresis_columns(inputs: Inputs, degree: int = 1) -> np.ndarray:
+    """(N, S, K·degree) the hysteresis basis of every sensor: first the Prandtl–Ishlinskii
+    columns ŝ − p_r(ŝ) of its K play operators p_r, then, for each power m = 2…degree,
+    z(ŝ)ᵐ − z(p_r(ŝ))ᵐ with z = (level − centre) / half the p1–p99 spread of ŝ.
+
+    Any Preisach operator is a sum over thresholds r of some function of p_r(ŝ) (Brokate and
+    Sprekels, *Hysteresis and Phase Transitions*, 1996, ch. 2), of which Prandtl–Ishlinskii
+    keeps the linear part: its loops are as wide at every level. The powers let the width
+    change with the level (a Preisach density that is not uniform in its bias, an
+    exponential read-out of a loop in strain). Each is zero wherever p_r(ŝ) = ŝ, so no
+    column is a static function of ŝ: a transfer curve cannot pass for a loop."""
+    key = ("H", degree)
+    if key not in inputs.cache:
+        if "P" not in inputs.cache:  # the plays, shared by every degree
+            inputs.cache["P"] = play(inputs.static, inputs.thresholds)  # (N, S, K)
+        played = inputs.cache["P"]
+        cols = [inputs.static[:, :, None] - played]
+        if degree > 1:
+            half = (inputs.thresholds[:, 0] / PLAY_FRACTIONS[0] / 2.0)[None, :]
+            z_static = ((inputs.static - inputs.centre) / half)[:, :, None]
+            z_played = (played - inputs.centre[None, :, None]) / half[:, :, None]
+            cols += [z_static**m - z_played**m for m in range(2, degree + 1)]
+        inputs.cache[key] = np.concatenate(cols, axis=2)
+    return inputs.cache[key]
 
 
 def creep_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.ndarray:
@@ -657,7 +683,7 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
 
     own = []
     if spec.hysteresis:
-        own.append(lagged(hysteresis_columns)[:, j, :])
+        own.append(lagged(hysteresis_columns, spec.hysteresis_degree)[:, j, :])
     for tau in spec.creep_tau_s:
         own.append(lagged(creep_columns, tau, rate_hz)[:, j:j + 1])
     if spec.creep_quadratic:

@@ -137,6 +137,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
         },
         "terms": {
             "hysteresis": spec.hysteresis,
+            "hysteresis_degree": spec.hysteresis_degree,
             "creep_tau_s": list(spec.creep_tau_s),
             "creep_quadratic": spec.creep_quadratic,
             "creep_build_recover_s": list(spec.creep_asym_s),
@@ -237,6 +238,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
         sm, terms, sensors = data["static_map"], data["terms"], data["sensor"]
         spec = Spec(degree=int(sm["degree"]), local=bool(sm.get("local", False)),
                     hysteresis=bool(terms["hysteresis"]),
+                    hysteresis_degree=int(terms.get("hysteresis_degree", 1)),
                     creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
                     creep_quadratic=bool(terms.get("creep_quadratic", False)),
                     creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
@@ -250,6 +252,9 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                     drift_degree=int(terms["drift_degree"]),
                     drift_piecewise=bool(terms.get("drift_piecewise", False)),
                     saturation=bool(terms["saturation"]))
+        if spec.hysteresis_degree < 1:
+            raise ValueError(f"hysteresis_degree must be 1 or more, not {spec.hysteresis_degree}")
+        centred = spec.creep_quadratic or spec.hysteresis_degree > 1  # terms about the centre
         if spec.lag_kind == "rate_limit" and (
                 len(spec.lag_rates) != len(sensors) or not all(r > 0 for r in spec.lag_rates)):
             raise ValueError(f"a rate_limit lag needs a positive lag_rates_per_s per sensor "
@@ -265,7 +270,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
                         thresholds=np.asarray([s["play_thresholds"] for s in sensors]),
                         t_norm=np.empty(0),
                         t_span=(float(sm["time_span_s"][0]), float(sm["time_span_s"][1])),
-                        centre=np.asarray([float(s["static_centre"] if spec.creep_quadratic
+                        centre=np.asarray([float(s["static_centre"] if centred
                                                  else s.get("static_centre", 0.0))
                                            for s in sensors]),
                         segments=_segments(sm.get("segments", []), str(sm["inputs"])))

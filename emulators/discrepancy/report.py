@@ -202,16 +202,20 @@ PER_SENSOR_PARAMS = frozenset({
     "loop_width", "gain", "quadratic_gain_per_unit", "centre", "rate_per_s", "change",
     "mean_rate_per_s", "stops", "softness", "shape", "lower", "upper"})
 #: Parameters left to the JSON: the hysteresis term's play operators (a row per sensor of
-#: as many thresholds and weights as the model has plays).
-JSON_ONLY_PARAMS = frozenset({"play_thresholds", "weights"})
+#: as many thresholds and weights as the model has plays, and of the weights of each power
+#: of the plays' level).
+JSON_ONLY_PARAMS = frozenset({"play_thresholds", "weights", "level_weights"})
 
 
 #: What each parameter of ``steps[].params`` means, in the order the report explains them
 #: (a per-sensor one is a column of its step's table, the others follow the step's title).
 PARAMETERS = {
     "loop_width": "the falling branch minus the rising branch after an excursion wider than "
-                  "the widest play, sensor units: positive where the reading is higher on the "
-                  "way down than on the way up (it trails its input), negative where lower",
+                  "the widest play, sensor units, at the middle of the sensor's range: "
+                  "positive where the reading is higher on the way down than on the way up "
+                  "(it trails its input), negative where lower",
+    "level_degree": "the loop's degree in the level: 1, as wide at every level "
+                    "(Prandtl–Ishlinskii); 2 or 3, a width that changes along the range",
     "tau_s": "time constant(s), s: of each low-pass of the stretch (creep), or of the "
              "reading's first-order low-pass (lag)",
     "build_recover_s": "a creep that builds and recovers at different rates: its build and "
