@@ -71,9 +71,13 @@ from exohil.emulators.discrepancy.localise import (
     steps_words,
 )
 from exohil.emulators.discrepancy.model import (
+    PLAY_FRACTIONS,
     Fit,
+    Inputs,
     Spec,
     fit,
+    hysteresis_columns,
+    loop_width_terms,
     make_inputs,
     map_ridge,
     restrict_to_coverage,
@@ -1529,6 +1533,28 @@ def test_a_loop_wider_at_the_top_of_the_range_is_followed_at_every_level(clean_1
     _assert_the_profile_reproduces(outcome, tmp_path, (f"hysteresis_degree = {degree}",
                                                        "hysteresis_degree = 0"),
                                    "hysteresis_degree must be 1 or more")
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3])
+def test_the_loop_width_is_what_the_branches_differ_by_at_the_middle(degree):
+    """The loop width reported for a named hysteresis (``loop_width``) is the falling
+    branch less the rising one at the middle of the range, after an excursion past every
+    play: measured here on the columns themselves, with weights drawn at random, so the odd
+    powers of the level count (the widest play sits δ = r / half the spread = 0.5 from ŝ,
+    so its cube adds −2δ³ = −0.25 per unit weight)."""
+    spread = 10.0
+    x = np.concatenate([np.linspace(0.0, spread, 2001), np.linspace(spread, 0.0, 2001)[1:]])
+    inputs = Inputs(u=np.empty((0, 0)), input_kind="angles", angle_lo=np.zeros(1),
+                    angle_hi=np.ones(1), static=x[:, None], static_coef=np.empty(0),
+                    static_degree=1, thresholds=spread * np.asarray([PLAY_FRACTIONS]),
+                    t_norm=np.empty(0), t_span=(0.0, 1.0), centre=np.array([spread / 2]))
+    columns = hysteresis_columns(inputs, degree)[:, 0, :]  # (N, K·degree)
+    weights = np.random.default_rng(degree).normal(size=columns.shape[1])
+    reading = columns @ weights
+    rising, falling = reading[1000], reading[3000]  # both at x = spread / 2
+    assert x[1000] == pytest.approx(spread / 2) and x[3000] == pytest.approx(spread / 2)
+    width = np.sum(weights.reshape(degree, -1) * loop_width_terms(inputs.thresholds[0], degree))
+    assert width == pytest.approx(falling - rising, rel=1e-9)
 
 
 def test_a_drift_is_counted_on_the_drift_it_would_become():

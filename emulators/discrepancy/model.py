@@ -566,6 +566,18 @@ def hysteresis_columns(inputs: Inputs, degree: int = 1) -> np.ndarray:
     return inputs.cache[key]
 
 
+def loop_width_terms(thresholds: np.ndarray, degree: int) -> np.ndarray:
+    """(degree, K) what each hysteresis column (:func:`hysteresis_columns`) adds to the
+    loop's width at the middle of the sensor's range (ŝ = centre), per unit weight: the
+    falling branch (each play at ŝ + r) less the rising one (at ŝ − r), after an excursion
+    wider than the widest play. ŝ − play is −r falling and +r rising: −2r. A power m of the
+    level, z(ŝ)ᵐ − z(play)ᵐ with z(ŝ) = 0 and z(play) = ±δ (δ = r / half the spread), is
+    −δᵐ falling and −(−δ)ᵐ rising: 0 for m even, −2δᵐ for m odd."""
+    delta = thresholds / (thresholds[0] / PLAY_FRACTIONS[0] / 2.0)
+    rows = [-2.0 * thresholds] + [(-delta) ** m - delta**m for m in range(2, degree + 1)]
+    return np.vstack(rows)
+
+
 def creep_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.ndarray:
     """(N, S) ŝ low-passed with ``tau_s`` (the relaxing creep state)."""
     key = ("C", tau_s)

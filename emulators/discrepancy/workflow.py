@@ -47,6 +47,7 @@ from exohil.emulators.discrepancy.model import (
     Spec,
     drift_columns,
     fit,
+    loop_width_terms,
     make_inputs,
     restrict_to_coverage,
     static_basis,
@@ -182,11 +183,8 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     if kind == "hysteresis":
         n_play = inputs.thresholds.shape[1]
         weights = [c[cols] for c in result.coef]
-        # rising: ŝ − play = +r, and the rising branch reads low, so the full width
-        # (falling − rising) after a large excursion is −2 Σ w·r, at the centre of the
-        # range where the level's powers (degree > 1) add nothing to first order
-        width = [float(-2.0 * np.dot(w[:n_play], r)) for w, r in zip(weights, inputs.thresholds,
-                                                                      strict=True)]
+        width = [float(np.sum(w.reshape(-1, n_play) * loop_width_terms(r, spec.hysteresis_degree)))
+                 for w, r in zip(weights, inputs.thresholds, strict=True)]
         return {"loop_width": [significant(w) for w in width],
                 "play_thresholds": significant_list(inputs.thresholds),
                 "level_degree": spec.hysteresis_degree,
