@@ -540,6 +540,20 @@ def _segment_offset(z: np.ndarray, quad: np.ndarray, abc: np.ndarray) -> np.ndar
     return q_of(best[1])
 
 
+def half_spread(thresholds: np.ndarray) -> np.ndarray:
+    """(...) half the p1–p99 spread of ŝ, from the play thresholds (..., K) placed on it
+    (:data:`PLAY_FRACTIONS` of the spread)."""
+    return thresholds[..., 0] / PLAY_FRACTIONS[0] / 2.0
+
+
+def level(inputs: Inputs, x: np.ndarray) -> np.ndarray:
+    """z = (x − centre) / half the p1–p99 spread of ŝ, per sensor, for levels x (N, S, ...)
+    in sensor units: −1…1 over the middle of ŝ's range."""
+    extra = (1,) * (x.ndim - 2)
+    return ((x - inputs.centre.reshape(-1, *extra))
+            / half_spread(inputs.thresholds).reshape(-1, *extra))
+
+
 def hysteresis_columns(inputs: Inputs, degree: int = 1) -> np.ndarray:
     """(N, S, K·degree) the hysteresis basis of every sensor: first the Prandtl–Ishlinskii
     columns ŝ − p_r(ŝ) of its K play operators p_r, then, for each power m = 2…degree,
@@ -558,9 +572,7 @@ def hysteresis_columns(inputs: Inputs, degree: int = 1) -> np.ndarray:
         played = inputs.cache["P"]
         cols = [inputs.static[:, :, None] - played]
         if degree > 1:
-            half = (inputs.thresholds[:, 0] / PLAY_FRACTIONS[0] / 2.0)[None, :]
-            z_static = ((inputs.static - inputs.centre) / half)[:, :, None]
-            z_played = (played - inputs.centre[None, :, None]) / half[:, :, None]
+            z_static, z_played = level(inputs, inputs.static)[:, :, None], level(inputs, played)
             cols += [z_static**m - z_played**m for m in range(2, degree + 1)]
         inputs.cache[key] = np.concatenate(cols, axis=2)
     return inputs.cache[key]
@@ -573,7 +585,7 @@ def loop_width_terms(thresholds: np.ndarray, degree: int) -> np.ndarray:
     wider than the widest play. ŝ − play is −r falling and +r rising: −2r. A power m of the
     level, z(ŝ)ᵐ − z(play)ᵐ with z(ŝ) = 0 and z(play) = ±δ (δ = r / half the spread), is
     −δᵐ falling and −(−δ)ᵐ rising: 0 for m even, −2δᵐ for m odd."""
-    delta = thresholds / (thresholds[0] / PLAY_FRACTIONS[0] / 2.0)
+    delta = thresholds / half_spread(thresholds)
     rows = [-2.0 * thresholds] + [(-delta) ** m - delta**m for m in range(2, degree + 1)]
     return np.vstack(rows)
 
@@ -658,8 +670,7 @@ def curve_columns(inputs: Inputs) -> np.ndarray:
     """(N, S, 2) z² and z³ of each sensor's static prediction, z = (ŝ − centre) / half its
     p1–p99 spread: with the static map's own ŝ, any cubic transfer curve of the reading."""
     if "Q" not in inputs.cache:
-        half = inputs.thresholds[:, 0] / PLAY_FRACTIONS[0] / 2.0
-        z = (inputs.static - inputs.centre) / half
+        z = level(inputs, inputs.static)
         inputs.cache["Q"] = np.stack([z**2, z**3], axis=2)
     return inputs.cache["Q"]
 

@@ -261,15 +261,15 @@ def _static_input_again(trial: Trial, inputs: Inputs, cand: Fit
     return cand, inputs, done
 
 
-def _own_static_part(trial: Trial, inputs: Inputs, cand: Fit, kind: str
+def _own_static_part(trial: Trial, inputs: Inputs, cand: Fit, loop_named: bool
                      ) -> tuple[Fit, Inputs, dict | None]:
-    """:func:`_static_input_again`, and for a hysteresis just named (``kind``) with each
-    degree of its plays' level (``HYSTERESIS_DEGREES``, :func:`~.model.hysteresis_columns`)
-    as well: the one with the lowest held-out gap on its own static part is kept. Chosen on
-    the first ŝ instead, powers that follow what that ŝ got wrong can win and then leave
-    more once ŝ is the model's own (hysteresis/alt/m2/s1001: 0.2468 mm against the plain
-    loop's 0.2168)."""
-    if kind != "hysteresis":
+    """:func:`_static_input_again`, and where a hysteresis was just named (``loop_named``)
+    with each degree of its plays' level (``HYSTERESIS_DEGREES``,
+    :func:`~.model.hysteresis_columns`) as well: the one with the lowest held-out gap on its
+    own static part is kept. Chosen on the first ŝ instead, powers that follow what that ŝ
+    got wrong can win and then leave more once ŝ is the model's own
+    (hysteresis/alt/m2/s1001: 0.2468 mm against the plain loop's 0.2168)."""
+    if not loop_named:
         return _static_input_again(trial, inputs, cand)
     tried = [_static_input_again(trial, inputs, cand)]
     for degree in HYSTERESIS_DEGREES:
@@ -597,7 +597,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     base = static_fit
     if in_model:
         base, inputs, _ = _own_static_part(trial, inputs, fit(trial, inputs, spec),
-                                           "hysteresis" if spec.hysteresis else "")
+                                           spec.hysteresis)
         spec = base.spec
     before = base
     runs = [trial.sensor_names[j] for j in inputs.segment_sensors]
@@ -653,7 +653,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         if previous == "lag":  # a lag named while a larger effect was
             # still missing was fitted against it: refit it once, with the next effect added
             cand = refine_lag_delay(trial, inputs, cand)
-        cand, inputs, own_input = _own_static_part(trial, inputs, cand, kind)
+        cand, inputs, own_input = _own_static_part(trial, inputs, cand, kind == "hysteresis")
         previous = kind
         evidence = candidate_evidence(trial, base, cand, floor)
         if kind == "saturation":  # judged against the smooth curve when it was named
