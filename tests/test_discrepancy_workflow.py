@@ -7,6 +7,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from exohil.emulators.discrepancy.candidates import (
     drift_options,
     flows_within_holds,
     rate_limit_candidate,
+    recording_length,
 )
 from exohil.emulators.discrepancy.data import (
     BLOCK_S,
@@ -1410,7 +1412,6 @@ def test_stops_that_tie_with_the_curve_leave_it_something():
     blocks and worse in three explain the bend no better than the curve. (The third blind
     generator's rec 16 took a saturation second this way: 0.008658 V against the curve's
     0.008805, where its hidden effect is a sample-and-hold lag.)"""
-    from types import SimpleNamespace
 
 
     curve_blocks = np.full(8, 2.0)
@@ -2076,6 +2077,20 @@ def test_a_profile_with_a_gain_effect_offers_only_vocabulary_effects():
     assert name == "donning-b" and in_model == VOCABULARY
 
 
+def test_a_drift_may_take_one_function_per_span_of_the_whole_recording():
+    """A 60 s recording at 250 Hz spans 59.996 s from its first frame to its last, but lasts
+    60 s: a refined drift may take 12 functions (one per ``DRIFT_SPAN_S`` = 5 s), not 13.
+    Counted on the span between the frames, the 12 were lost to one frame (until
+    2026-12-02), so a wandering baseline kept knots 7.5 s apart."""
+    frames = SimpleNamespace(t=100.0 + np.arange(15000) / 250.0, rate_hz=250.0)
+    assert recording_length(frames) == pytest.approx(60.0)
+    counts = {d for d, piecewise in drift_options(recording_length(frames)) if piecewise}
+    assert max(counts) == 12, counts
+    shorter = SimpleNamespace(t=frames.t[:-1], rate_hz=250.0)  # one frame short of 60 s
+    assert max(d for d, piecewise in drift_options(recording_length(shorter))
+               if piecewise) == 8
+
+
 def test_a_slip_step_is_followed_by_a_piecewise_linear_drift(clean_101, tmp_path):
     """One sensor's offset steps by 2 mm in 50 ms at 60 % of the recording (a connector that
     slips). A polynomial of time rings around the step over the whole recording; knots every
@@ -2092,10 +2107,10 @@ def test_a_slip_step_is_followed_by_a_piecewise_linear_drift(clean_101, tmp_path
     assert s["effects"][:1] == ["drift"], s["effects"]
     spec = outcome.after.spec
     assert spec.drift_piecewise, spec
-    span = outcome.inputs.t_span[1] - outcome.inputs.t_span[0]
     polynomial = min(fit(outcome.trial, outcome.inputs,
                          replace(spec, drift_degree=d, drift_piecewise=False)).gap
-                     for d, piecewise in drift_options(span) if not piecewise)
+                     for d, piecewise in drift_options(recording_length(outcome.trial))
+                     if not piecewise)
     assert clean < s["gap_after"] < polynomial, (s, polynomial)
     drift = [s["steps"][0]["params"]] + [step["evidence"]["refitted"]["drift"]
                                          for step in s["steps"]

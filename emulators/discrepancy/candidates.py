@@ -346,21 +346,28 @@ def refine_drift(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     here = current.spec.drift_term()
     refined = min([current] + [fit(trial, inputs, replace(current.spec, drift_degree=d,
                                                            drift_piecewise=piecewise))
-                               for d, piecewise in drift_options(inputs.t_span[1]
-                                                                 - inputs.t_span[0])
+                               for d, piecewise in drift_options(recording_length(trial))
                                if (d, piecewise) != here],
                   key=lambda f: f.gap)
     inputs.cache["refined_drift"] = (current.spec, refined)
     return refined
 
 
-def drift_options(span_s: float) -> list[tuple[int, bool]]:
-    """(count, piecewise) of every drift a named drift is refined over on ``span_s`` seconds
-    of recording: Legendre degrees and piecewise-linear intervals, at most one function per
-    ``DRIFT_SPAN_S``."""
+def recording_length(trial: Trial) -> float:
+    """How long the trial's frames last, s: its first to last frame and the last frame's
+    period (a 60 s recording at 250 Hz spans 59.996 s from its first frame to its last)."""
+    return float(trial.t[-1] - trial.t[0]) + 1.0 / trial.rate_hz
+
+
+def drift_options(length_s: float) -> list[tuple[int, bool]]:
+    """(count, piecewise) of every drift a named drift is refined over on a recording
+    ``length_s`` seconds long (:func:`recording_length`): Legendre degrees and
+    piecewise-linear intervals, at most one function per ``DRIFT_SPAN_S``."""
     options = [(d, False) for d in DRIFT_DEGREES + DRIFT_REFINE_DEGREES]
     options += [(d, True) for d in DRIFT_REFINE_DEGREES]
-    return [(d, piecewise) for d, piecewise in options if d * DRIFT_SPAN_S <= span_s]
+    # a hair of tolerance: a length that is a whole number of spans is not lost to rounding
+    return [(d, piecewise) for d, piecewise in options
+            if d * DRIFT_SPAN_S <= length_s * (1.0 + 1e-9)]
 
 
 def _refine_creep(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
