@@ -78,7 +78,8 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     the missing effect, add it, and show the held-out gap shrink, step by step.
 
     Time and memory grow with the recording: a four-minute trial with seven tendons takes
-    45-65 s on two cores, a thirty-minute one ten minutes and 10 GB. Analyse a longer
+    30-65 s on two cores (the machine's hour moves it), a thirty-minute one ten minutes and
+    10 GB. Analyse a longer
     session in parts (exohil record cut), each of which holds out its own blocks; a
     recording that may need more memory than is available gets a warning line first.
 
