@@ -1412,8 +1412,6 @@ def test_stops_that_tie_with_the_curve_leave_it_something():
     blocks and worse in three explain the bend no better than the curve. (The third blind
     generator's rec 16 took a saturation second this way: 0.008658 V against the curve's
     0.008805, where its hidden effect is a sample-and-hold lag.)"""
-
-
     curve_blocks = np.full(8, 2.0)
     curve = SimpleNamespace(block_mse=curve_blocks, gap=float(np.sqrt(curve_blocks.mean())))
     nothing_added = {"beyond_noise": False}
