@@ -26,11 +26,8 @@ import numpy as np
 from exohil.estimator.dataset import Block
 from exohil.estimator.trained import TrainedEstimator
 from exohil.formats.measurement import Limit, Measurement
-from exohil.kinematics import humerus_direction
+from exohil.kinematics import OBSERVABLE_ELEVATION_DEG, humerus_direction
 
-#: Shoulder elevation (deg) from which the plane of elevation counts as observable: below it
-#: θ is ill-defined (undefined at φ = 0), see docs/conventions.md.
-OBSERVABLE_ELEVATION_DEG = 20.0
 #: Angles that wrap around (deg): an estimate of −179° for a true 179° is 2° off, not 358°.
 CIRCULAR_ANGLES = ("elv_angle",)
 

@@ -35,27 +35,17 @@ def memory_warning(frames: int, available: int | None) -> str | None:
 def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
     """The profile's name and the vocabulary effects its model already has."""
     from exohil.emulators.discrepancy import VOCABULARY
-    from exohil.emulators.discrepancy.profile import (
-        CALIBRATED_SCHEMA,
-        load_calibrated_profile,
-    )
-    from exohil.emulators.suit_profile import ProfileError, load_profile
+    from exohil.emulators.discrepancy.profile import CalibratedSuit, load_any_profile
+    from exohil.emulators.suit_profile import ProfileError
 
     if profile_path is None:
         return "calibrated", ()
     try:
-        import tomllib
-
-        schema = tomllib.loads(profile_path.read_text(encoding="utf-8")).get("schema")
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise click.ClickException(f"{profile_path}: not a readable suit profile ({exc})") from exc
-    try:
-        if schema == CALIBRATED_SCHEMA:
-            suit = load_calibrated_profile(profile_path)
-            return suit.name, tuple(e for e in suit.effects if e in VOCABULARY)
-        profile = load_profile(profile_path)
+        profile = load_any_profile(profile_path)
     except ProfileError as exc:
         raise click.ClickException(str(exc)) from exc
+    if isinstance(profile, CalibratedSuit):
+        return profile.name, tuple(e for e in profile.effects if e in VOCABULARY)
     kinds = {e.name for e in profile.effects.effects}
     return profile.name, tuple(k for k in VOCABULARY if k in kinds)
 

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from exohil.emulators.effects import EFFECT_TYPES
 from exohil.harness.cli_types import InputFile, OutputFile, Seed, refuse_overwriting_inputs
+
+if TYPE_CHECKING:  # imported when a command runs: `exohil --help` stays quick
+    from exohil.emulators.discrepancy.profile import CalibratedSuit
+    from exohil.formats.recording import Recording
 
 
 def _mot_files(protocol: str) -> list[Path]:
@@ -63,13 +68,17 @@ class EffectKind(click.Choice):
                    "seeded; docs/suit-model.md); or real motion from OpenSim .mot files "
                    "(comma-separated, concatenated in order).")
 @click.option("--profile", "profile_path", type=InputFile(), default=None,
-              help="Suit profile TOML (default: the packaged default profile).")
+              help="Suit profile TOML (default: the packaged default profile), or a "
+                   "calibrated suit profile written by `exohil discrepancy` "
+                   "(DIR/suit_profile.toml).")
 @click.option("--seed", type=Seed(), default=0, show_default=True,
               help="Seed for the protocol and every random effect.")
 @click.option("--without", "without", multiple=True, metavar="KIND",
               type=EffectKind(),
               help="Drop effects of this kind (hysteresis, creep, saturation, lag, drift, noise, "
-                   "quantization, dropout, gain) from the profile's chain (repeatable).")
+                   "quantization, dropout, gain) from the profile's chain (repeatable). A "
+                   "calibrated profile takes only 'noise': its effects were fitted together "
+                   "with its static map.")
 @click.option("--out", "out_path", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
 def simulate_command(protocol: str, profile_path: Path | None, seed: int,
@@ -78,6 +87,9 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
 
     Sensors (tendon path lengths, mm) at 250 Hz after the profile's effect chain, ground-truth
     shoulder angles at 120 Hz on /mocap/shoulder, movement segments and provenance metadata.
+    With a calibrated profile (from `exohil discrepancy`) the sensors are those it was
+    calibrated on, in its units and at its rate, with its white noise; a movement that
+    leaves the angles it was calibrated on gets a warning line (the map extrapolates there).
 
     \b
     Examples:
@@ -85,21 +97,68 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
       exohil simulate --protocol calibration --seed 3 \\
           --profile emulators/profiles/donning-b.toml --out calibration.mcap
       exohil simulate --protocol mot:ABD01.mot,FLX01.mot --without noise --out real.mcap
+      exohil simulate --profile disc/suit_profile.toml --out calibrated.mcap
     """
-    from exohil.emulators.simulate import simulate
-    from exohil.emulators.suit_profile import ProfileError, load_default_profile, load_profile
-    from exohil.formats.errors import RecordingError
-    from exohil.formats.recording_writer import write_recording
+    from exohil.emulators.discrepancy.profile import CalibratedSuit, load_any_profile
+    from exohil.emulators.suit_profile import ProfileError, load_default_profile
 
     refuse_overwriting_inputs([("--out", out_path)], [profile_path, *_mot_files(protocol)])
     try:
-        profile = load_default_profile() if profile_path is None else load_profile(profile_path)
+        profile = load_default_profile() if profile_path is None else load_any_profile(
+            profile_path)
     except ProfileError as exc:
         raise click.ClickException(str(exc)) from exc
+    if isinstance(profile, CalibratedSuit):
+        recording = _calibrated(profile, protocol, seed, without)
+    else:
+        from exohil.emulators.simulate import simulate
+
+        trajectory = _trajectory(protocol, seed)
+        click.echo(f"simulating {trajectory.duration_s:.1f} s of {trajectory.source} on suit "
+                   f"profile '{profile.name}'", err=True)
+        recording = simulate(trajectory, profile, seed, effects=profile.effects.without(*without))
+    _write(out_path, recording)
+
+
+def _calibrated(suit: CalibratedSuit, protocol: str, seed: int,
+                without: tuple[str, ...]) -> Recording:
+    """The recording of the calibrated ``suit`` following ``protocol`` (noise-free with
+    ``--without noise``; any other ``--without`` is refused), with a warning line where the
+    movement leaves the angles the suit was calibrated on."""
+    from exohil.emulators.discrepancy.profile import (
+        outside_calibration,
+        simulate_calibrated_recording,
+    )
+    from exohil.emulators.suit_profile import ProfileError
+
+    others = sorted(set(without) - {"noise"})
+    if others:
+        raise click.ClickException(
+            f"--without {', '.join(others)}: a calibrated profile's effects "
+            f"({', '.join(suit.effects) or 'none'}) were fitted together with its static map, "
+            "so they cannot be dropped one by one; only --without noise applies")
     trajectory = _trajectory(protocol, seed)
-    click.echo(f"simulating {trajectory.duration_s:.1f} s of {trajectory.source} on suit "
-               f"profile '{profile.name}'", err=True)
-    recording = simulate(trajectory, profile, seed, effects=profile.effects.without(*without))
+    try:
+        outside = outside_calibration(suit, trajectory)
+    except ProfileError as exc:
+        raise click.ClickException(str(exc)) from exc
+    click.echo(f"simulating {trajectory.duration_s:.1f} s of {trajectory.source} on calibrated "
+               f"suit profile '{suit.name}' ({len(suit.sensors)} sensors, {suit.units}, "
+               f"{suit.rate_hz:.4g} Hz; effects: {', '.join(suit.effects) or 'none'})", err=True)
+    if outside:
+        lo, hi = suit.inputs.angle_lo, suit.inputs.angle_hi
+        click.echo("warning: the movement leaves the angles the profile was calibrated on ("
+                   + "; ".join(f"{a} {lo[k]:.0f}…{hi[k]:.0f}° on {100 * outside[a]:.1f} % of "
+                               f"the frames" for k, a in enumerate(suit.angles) if a in outside)
+                   + "): the calibrated map extrapolates there", err=True)
+    return simulate_calibrated_recording(trajectory, suit, seed, noise="noise" not in without)
+
+
+def _write(out_path: Path, recording: Recording) -> None:
+    """Write ``recording`` to ``out_path``; one error line where it cannot be written."""
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.recording_writer import write_recording
+
     try:
         write_recording(out_path, recording)
     except (OSError, RecordingError) as exc:

@@ -18,6 +18,7 @@ from exohil.kinematics.rotations import (
 )
 from exohil.kinematics.shoulder import (
     MOBL_RANGES,
+    OBSERVABLE_ELEVATION_DEG,
     isb_to_ms,
     isb_to_quat,
     ms_to_isb,
@@ -32,6 +33,7 @@ __all__ = [
     "NAO_JOINTS",
     "NAO_LIMITS",
     "NaoArm",
+    "OBSERVABLE_ELEVATION_DEG",
     "humerus_angles",
     "humerus_direction",
     "humerus_to_nao",

@@ -53,6 +53,11 @@ MOBL_ELV_ANGLE_AXIS = np.array([0.0048, 0.99908918, 0.04240001])
 MOBL_SHOULDER_ELV_AXIS = np.array([-0.99826136, 0.0023, 0.05889802])
 MOBL_SHOULDER_ROT_AXIS = MOBL_ELV_ANGLE_AXIS  # the coupled rotation uses the same axis
 
+#: Shoulder elevation φ, degrees (a convention every layer scores by, so it is in degrees
+#: like the files it is applied to), from which the plane of elevation θ counts as
+#: observable: below it θ is ill-defined, undefined at φ = 0 (docs/conventions.md).
+OBSERVABLE_ELEVATION_DEG = 20.0
+
 #: Ranges of the MoBL-ARMS coordinates, radians.
 MOBL_RANGES = {
     "elv_angle": (np.deg2rad(-90.0), np.deg2rad(130.0)),

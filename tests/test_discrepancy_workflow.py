@@ -87,6 +87,7 @@ from exohil.emulators.discrepancy.model import (
 from exohil.emulators.discrepancy.profile import (
     calibrated_suit,
     load_calibrated_profile,
+    outside_calibration,
     simulate_calibrated,
     simulate_calibrated_recording,
     write_calibrated_profile,
@@ -2004,6 +2005,62 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     second = json.loads((tmp_path / "b" / "discrepancy.json").read_text())
     assert second["already_in_model"] == summary["effects"]
     assert not set(second["effects"]) & set(summary["effects"])
+
+
+def test_simulate_takes_the_calibrated_profile_the_workflow_writes(hysteresis_outcome, tmp_path):
+    """`exohil simulate --profile DIR/suit_profile.toml` runs the calibrated suit: its sensors,
+    units and rate, the model's prediction (with --without noise, exactly) and its noise."""
+    from exohil.emulators.discrepancy.report import write_outputs
+    from exohil.emulators.protocols import calibration_protocol
+
+    _, outcome = hysteresis_outcome
+    write_outputs(outcome, tmp_path / "disc", "test", workers=1)
+    profile = tmp_path / "disc" / "suit_profile.toml"
+    suit = load_calibrated_profile(profile)
+    runs = {}
+    for name, extra in (("clean", ["--without", "noise"]), ("noisy", [])):
+        result = CliRunner().invoke(main, ["simulate", "--profile", str(profile), "--protocol",
+                                           "calibration", "--seed", "5", *extra, "--out",
+                                           str(tmp_path / f"{name}.mcap")])
+        assert result.exit_code == 0, result.output
+        assert f"on calibrated suit profile '{suit.name}'" in result.stderr
+        runs[name] = read_recording(tmp_path / f"{name}.mcap")
+    clean = runs["clean"]
+    assert clean.sensor_names == suit.sensors and clean.sensor_rate_hz == suit.rate_hz
+    assert clean.sensor_units == suit.units
+    expected = simulate_calibrated_recording(calibration_protocol(5), suit, 5, noise=False)
+    # recording format v1 keeps four decimals of a reading
+    np.testing.assert_allclose(clean.sensors.values, expected.sensors.values, rtol=0,
+                               atol=0.5e-4 + 1e-9)
+    noise = np.std(runs["noisy"].sensors.values - clean.sensors.values, axis=0)
+    np.testing.assert_allclose(noise, suit.noise, rtol=0.05)  # 15,000 draws per sensor
+    refused = CliRunner().invoke(main, ["simulate", "--profile", str(profile), "--without",
+                                        "creep", "--out", str(tmp_path / "x.mcap")])
+    assert refused.exit_code != 0 and len(refused.output.strip().splitlines()) == 1
+    assert "only --without noise applies" in refused.output
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_a_movement_beyond_the_calibrated_angles_is_counted(hysteresis_outcome):
+    """The share of a movement's frames beyond each calibrated angle's range, the plane of
+    elevation only where the elevation makes it a direction; a knee profile is refused."""
+    _, outcome = hysteresis_outcome
+    suit = calibrated_suit(outcome, "test")
+    (t_lo, p_lo), (t_hi, p_hi) = suit.inputs.angle_lo[:2], suit.inputs.angle_hi[:2]
+    inside = Trajectory(knot_t=np.array([0.0, 10.0]), interpolation="minimum_jerk",
+                        knot_deg=np.array([[t_lo, p_lo, 0.0], [t_hi, p_hi, 0.0]]),
+                        duration_s=10.0)
+    assert outside_calibration(suit, inside) == {}
+    # 10 s beyond the plane's range: raised to 60° of elevation, then hanging
+    beyond = Trajectory(knot_t=np.array([0.0, 10.0, 10.001, 20.0]),
+                        interpolation="minimum_jerk", duration_s=20.0,
+                        knot_deg=np.array([[t_hi + 20.0, 60.0, 0.0]] * 2
+                                          + [[t_hi + 20.0, 0.0, 0.0]] * 2))
+    share = outside_calibration(suit, beyond)
+    assert set(share) <= {"elv_angle", "shoulder_elv"}
+    assert share["elv_angle"] == pytest.approx(0.5, abs=0.01)
+    with pytest.raises(ProfileError, match="which a shoulder trajectory does not have"):
+        outside_calibration(replace(suit, angles=("knee_flexion",)), inside)
 
 
 def test_cli_errors_are_one_line(tmp_path):

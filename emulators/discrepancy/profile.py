@@ -31,13 +31,18 @@ from exohil.emulators.discrepancy.stops import Stops
 from exohil.emulators.discrepancy.workflow import Outcome
 from exohil.emulators.effects import Noise, Signal
 from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory
-from exohil.emulators.suit_profile import ProfileError, read_toml
+from exohil.emulators.suit_profile import ProfileError, SuitProfile, load_profile, read_toml
 from exohil.formats.atomic import write_text
 from exohil.formats.recording import AngleStream, Recording, SensorStream
+from exohil.kinematics import OBSERVABLE_ELEVATION_DEG
 
 CALIBRATED_SCHEMA = "exohil-calibrated-suit-profile"
 CALIBRATED_VERSION = 1
 LAG_KINDS = ("none", "first_order", "delay", "first_order_delay", "rate_limit")
+#: An angle this far (degrees) beyond the calibrated range still counts as inside it
+#: (:func:`outside_calibration`): about the reach within which the workflow counts a pose
+#: as covered by the calibration (``COVER_RADIUS``, a chord of 0.1, 5.7° of arm direction).
+RANGE_TOLERANCE_DEG = 5.0
 
 
 @dataclass(frozen=True)
@@ -295,6 +300,17 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
         raise ProfileError(f"{path}: malformed calibrated suit profile ({exc!r})") from exc
 
 
+def load_any_profile(path: str | Path) -> SuitProfile | CalibratedSuit:
+    """A suit profile of either schema, by its ``schema`` key: a calibrated one
+    (:func:`load_calibrated_profile`) or a geometric one
+    (:func:`~exohil.emulators.suit_profile.load_profile`); one :class:`ProfileError` line on
+    any problem."""
+    path = Path(path)
+    if read_toml(path, "suit profile").get("schema") == CALIBRATED_SCHEMA:
+        return load_calibrated_profile(path)
+    return load_profile(path)
+
+
 def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inputs:
     """The model's inputs for angles (N, A) in degrees (``suit.angles`` order) at times t."""
     u, _ = map_inputs(angles_deg, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
@@ -349,19 +365,27 @@ def simulate_calibrated(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndar
     return out
 
 
-def simulate_calibrated_recording(trajectory: Trajectory, suit: CalibratedSuit,
-                                  seed: int) -> Recording:
-    """A recording of the calibrated suit following a shoulder ``trajectory``: sensors at the
-    profile's rate with its white noise, exact angles on ``/mocap/shoulder`` at 120 Hz."""
+def _shoulder_angles(suit: CalibratedSuit, trajectory: Trajectory, t: np.ndarray
+                     ) -> np.ndarray:
+    """(N, A) the angles ``suit`` is driven by, in its order, of a shoulder ``trajectory``
+    sampled at times t (s), degrees; ProfileError where the suit is driven by others."""
     missing = [a for a in suit.angles if a not in ANGLE_NAMES]
     if missing:
         raise ProfileError(f"profile {suit.name!r} is driven by {missing}, which a shoulder "
                            "trajectory does not have")
+    return trajectory.sample(t)[:, [ANGLE_NAMES.index(a) for a in suit.angles]]
+
+
+def simulate_calibrated_recording(trajectory: Trajectory, suit: CalibratedSuit,
+                                  seed: int, noise: bool = True) -> Recording:
+    """A recording of the calibrated suit following a shoulder ``trajectory``: sensors at the
+    profile's rate with its white noise (none with ``noise`` False), exact angles on
+    ``/mocap/shoulder`` at 120 Hz."""
     t = trajectory.frame_times(suit.rate_hz)
-    sampled = trajectory.sample(t)
-    angles = sampled[:, [ANGLE_NAMES.index(a) for a in suit.angles]]
+    angles = _shoulder_angles(suit, trajectory, t)
     clean = Signal.from_values(t, simulate_calibrated(suit, t, angles))
-    noisy = Noise(sigma_mm=suit.noise.tolist()).apply(clean, np.random.default_rng(seed))
+    sigma = suit.noise if noise else np.zeros_like(suit.noise)
+    noisy = Noise(sigma_mm=sigma.tolist()).apply(clean, np.random.default_rng(seed))
     t_mocap = trajectory.frame_times(MOCAP_RATE_HZ)
     return Recording(
         sensor_names=suit.sensors,
@@ -372,6 +396,24 @@ def simulate_calibrated_recording(trajectory: Trajectory, suit: CalibratedSuit,
         segments=list(trajectory.segments),
         metadata={"generator": "exohil.emulators.discrepancy.profile", "seed": str(int(seed)),
                   "trajectory": trajectory.source, "suit_profile": suit.name})
+
+
+def outside_calibration(suit: CalibratedSuit, trajectory: Trajectory) -> dict[str, float]:
+    """Per angle the suit is driven by, the share of a shoulder ``trajectory``'s frames (at
+    the suit's rate) outside the range of that angle the suit was calibrated on, where the
+    calibrated map extrapolates, beyond ``RANGE_TOLERANCE_DEG``; only angles with such
+    frames. The plane of elevation counts only where the elevation is at least
+    :data:`~exohil.kinematics.OBSERVABLE_ELEVATION_DEG` (with the arm hanging it is
+    undefined, and any value names the same pose)."""
+    t = trajectory.frame_times(suit.rate_hz)
+    angles = _shoulder_angles(suit, trajectory, t)
+    lo, hi = suit.inputs.angle_lo, suit.inputs.angle_hi
+    outside = (angles < lo - RANGE_TOLERANCE_DEG) | (angles > hi + RANGE_TOLERANCE_DEG)
+    if "elv_angle" in suit.angles and "shoulder_elv" in suit.angles:
+        hanging = angles[:, suit.angles.index("shoulder_elv")] < OBSERVABLE_ELEVATION_DEG
+        outside[hanging, suit.angles.index("elv_angle")] = False
+    share = outside.mean(axis=0)
+    return {a: float(s) for a, s in zip(suit.angles, share, strict=True) if s > 0}
 
 
 def calibrated_suit(outcome: Outcome, name: str) -> CalibratedSuit:

@@ -519,8 +519,10 @@ def markdown(summary: dict) -> str:
     lines += _localisation_lines(summary)
     lines += ["", "![residual against time](residual_time.png)", "",
               "![residual against angle](residual_angle.png)", "",
-              "The updated model is `suit_profile.toml` (schema exohil-calibrated-suit-profile; "
-              "load with `exohil.emulators.discrepancy.load_calibrated_profile`).", ""]
+              "The updated model is `suit_profile.toml` (schema exohil-calibrated-suit-profile): "
+              "`exohil simulate --profile suit_profile.toml --out sim.mcap` runs it on any "
+              "shoulder movement; in Python, "
+              "`exohil.emulators.discrepancy.load_calibrated_profile` reads it.", ""]
     return "\n".join(lines)
 
 
