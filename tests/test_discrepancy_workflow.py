@@ -28,10 +28,12 @@ from exohil.emulators.discrepancy.candidates import (
 from exohil.emulators.discrepancy.data import (
     BLOCK_S,
     N_BLOCKS,
+    RESAMPLED_SPREAD,
     SKIPPED_RUN_S,
     held_out_blocks,
     in_mocap_gap,
     quantisation_step,
+    resampled_spread,
     smooth_angles,
     true_runs,
 )
@@ -793,6 +795,50 @@ def test_coarse_quantisation_raises_the_floor_and_names_nothing_on_a_clean_suit(
     floor = noise_floor(prepare_trial(rec))
     assert np.all(floor >= 1.0 / np.sqrt(12.0) - 1e-12)
     assert run(rec, "quantised").summary["effects"] == []
+
+
+def _resampled(rec: Recording, factor: int, hold: bool) -> Recording:
+    """``rec``'s readings at ``factor`` times its rate, as a logger fills in a slower
+    sensor's stream: each reading held until the next, or interpolated linearly."""
+    s = rec.sensors
+    t = s.t[0] + np.arange((len(s.t) - 1) * factor + 1) / (factor * rec.sensor_rate_hz)
+    if hold:
+        values = s.values[np.searchsorted(s.t, t, side="right") - 1]
+    else:
+        values = np.column_stack([np.interp(t, s.t, v) for v in s.values.T])
+    return replace(rec, sensors=SensorStream(seq=np.arange(len(t)), t=t, values=values),
+                   sensor_rate_hz=factor * rec.sensor_rate_hz)
+
+
+def test_a_stream_resampled_from_a_slower_sensor_is_told_from_noise_and_movement():
+    """Interpolated or held over four frames, a slower sensor's readings change less from
+    one frame to the next than noise can, and its frame-to-frame floor is far too low.
+    Their second differences over two frames spread many times the floor; those of white
+    noise about as wide, coarse steps and a movement without noise not four times. Such a
+    stream is not searched for spikes: against its floor most readings would be one."""
+    rec = make_recording(Case("clean", "lib", 1, seed=5, duration_s=30.0))
+    trial = prepare_trial(rec)
+    assert trial.resampled.max() < 1.3
+    assert prepare_trial(_quantised(rec, 1.0)).resampled.max() < RESAMPLED_SPREAD
+    smooth = uniform_filter1d(trial.y, 50, axis=0)  # 0.2 s mean: next to no noise left
+    assert resampled_spread(smooth, trial.valid, noise_floor(replace(trial, y=smooth))
+                            ).max() < RESAMPLED_SPREAD
+    for hold in (True, False):
+        resampled = prepare_trial(_resampled(rec, 4, hold))
+        assert np.all(resampled.resampled > 2 * RESAMPLED_SPREAD), (hold, resampled.resampled)
+        assert resampled.spikes.sum() == 0 and resampled.valid.mean() > 0.99
+
+
+def test_a_resampled_stream_is_said_in_the_progress_json_and_report():
+    rec = _resampled(make_recording(Case("clean", "lib", 1, seed=5, duration_s=24.0)), 4, True)
+    lines: list[str] = []
+    outcome = run(rec, "held", progress=lines.append)
+    flagged = outcome.summary["resampled_sensors"]
+    assert [item["sensor"] for item in flagged] == list(rec.sensor_names)
+    assert all(item["spread"] > RESAMPLED_SPREAD for item in flagged)
+    said = [line for line in lines if "less from one frame to the next than noise" in line]
+    assert said and ", ".join(rec.sensor_names) in said[0], lines
+    assert "resampled from a slower sensor?" in markdown(outcome.summary)
 
 
 def test_play_delay_and_low_pass():

@@ -72,6 +72,13 @@ QUANTISED_SHARE = 0.3
 D2_CLIP_SIGMAS = 4.0
 D2_CLIP_VARIANCE = 1.0 - 2.0 * D2_CLIP_SIGMAS * math.exp(-D2_CLIP_SIGMAS ** 2 / 2.0) / (
     math.sqrt(2.0 * math.pi) * math.erf(D2_CLIP_SIGMAS / math.sqrt(2.0)))
+#: Second differences over two frames spread like those over one for white noise, and at
+#: most four times as wide for a movement whose noise vanishes (a smooth reading's Δ² grows
+#: with the square of its span). A sensor whose two-frame spread is wider still, against its
+#: floor, changes less from one frame to the next than noise or movement can make it: a
+#: stream resampled from a slower sensor (each reading interpolated, or held over several
+#: frames), whose frame-to-frame floor is too low (:func:`resampled_spread`).
+RESAMPLED_SPREAD = 4.0
 #: The noise floor is measured on runs of three frames received in a row; with fewer than
 #: ``MIN_NOISE_TRIPLES`` of them (frames seldom arrive three in a row: a link that drops
 #: three of every five) triples of successive received frames that span at most
@@ -109,6 +116,10 @@ class Trial:
             (:func:`unusable_sensors`); ``sensor_names`` lists only the analysed ones.
         spikes: (S,) int, frames per sensor holding an isolated spike (:func:`spikes`),
             which are invalid.
+        resampled: (S,) how much wider the readings' second differences over two frames
+            spread than over one, in noise floors (:func:`resampled_spread`); over
+            ``RESAMPLED_SPREAD``, a stream resampled from a slower sensor, whose readings
+            are not looked at for spikes.
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
         mocap_late_s: s, how much later than the sensors' clock the motion capture stamps
             its samples (a clock offset); ``angles`` are read that much later.
@@ -137,6 +148,7 @@ class Trial:
     noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ignored: tuple[tuple[str, str], ...] = ()
     spikes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    resampled: np.ndarray = field(default_factory=lambda: np.zeros(0))
     placed_by: str = FRAME_COUNTER
     mocap_late_s: float = 0.0
     mocap_low_pass_hz: float | None = None
@@ -231,7 +243,11 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
         floor = sensor_noise(y, valid)
     except DiscrepancyError as err:
         raise DiscrepancyError(f"{name}: {err}") from None
+    spread = resampled_spread(y, valid, floor)
     spiked = spikes(y, valid, floor)
+    # against the floor of a stream resampled from a slower sensor, far below its noise,
+    # most readings would be spikes
+    spiked[:, spread > RESAMPLED_SPREAD] = False
     valid &= ~spiked.any(axis=1)
     span = np.diff(t[[0, -1]])[0] if n > 1 else 0.0
     rate = (n - 1) / span if span > 0 else 0.0
@@ -248,7 +264,7 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
                   units=rec.sensor_units, rate_hz=rate, blocks=blocks,
                   scored=valid.copy(), ignored=ignored, spikes=spiked.sum(axis=0),
                   placed_by=placed_by, mocap_late_s=mocap_late_s,
-                  mocap_low_pass_hz=low_pass_hz, mocap_skew=mocap_skew)
+                  mocap_low_pass_hz=low_pass_hz, mocap_skew=mocap_skew, resampled=spread)
     trial.noise = noise_floor(trial)
     return trial
 
@@ -466,6 +482,22 @@ def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
     for j in np.flatnonzero(step > QUANTISED_SHARE * sigma):
         sigma[j] = _clipped_sd(centred[:, j], max(sigma[j], rounding[j]))
     return np.maximum(sigma, rounding)
+
+
+def resampled_spread(y: np.ndarray, valid: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """(S,) per sensor, the robust spread of the second differences over two frames of the
+    readings y (N, S) (y[i + 4] − 2·y[i + 2] + y[i] over runs of five ``valid`` frames), as
+    the σ of white noise, over its noise floor ``floor`` (S,): about 1 for white noise, at
+    most ``RESAMPLED_SPREAD`` for a smooth movement; inf where the floor is 0; NaN where no
+    run of five frames is valid."""
+    ok = valid[4:] & valid[2:-2] & valid[:-4]
+    if not ok.any():
+        return np.full(y.shape[1], np.nan)
+    y0 = np.where(valid[:, None], y, 0.0)  # invalid frames may hold NaN or inf
+    d2 = (y0[4:] - 2.0 * y0[2:-2] + y0[:-4])[ok]
+    spread = D2_MAD_TO_SIGMA * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(floor > 0, spread / floor, np.inf)
 
 
 def _second_differences(y: np.ndarray, valid: np.ndarray) -> np.ndarray:

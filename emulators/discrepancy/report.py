@@ -29,7 +29,7 @@ from exohil.emulators.discrepancy.timing import (
     skew_words,
 )
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
-from exohil.emulators.discrepancy.workflow import Outcome, map_words
+from exohil.emulators.discrepancy.workflow import Outcome, map_words, resampled_words
 from exohil.formats.atomic import write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
@@ -165,17 +165,22 @@ def _clock_lines(summary: dict, u: str) -> list[str]:
     for key, say in (("clock_offset", clock_words), ("clock_skew", skew_words)):
         if summary.get(key) is not None:
             words = say(summary[key], u)
-            lines += [words[0].upper() + words[1:] + ".", ""]
+            lines += [_sentence(words) + ".", ""]
     for key, found in summary.get("timing_after_effects", {}).items():
         if found is not None and not (found["applied"] and found["run_again"]["kept"]):
             lines += [f"With the effects in place {after_effects_words(key, found, u)}.", ""]
     return lines
 
 
+def _sentence(words: str) -> str:
+    """``words`` with its first letter a capital (the rest as written: sensor names keep
+    their case)."""
+    return words[:1].upper() + words[1:]
+
+
 def _filter_sentence(summary: dict, units: str) -> str:
     """How the motion capture was read, as a sentence of its own."""
-    words = filter_words(summary["mocap_filter"], units)
-    return f" {words[0].upper()}{words[1:]}."
+    return f" {_sentence(filter_words(summary['mocap_filter'], units))}."
 
 
 def _unused(value: object) -> bool:
@@ -454,7 +459,10 @@ def markdown(summary: dict) -> str:
              "outside motion capture or in its dropouts, or holding an isolated spike: "
              f"{spike_counts(summary['sensors'], summary['spikes'])})." + "".join(
                  f" Left out: {item['sensor']} {item['reason']}."
-                 for item in summary["sensors_ignored"]) + _filter_sentence(summary, u), "",
+                 for item in summary["sensors_ignored"])
+             + (f" {_sentence(resampled_words(summary['resampled_sensors']))}."
+                if summary["resampled_sensors"] else "")
+             + _filter_sentence(summary, u), "",
              f"**{summary['conclusion']}.** Held-out gap (sensor-space RMSE on "
              f"{summary['heldout_blocks']}-fold blocked cross-validation): "
              f"{summary['gap_before']:.4g} {u} before, {summary['gap_after']:.4g} {u} after; "

@@ -29,6 +29,7 @@ from exohil.emulators.discrepancy.candidates import (
 from exohil.emulators.discrepancy.data import (
     FRAME_COUNTER,
     MOCAP_CUTOFF_HZ,
+    RESAMPLED_SPREAD,
     SPIKE_SIGMAS,
     SPIKE_WINDOW,
     Trial,
@@ -382,6 +383,27 @@ def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float
     return kind, cand, evidence
 
 
+def _resampled(trial: Trial) -> list[dict]:
+    """The sensors whose readings change less from one frame to the next than noise or a
+    smooth movement can (``trial.resampled`` over ``RESAMPLED_SPREAD``), each
+    with that spread in noise floors (JSON ``resampled_sensors``; inf where the floor is 0)."""
+    return [{"sensor": name, "spread": significant(float(r)) if np.isfinite(r) else None}
+            for name, r in zip(trial.sensor_names, trial.resampled, strict=True)
+            if r > RESAMPLED_SPREAD]
+
+
+def resampled_words(resampled: list[dict]) -> str:
+    """The sensors of ``resampled_sensors`` in words, for the progress line and the report."""
+    spreads = ", ".join("without limit" if item["spread"] is None else f"{item['spread']:.3g}"
+                        for item in resampled)
+    one = len(resampled) == 1
+    return (f"{'sensor' if one else 'sensors'} {', '.join(i['sensor'] for i in resampled)} "
+            f"{'changes' if one else 'change'} less from one frame to the next than noise can: "
+            f"over two frames the readings spread {spreads} times the noise floor (white "
+            f"noise about 1, a smooth movement at most {RESAMPLED_SPREAD:g}); resampled from a "
+            "slower sensor? The floor, and any effect named against it, may be too low")
+
+
 def _rms_words(rms: float | None) -> str:
     """A localisation's RMS in a progress line (None: no scored frame there)."""
     return "none scored" if rms is None else f"{rms:.4g}"
@@ -560,6 +582,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         progress(f"    isolated spikes, not fitted or scored: "
                  f"{spike_counts(trial.sensor_names, trial.spikes.tolist())} (readings over "
                  f"{SPIKE_SIGMAS:g} σ from the median of their {SPIKE_WINDOW} frames)")
+    resampled = _resampled(trial)
+    if resampled:
+        progress(f"    {resampled_words(resampled)}: analyse such a stream at its sensor's rate")
     scaled = make_inputs(trial)  # one basis per map for every ridge
     uncovered = restrict_to_coverage(trial, scaled.u)
     if uncovered > 0:
@@ -711,6 +736,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "frames_placed_by": trial.placed_by,
         "invalid_frames": int((~trial.valid).sum()),
         "spikes": trial.spikes.tolist(),
+        "resampled_sensors": resampled,
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
         "already_in_model": list(in_model),
         "clock_offset": clock,
