@@ -72,13 +72,18 @@ QUANTISED_SHARE = 0.3
 D2_CLIP_SIGMAS = 4.0
 D2_CLIP_VARIANCE = 1.0 - 2.0 * D2_CLIP_SIGMAS * math.exp(-D2_CLIP_SIGMAS ** 2 / 2.0) / (
     math.sqrt(2.0 * math.pi) * math.erf(D2_CLIP_SIGMAS / math.sqrt(2.0)))
-#: Second differences over two frames spread like those over one for white noise, and at
-#: most four times as wide for a movement whose noise vanishes (a smooth reading's Δ² grows
-#: with the square of its span). A sensor whose two-frame spread is wider still, against its
-#: floor, changes less from one frame to the next than noise or movement can make it: a
-#: stream resampled from a slower sensor (each reading interpolated, or held over several
-#: frames), whose frame-to-frame floor is too low (:func:`resampled_spread`).
-RESAMPLED_SPREAD = 4.0
+#: Second differences over k frames spread like those over one for white noise, and at most
+#: k² times as wide for a movement whose noise vanishes (a smooth reading's Δ² grows with
+#: the square of its span). Readings whose second differences over some span k of 2 to
+#: ``RESAMPLED_STRIDES`` frames spread wider than k² noise floors change less from one frame
+#: to the next than noise or movement can make them: a stream resampled from a slower
+#: sensor (each reading interpolated, or held over several frames), whose frame-to-frame
+#: floor is far too low (:func:`resampled_spread`). Its floor is then the widest of those
+#: spreads (:func:`noise_floor`): once their span reaches the slower sensor's sample spacing
+#: they see its own noise (held readings all of it, interpolated ones about 0.8).
+RESAMPLED_STRIDES = 8
+#: ``resampled_spread`` over this is such a stream.
+RESAMPLED_SPREAD = 1.0
 #: The noise floor is measured on runs of three frames received in a row; with fewer than
 #: ``MIN_NOISE_TRIPLES`` of them (frames seldom arrive three in a row: a link that drops
 #: three of every five) triples of successive received frames that span at most
@@ -118,8 +123,8 @@ class Trial:
             which are invalid.
         resampled: (S,) how much wider the readings' second differences over two frames
             spread than over one, in noise floors (:func:`resampled_spread`); over
-            ``RESAMPLED_SPREAD``, a stream resampled from a slower sensor, whose readings
-            are not looked at for spikes.
+            ``RESAMPLED_SPREAD``, a stream resampled from a slower sensor, whose floor is
+            measured over several frames (:func:`noise_floor`).
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
         mocap_late_s: s, how much later than the sensors' clock the motion capture stamps
             its samples (a clock offset); ``angles`` are read that much later.
@@ -244,10 +249,9 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     except DiscrepancyError as err:
         raise DiscrepancyError(f"{name}: {err}") from None
     spread = resampled_spread(y, valid, floor)
-    spiked = spikes(y, valid, floor)
-    # against the floor of a stream resampled from a slower sensor, far below its noise,
-    # most readings would be spikes
-    spiked[:, spread > RESAMPLED_SPREAD] = False
+    # against the frame-to-frame floor of a stream resampled from a slower sensor, far
+    # below its noise, most readings would be spikes
+    spiked = spikes(y, valid, _widened(y, valid, floor, spread > RESAMPLED_SPREAD))
     valid &= ~spiked.any(axis=1)
     span = np.diff(t[[0, -1]])[0] if n > 1 else 0.0
     rate = (n - 1) / span if span > 0 else 0.0
@@ -465,8 +469,28 @@ def noise_floor(trial: Trial) -> np.ndarray:
     is the standard deviation of the second differences within ±``D2_CLIP_SIGMAS`` of
     their median instead. It counts the rounding error with the noise, as the residual of
     any model does (σ² + q²/12 while σ ≳ q/2).
+
+    A sensor whose readings change less from one frame to the next than noise can
+    (``trial.resampled`` over ``RESAMPLED_SPREAD``: a stream resampled from a slower
+    sensor) would have a floor far below its noise; its floor is the widest spread of its
+    second differences over 2 to ``RESAMPLED_STRIDES`` frames instead.
     """
-    return sensor_noise(trial.y, trial.valid)
+    return _widened(trial.y, trial.valid, sensor_noise(trial.y, trial.valid),
+                    trial.resampled > RESAMPLED_SPREAD)
+
+
+def _widened(y: np.ndarray, valid: np.ndarray, floor: np.ndarray, resampled: np.ndarray
+             ) -> np.ndarray:
+    """``floor`` (S,) with each sensor marked in ``resampled`` (S,) raised to the widest
+    spread of its second differences over 2 to ``RESAMPLED_STRIDES`` frames."""
+    flagged = np.flatnonzero(resampled)
+    if not flagged.size:
+        return floor
+    wide = np.nanmax([_spread_over(y[:, flagged], valid, k)
+                      for k in range(2, RESAMPLED_STRIDES + 1)], axis=0)
+    out = floor.copy()
+    out[flagged] = np.maximum(floor[flagged], wide)
+    return out
 
 
 def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -484,20 +508,29 @@ def sensor_noise(y: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.maximum(sigma, rounding)
 
 
-def resampled_spread(y: np.ndarray, valid: np.ndarray, floor: np.ndarray) -> np.ndarray:
-    """(S,) per sensor, the robust spread of the second differences over two frames of the
-    readings y (N, S) (y[i + 4] − 2·y[i + 2] + y[i] over runs of five ``valid`` frames), as
-    the σ of white noise, over its noise floor ``floor`` (S,): about 1 for white noise, at
-    most ``RESAMPLED_SPREAD`` for a smooth movement; inf where the floor is 0; NaN where no
-    run of five frames is valid."""
-    ok = valid[4:] & valid[2:-2] & valid[:-4]
+def _spread_over(y: np.ndarray, valid: np.ndarray, k: int) -> np.ndarray:
+    """(S,) the robust spread of the second differences over k frames of readings y (N, S),
+    y[i + 2k] − 2·y[i + k] + y[i] over ``valid`` frames, as the σ of white noise; NaN where
+    no such triple is valid."""
+    ok = valid[2 * k:] & valid[k:-k] & valid[:-2 * k]
     if not ok.any():
         return np.full(y.shape[1], np.nan)
     y0 = np.where(valid[:, None], y, 0.0)  # invalid frames may hold NaN or inf
-    d2 = (y0[4:] - 2.0 * y0[2:-2] + y0[:-4])[ok]
-    spread = D2_MAD_TO_SIGMA * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+    d2 = (y0[2 * k:] - 2.0 * y0[k:-k] + y0[:-2 * k])[ok]
+    return D2_MAD_TO_SIGMA * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+
+
+def resampled_spread(y: np.ndarray, valid: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """(S,) per sensor, the widest spread of the second differences of readings y (N, S)
+    over k = 2 … ``RESAMPLED_STRIDES`` frames (:func:`_spread_over`), each over k² times
+    its noise floor ``floor`` (S,), what a smooth movement without noise can reach: at
+    most 1/4 for white noise, at most about 1 for a movement; inf where the floor is 0;
+    NaN where no such span is valid."""
+    widest = np.full(y.shape[1], np.nan)
+    for k in range(2, RESAMPLED_STRIDES + 1):
+        widest = np.fmax(widest, _spread_over(y, valid, k) / k**2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(floor > 0, spread / floor, np.inf)
+        return np.where(floor > 0, widest / floor, np.inf)
 
 
 def _second_differences(y: np.ndarray, valid: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ from exohil.emulators.discrepancy.data import (
     FRAME_COUNTER,
     MOCAP_CUTOFF_HZ,
     RESAMPLED_SPREAD,
+    RESAMPLED_STRIDES,
     SPIKE_SIGMAS,
     SPIKE_WINDOW,
     Trial,
@@ -385,8 +386,8 @@ def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float
 
 def _resampled(trial: Trial) -> list[dict]:
     """The sensors whose readings change less from one frame to the next than noise or a
-    smooth movement can (``trial.resampled`` over ``RESAMPLED_SPREAD``), each
-    with that spread in noise floors (JSON ``resampled_sensors``; inf where the floor is 0)."""
+    smooth movement can (``trial.resampled`` over ``RESAMPLED_SPREAD``), each with that
+    spread (JSON ``resampled_sensors``; null where the floor is 0)."""
     return [{"sensor": name, "spread": significant(float(r)) if np.isfinite(r) else None}
             for name, r in zip(trial.sensor_names, trial.resampled, strict=True)
             if r > RESAMPLED_SPREAD]
@@ -399,9 +400,10 @@ def resampled_words(resampled: list[dict]) -> str:
     one = len(resampled) == 1
     return (f"{'sensor' if one else 'sensors'} {', '.join(i['sensor'] for i in resampled)} "
             f"{'changes' if one else 'change'} less from one frame to the next than noise can: "
-            f"over two frames the readings spread {spreads} times the noise floor (white "
-            f"noise about 1, a smooth movement at most {RESAMPLED_SPREAD:g}); resampled from a "
-            "slower sensor? The floor, and any effect named against it, may be too low")
+            f"over 2–{RESAMPLED_STRIDES} frames the readings' second differences spread "
+            f"{spreads} times as wide as noise or a smooth movement makes them; resampled from "
+            "a slower sensor? The noise floor is their widest spread instead, about that "
+            "sensor's own noise")
 
 
 def _rms_words(rms: float | None) -> str:
