@@ -121,9 +121,9 @@ class Trial:
             (:func:`unusable_sensors`); ``sensor_names`` lists only the analysed ones.
         spikes: (S,) int, frames per sensor holding an isolated spike (:func:`spikes`),
             which are invalid.
-        resampled: (S,) how much wider the readings' second differences over two frames
-            spread than over one, in noise floors (:func:`resampled_spread`); over
-            ``RESAMPLED_SPREAD``, a stream resampled from a slower sensor, whose floor is
+        resampled: (S,) the widest spread of the readings' second differences over k = 2 …
+            ``RESAMPLED_STRIDES`` frames, each over k² noise floors (:func:`resampled_spread`);
+            over ``RESAMPLED_SPREAD``, a stream resampled from a slower sensor, whose floor is
             measured over several frames (:func:`noise_floor`).
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
         mocap_late_s: s, how much later than the sensors' clock the motion capture stamps
