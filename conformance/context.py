@@ -24,6 +24,7 @@ import numpy as np
 
 from exohil.conformance.conversions import run_properties
 from exohil.conformance.profile import Profile
+from exohil.estimator.coverage import CoverageTally, stream_coverage
 from exohil.estimator.evaluation import accuracy_measurements
 from exohil.formats.alignment import angles_at_sensor_times
 from exohil.formats.measurement import Limit, Measurement, distribution
@@ -41,6 +42,7 @@ from exohil.harness.session import (
     LoadedModel,
     SessionError,
     SessionResult,
+    coverage_measurement,
     latency_measurements,
     link_measurements,
     load_model,
@@ -185,7 +187,8 @@ class ConformanceRun:
             bad = int(session.run.frames == 0 and session.run.link.decode_errors > 0)
             return [Measurement.judge("compatibility.sensor_mismatch", bad, "count",
                                       limits.get("compatibility.sensor_mismatch"),
-                                      "frames of the model's sensor count arrive")]
+                                      "frames of the model's sensor count arrive"),
+                    self._coverage(session.coverage, limits)]
         stream = rec.mocap.get(est.target.joint)
         missing = [a for a in est.target.angles if stream is None or a not in stream.names]
         sensors_ok = tuple(rec.sensor_names) == est.sensor_names
@@ -198,7 +201,18 @@ class ConformanceRun:
                               limits.get("compatibility.angle_mismatch"),
                               f"estimated angles missing from the reference: {missing}"
                               if missing else "every estimated angle has ground truth"),
+            self._coverage(stream_coverage(est, rec.sensors.values) if sensors_ok else None,
+                           limits),
         ]
+
+    @staticmethod
+    def _coverage(tally: CoverageTally | None, limits: dict[str, Limit]) -> Measurement:
+        """``compatibility.outside_training`` of ``tally`` (skipped without one: sensors
+        that do not match)."""
+        name = "compatibility.outside_training"
+        if tally is None:
+            return Measurement.skipped(name, "%", "the sensors do not match", limits.get(name))
+        return coverage_measurement(tally, limits)
 
     def heldout_measurements(self) -> list[Measurement]:
         limits = self.profile.limits("heldout")

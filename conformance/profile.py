@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from exohil.estimator.coverage import OUTSIDE_SHARE_PERCENT
 from exohil.formats.errors import InputError
 from exohil.formats.measurement import Limit, check_unit, convert
 from exohil.harness.cli_types import MAX_DURATION_S, SEED_MAX
@@ -49,7 +50,8 @@ class ProfileError(InputError, ValueError):
 #: (the model's angles, NAO's joints, the distribution statistics p50/p99/max).
 CHECKS: dict[str, dict[str, str]] = {
     "compatibility": {"compatibility.sensor_mismatch": "count",
-                      "compatibility.angle_mismatch": "count"},
+                      "compatibility.angle_mismatch": "count",
+                      "compatibility.outside_training": "%"},
     "heldout": {"heldout.overlap": "count"},
     "accuracy": {"accuracy.rmse.*": "deg", "accuracy.direction_rmse": "deg",
                  "accuracy.frames_scored": "count"},
@@ -71,7 +73,9 @@ BUILTIN_LIMITS: dict[str, dict[str, Limit]] = {
     "compatibility": {"compatibility.sensor_mismatch": Limit(high=0, unit="count",
                                                              inclusive=True),
                       "compatibility.angle_mismatch": Limit(high=0, unit="count",
-                                                            inclusive=True)},
+                                                            inclusive=True),
+                      "compatibility.outside_training": Limit(high=OUTSIDE_SHARE_PERCENT,
+                                                              unit="%")},
     "heldout": {"heldout.overlap": Limit(high=0, unit="count", inclusive=True)},
     "link": {"link.lost_on_host": Limit(high=0, unit="count", inclusive=True),
              "link.bad_frames_delivered": Limit(high=0, unit="count", inclusive=True),

@@ -20,7 +20,8 @@ the dense head only, and fine-tuning every weight without the jitter
 (``python -m benchmarks.bench_calibration``).
 
 The calibration recordings are training data: they join ``info["sources"]``, so the
-held-out rule (conformance ``heldout.overlap``) refuses to score on them.
+held-out rule (conformance ``heldout.overlap``) refuses to score on them, and where their
+readings lie joins the training coverage (:mod:`exohil.estimator.coverage`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from exohil.estimator.coverage import input_statistics
 from exohil.estimator.dataset import Block, DatasetError
 from exohil.estimator.defaults import CALIBRATION_JITTERS
 from exohil.estimator.evaluation import evaluate
@@ -119,6 +121,8 @@ def calibrate(
             "recordings": sources or [],
             "seconds": round(seconds, 2),
             "frames": frames,
+            # where the calibration readings lie (estimator.coverage counts them as trained on)
+            **input_statistics(blocks),
             "config": asdict(cfg),
             "jitter": jitter,
             # each candidate jitter's held-out MSE and its standard error; empty when the

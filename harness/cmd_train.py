@@ -229,11 +229,13 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     """Score CHECKPOINT on RECORDING files: first exohil's accuracy (RMSE per angle where the
     elevation is at least 20°, and the arm-direction RMSE over all frames), then per-angle
     RMSE, MAE and max |error| (degrees) over all frames, overall and per movement segment.
-    Example:
+    A warning comes first when 1 % or more of the frames read more than 4 training standard
+    deviations from the model's training mean (another suit: calibrate first). Example:
 
     \b
         exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
     """
+    from exohil.estimator.coverage import block_coverage
     from exohil.estimator.evaluation import evaluate
     from exohil.estimator.splits import tail_cut
 
@@ -250,9 +252,14 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         result = evaluate(est, blocks, limits)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
+    coverage = block_coverage(est, blocks)
     result["checkpoint"] = str(checkpoint)
     result["model"] = est.kind
     result["recordings"] = data.sources
+    result["training_coverage"] = coverage.to_dict()
+    warning = coverage.warning()
+    if warning:
+        click.echo(f"warning: {warning}", err=True)
     click.echo(_accuracy_line(result["accuracy"]))
     scope = "frames kept by --min" if limits else "all frames"
     for stat in ("rmse", "mae", "max"):

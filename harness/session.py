@@ -37,6 +37,7 @@ import numpy as np
 
 from exohil.emulators.faults import LOSING_KINDS
 from exohil.estimator.checkpoint import CheckpointError, ensure_fits, load_checkpoint
+from exohil.estimator.coverage import CoverageTally
 from exohil.estimator.evaluation import AccuracyTally, arm_direction_error_deg
 from exohil.estimator.inference import StreamingEstimator, default_backend
 from exohil.estimator.trained import TrainedEstimator
@@ -280,6 +281,8 @@ class SessionResult:
     scoring: TruthTally | None = None
     #: the host's frames against the emulator's (None for another device)
     link_tally: LinkTally | None = None
+    #: the received readings against those the model was trained on (every frame)
+    coverage: CoverageTally | None = None
 
     @property
     def fault_counts(self) -> dict[str, int] | None:
@@ -349,7 +352,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
             sinks.append(RecorderSink(config.record, est.sensor_names, metadata={
                 "generator": "exohil", "source": config.device.describe(),
                 "model_sha256": model.sha256}))
-        observers: list[RowsObserver] = []
+        coverage = CoverageTally(est)
+        observers: list[RowsObserver] = [lambda rows: coverage.add(rows.values)]
         if reference is not None:
             scoring = TruthTally(reference, est, teleop=bool(robots))
             observers.append(scoring)
@@ -408,7 +412,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
     return SessionResult(config, model, run, truth, fault_log, seq0, clipped, host_load, robots,
-                         trace, device_lost, scoring, link_tally)
+                         trace, device_lost, scoring, link_tally, coverage)
 
 
 def _with_running_error(progress: Progress, reference: Recording,
@@ -481,6 +485,22 @@ def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list
     for name, (hist, note) in latency_histograms(run).items():
         out += histogram_distribution(name, hist, "ms", _stat_limits(limits, name), note)
     return out
+
+
+def coverage_measurement(tally: CoverageTally, limits: Limits | None = None) -> Measurement:
+    """``compatibility.outside_training``: the share of frames with a reading outside the
+    model's training data (:mod:`exohil.estimator.coverage`), %; skipped without a frame."""
+    name = "compatibility.outside_training"
+    limit = (limits or {}).get(name)
+    if tally.outside_percent is None:
+        return Measurement.skipped(name, "%", "no frame with finite readings", limit)
+    return Measurement.judge(name, tally.outside_percent, "%", limit, tally.note())
+
+
+def session_coverage(result: SessionResult) -> list[Measurement]:
+    """The received readings against the model's training data (none for a result made
+    without a tally)."""
+    return [] if result.coverage is None else [coverage_measurement(result.coverage)]
 
 
 def link_measurements(result: SessionResult, limits: Limits | None = None) -> list[Measurement]:

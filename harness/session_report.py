@@ -10,7 +10,11 @@ module lays them out as the summary JSON and the lines a person reads.
      "teleop": {"rmse_deg": {joint: deg}, "clamped_share",
                 "robot_tracking_deg": {"p50", "p99", "max"}, "robot_axis_error_deg": {...},
                 "robots": {class: summary}},
-     "device_log": {kind: count}, "measurements": [Measurement.to_dict(), ...],
+     "device_log": {kind: count}, "values_clipped_to_wire_range": count,
+     "training_coverage": {"frames", "outside_percent", "outside_bound_sigmas",
+                           "extremes_sigmas": {sensor: [low, high]}},
+     "training_coverage_warning": text or null,
+     "measurements": [Measurement.to_dict(), ...],
      "model", "model_sha256", "backend", "target", "machine", "finished_at"}
 """
 
@@ -28,15 +32,16 @@ from exohil.harness.session import (
     link_measurements,
     robot_measurements,
     session_accuracy,
+    session_coverage,
     teleop_measurements,
 )
 
 
 def session_measurements(result: SessionResult) -> list[Measurement]:
     """Every measurement of a session, without limits (the demo and ``run`` report them)."""
-    return (link_measurements(result) + latency_measurements(result.run)
-            + session_accuracy(result) + teleop_measurements(result)
-            + robot_measurements(result))
+    return (link_measurements(result) + session_coverage(result)
+            + latency_measurements(result.run) + session_accuracy(result)
+            + teleop_measurements(result) + robot_measurements(result))
 
 
 def _value(measurements: list[Measurement], name: str) -> float | None:
@@ -74,6 +79,9 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
         "device_lost": result.device_lost,
         "device_log": counts,
         "values_clipped_to_wire_range": result.clipped_values,
+        "training_coverage": None if result.coverage is None else result.coverage.to_dict(),
+        "training_coverage_warning": (None if result.coverage is None
+                                      else result.coverage.warning()),
         "teleop": {
             "rmse_deg": {m.name.removeprefix("teleop.rmse."): _value(measurements, m.name)
                          for m in measurements if m.name.startswith("teleop.rmse.")},
@@ -131,6 +139,8 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
     if axis["p50"] is not None:
         lines.append(f"robot       upper-arm axis vs true humerus p50 {axis['p50']:.1f}°  "
                      f"p99 {axis['p99']:.1f}°  max {axis['max']:.1f}°")
+    if s.get("training_coverage_warning"):
+        lines.append(f"warning     {s['training_coverage_warning']}")
     if s["values_clipped_to_wire_range"]:
         lines.append(f"warning     {s['values_clipped_to_wire_range']} sensor values were outside "
                      "the wire's 0..655.35 mm and were clipped")

@@ -18,6 +18,7 @@ from exohil.estimator.calibration import (
     calibrate,
 )
 from exohil.estimator.checkpoint import load_checkpoint
+from exohil.estimator.coverage import block_coverage
 from exohil.estimator.dataset import DatasetError, TargetSpec, recording_blocks
 from exohil.estimator.splits import Split, cut_at_segments
 from exohil.estimator.training import TrainConfig, train
@@ -83,6 +84,10 @@ def test_calibrated_info_names_what_it_came_from(base):
         cal["accuracy_before"]["accuracy.direction_rmse"]
     assert est.info["sources"][-1] == {**source[0], "role": "calibration"}
     assert est.info["base_info"] == base.info
+    x = np.concatenate([b.x for b in part])  # where its readings lie joins the coverage
+    assert cal["input_mean"] == pytest.approx(x.mean(axis=0).tolist())
+    assert cal["input_std"] == pytest.approx(x.std(axis=0).tolist())
+    assert block_coverage(est, part).outside == 0
 
 
 def test_the_jitter_is_the_largest_within_one_standard_error_of_the_best(base):
