@@ -30,6 +30,8 @@ from exohil.estimator.training import TrainConfig, train
 from exohil.formats.digest import sha256_file
 from exohil.formats.recording import Recording
 
+#: Relative difference of sensor rates beyond which a model's window would span another time.
+RATE_TOLERANCE = 0.01
 
 def model_config(name: str, base: TrainConfig, rate_hz: float,
                  hidden: int | None = None) -> TrainConfig:
@@ -68,6 +70,12 @@ class LoadedData:
         return cut_at_segments(out)
 
 
+def same_rate(rate_hz: float, model_rate_hz: float) -> bool:
+    """Whether sensors at ``rate_hz`` suit a model of ``model_rate_hz`` (within
+    :data:`RATE_TOLERANCE`): otherwise its window and time constants span another time."""
+    return abs(rate_hz - model_rate_hz) <= RATE_TOLERANCE * model_rate_hz
+
+
 def load_recordings(
     paths: list[Path], joint: str | None = None, angles: tuple[str, ...] | None = None,
     expected_sensors: tuple[str, ...] | None = None,
@@ -86,11 +94,16 @@ def load_recordings(
     for p, r in zip(paths, recs, strict=True):
         check_sensors(r, tuple(sensors), str(p))
     target = resolve_target(recs[0], joint, angles)
+    rate = float(recs[0].sensor_rate_hz)
     for p, r in zip(paths[1:], recs[1:], strict=True):
+        if not same_rate(r.sensor_rate_hz, rate):
+            raise DatasetError(f"{p}: sensors at {r.sensor_rate_hz:g} Hz, {paths[0]} at "
+                               f"{rate:g} Hz: a model's window would span another time in "
+                               "each; resample them to one rate")
         stream = r.mocap.get(target.joint)
         if stream is None or any(a not in stream.names for a in target.angles):
             raise DatasetError(f"{p}: has no {target.joint} angles {list(target.angles)}")
-    return LoadedData(list(paths), recs, tuple(sensors), target, float(recs[0].sensor_rate_hz),
+    return LoadedData(list(paths), recs, tuple(sensors), target, rate,
                       [{"file": p.name, "sha256": sha256_file(p)} for p in paths])
 
 

@@ -14,14 +14,17 @@ from exohil.harness.cli_types import (
     Seed,
     refuse_overwriting_inputs,
 )
-from exohil.harness.cmd_train import _accuracy_line, _command_line, _model_and_recordings
+from exohil.harness.cmd_train import (
+    _accuracy_line,
+    _command_line,
+    _model_and_recordings,
+    _rate_mismatch,
+)
 
 #: Most fine-tuning steps accepted (far beyond any useful value; a typo cannot run for days).
 MAX_STEPS = 1_000_000
 #: Largest --jitter accepted (a σ of 10 training standard deviations drowns any signal).
 MAX_JITTER = 10.0
-#: Relative difference of sensor rates beyond which a model's window would span another time.
-RATE_TOLERANCE = 0.01
 
 
 @click.command("calibrate")
@@ -61,10 +64,9 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
 
     refuse_overwriting_inputs([("--out", out)], [checkpoint, *recordings])
     base, data = _model_and_recordings(checkpoint, recordings)
-    if abs(data.rate_hz - base.sensor_rate_hz) > RATE_TOLERANCE * base.sensor_rate_hz:
-        raise click.ClickException(
-            f"the recordings' sensor rate is {data.rate_hz:g} Hz, the model's "
-            f"{base.sensor_rate_hz:g} Hz: its window would span another time")
+    other_rate = _rate_mismatch(base, data.rate_hz)
+    if other_rate:
+        raise click.ClickException(other_rate)
     blocks = [b for b in data.blocks(base.offset_frames) if len(b)]
     try:
         est = calibrate(base, blocks, CalibrationConfig(steps=steps, jitter=jitter, seed=seed),

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import shlex
 import sys
+from typing import TYPE_CHECKING
 
 import click
 
@@ -25,6 +26,9 @@ from exohil.harness.cli_types import (
     Widths,
     refuse_overwriting_inputs,
 )
+
+if TYPE_CHECKING:
+    from exohil.estimator.trained import TrainedEstimator
 
 OUTPUT_CHOICES = ("auto", *OUTPUTS)
 
@@ -126,6 +130,14 @@ def _model_and_recordings(checkpoint, recordings):
     except CheckpointError as exc:
         raise click.ClickException(str(exc)) from None
     return est, data
+
+
+def _rate_mismatch(est: TrainedEstimator, rate_hz: float) -> str | None:
+    """Why recordings at ``rate_hz`` do not suit ``est``, or None."""
+    if _workflow().same_rate(rate_hz, est.sensor_rate_hz):
+        return None
+    return (f"the recordings' sensor rate is {rate_hz:g} Hz, the model's "
+            f"{est.sensor_rate_hz:g} Hz: its window would span another time")
 
 
 def _accuracy_line(accuracy: dict) -> str:
@@ -252,6 +264,9 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         result = evaluate(est, blocks, limits)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
+    other_rate = _rate_mismatch(est, data.rate_hz)
+    if other_rate:
+        click.echo(f"warning: {other_rate}; train or calibrate at this rate", err=True)
     coverage = block_coverage(est, blocks)
     result["checkpoint"] = str(checkpoint)
     result["model"] = est.kind

@@ -104,3 +104,24 @@ def test_evaluate_min_angle_filter(files):
     line = _one_line_error(CliRunner().invoke(
         main, ["evaluate", str(files["ckpt"]), str(files["good"]), "--min", "phi>3"]))
     assert "ANGLE=DEG" in line
+
+
+def test_evaluate_warns_when_the_recording_runs_at_another_rate(files):
+    slow = files["dir"] / "slow.mcap"
+    write_recording(slow, shoulder_recording(seconds=3.0, rate=100.0, seed=2))
+    result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(slow)])
+    assert result.exit_code == 0, result.output
+    assert result.output.startswith("warning: the recordings' sensor rate is 100 Hz, the "
+                                    "model's 250 Hz: its window would span another time")
+    same = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(files["good"])])
+    assert "warning" not in same.output
+
+
+def test_training_on_recordings_at_two_rates_is_one_clear_error(files):
+    slow = files["dir"] / "slow2.mcap"
+    write_recording(slow, shoulder_recording(seconds=3.0, rate=100.0, seed=3))
+    line = _one_line_error(CliRunner().invoke(
+        main, ["train", "--model", "ann", str(files["good"]), str(slow),
+               "--out", str(files["dir"] / "mixed.npz"), "--max-epochs", "1"]))
+    assert "sensors at 100 Hz" in line and "at 250 Hz" in line
+    assert not (files["dir"] / "mixed.npz").exists()
