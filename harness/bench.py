@@ -249,7 +249,9 @@ def open_device(device: Device, expected_sensors: int | None, *, realtime: bool 
 
     if recording is None:
         recording = read_recording(device.recording)
-    with ArduinoEmulator.from_recording(recording, faults=device.faults, seed=device.seed,
+    # at the recording's own rate, so that device time is the recording's time
+    with ArduinoEmulator.from_recording(recording, rate_hz=recording.sensor_rate_hz,
+                                        faults=device.faults, seed=device.seed,
                                         loop=device.loop, realtime=realtime,
                                         duration_s=duration_s) as emulator:
         with SerialFrameSource(emulator.port, expected_sensors=expected_sensors,

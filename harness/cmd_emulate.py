@@ -51,8 +51,9 @@ def _raise_interrupt(signum: int, frame: object) -> None:
 
 @click.command("emulate")
 @click.argument("recording", type=InputFile())
-@click.option("--rate", type=Finite(0.0, MAX_RATE_HZ, min_open=True), default=250.0,
-              show_default=True, help="Frame rate, Hz.")
+@click.option("--rate", type=Finite(0.0, MAX_RATE_HZ, min_open=True), default=None,
+              help="Frame rate, Hz [default: the recording's sensor rate, so that device "
+                   "time is the recording's time and `run --reference` aligns with it].")
 @click.option("--loop", is_flag=True, help="Replay the recording cyclically.")
 @click.option("--faults", type=FaultSpec(), default=None, metavar="SPEC|FILE.toml",
               help="Faults to inject, e.g. 'noise:sigma_mm=0.5;drop:rate=0.01,burst=3;"
@@ -73,7 +74,7 @@ def _raise_interrupt(signum: int, frame: object) -> None:
                    "loaded machine; falls back with a warning when refused.")
 @click.option("--fault-log", "fault_log", type=OutputFile(),
               default=None, help="Write every injected fault as JSON lines here on exit.")
-def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None, seed: int,
+def emulate_command(recording: Path, rate: float | None, loop: bool, faults: str | None, seed: int,
                     duration: float | None, spin_ms: float, realtime: bool,
                     fault_log: Path | None) -> None:
     """Stream RECORDING's sensor frames (wire protocol v1) from a software Arduino on a pty.
@@ -99,7 +100,8 @@ def emulate_command(recording: Path, rate: float, loop: bool, faults: str | None
         raise click.BadParameter(str(exc), param_hint="--faults") from exc
     try:
         # from the recording: its own sequence numbers and clock, as the in-process emulator
-        emulator = ArduinoEmulator(source, rate_hz=rate, loop=loop, duration_s=duration,
+        emulator = ArduinoEmulator(source, rate_hz=rate or source.sensor_rate_hz, loop=loop,
+                                   duration_s=duration,
                                    faults=plan, seed=seed, spin_s=spin_ms / 1000.0,
                                    realtime=realtime)
     except ValueError as exc:

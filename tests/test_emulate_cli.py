@@ -99,13 +99,10 @@ def recording_path(request, tmp_path: Path) -> Path:
     return _synthetic_recording(tmp_path / "synthetic.mcap")
 
 
-def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Path) -> None:
-    rate, duration = 2000, 2.0
-    generated = int(rate * duration)
-    proc = subprocess.Popen(
-        [str(Path(sys.executable).parent / "exohil"), "emulate", str(recording_path),
-         "--rate", str(rate), "--duration", str(duration), "--loop"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _emulate(*args: str) -> list[tuple[int, int, list[int]]]:
+    """Run `exohil emulate ARGS`, read its port until it exits; the frames decoded."""
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "exohil"), "emulate", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         port = proc.stdout.readline().strip()
         assert port, proc.stderr.read()
@@ -133,6 +130,15 @@ def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Pa
     packets = bytes(stream).split(b"\x00")[:-1]
     frames = [f for f in map(doc_parse, packets) if f is not None]
     assert frames, "no valid frame"
+    assert len(frames) == len(packets)  # no invalid packet at all without faults
+    return frames
+
+
+def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Path) -> None:
+    rate, duration = 2000, 2.0
+    generated = int(rate * duration)
+    frames = _emulate(str(recording_path), "--rate", str(rate), "--duration", str(duration),
+                      "--loop")
     seqs = [seq for seq, _, _ in frames]
     # the emulator replays the recording's own numbering: sequence numbers the recording lacks
     # (the foreign sample has gaps) are never sent, looped over its seq span
@@ -144,7 +150,6 @@ def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Pa
     assert seqs == sorted(seqs) and seqs[-1] == int(recorded[0]) + sent[-1]
     span = sum(1 for k in sent if int(recorded[0]) + k >= seqs[0])  # sent once the reader was ready
     assert len(frames) >= 0.999 * span, f"decoded {len(frames)} of {span}"
-    assert len(frames) == len(packets)  # no invalid packet at all without faults
     rec = read_recording(recording_path)
     row_of = {int(offset): row for row, offset in enumerate(offsets)}
     expected = np.rint(rec.sensors.values / 0.01).astype(int)
@@ -153,6 +158,17 @@ def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Pa
         k = seq - int(recorded[0])
         assert t_us == t_us0 + k * 500  # 2 kHz device clock, µs
         assert values == expected[row_of[k % present.size]].tolist()
+
+
+def test_emulate_streams_at_the_recordings_own_rate_by_default(tmp_path: Path) -> None:
+    k = np.arange(200)
+    values = 300.0 + 50.0 * np.sin(k[:, None] / 20.0 + np.arange(4)[None, :])
+    path = tmp_path / "slow.mcap"
+    write_recording(path, Recording(("F", "SF", "SR", "R"), SensorStream(k, k / 100.0, values),
+                                    sensor_rate_hz=100.0))
+    frames = _emulate(str(path))
+    steps = np.diff([t_us for _, t_us, _ in frames])
+    assert len(frames) > 100 and set(steps.tolist()) == {10_000}  # 100 Hz, in µs
 
 
 # ---- bad input -------------------------------------------------------------------------------

@@ -163,3 +163,36 @@ def test_run_rejects_a_bad_sink_with_one_line(tmp_path):
     assert result.exit_code != 0
     assert "bad robot address 'udp:localhost'" in result.output
     assert "Traceback" not in result.output
+
+
+def test_a_recording_at_another_rate_is_replayed_at_its_own(tmp_path):
+    """Device time is the recording's time: the session's accuracy (truth aligned by device
+    time) is the accuracy `evaluate` gives on the frames streamed. Before, a 100 Hz
+    recording was replayed at 250 Hz and scored against the wrong poses."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from estimator_synth import shoulder_recording
+
+    from exohil.formats.recording_writer import write_recording
+
+    train, rec, part = tmp_path / "train.mcap", tmp_path / "rec.mcap", tmp_path / "part.mcap"
+    write_recording(train, shoulder_recording(seconds=20.0, rate=100.0, seed=2))
+    write_recording(rec, shoulder_recording(seconds=10.0, rate=100.0, seed=5))
+    model = tmp_path / "ann.npz"
+    runner = CliRunner()
+    for args in (["train", "--model", "ann", str(train), "--out", str(model),
+                  "--max-epochs", "5"],
+                 ["record", "cut", str(rec), "--stop", "3", "--out", str(part)]):
+        result = runner.invoke(main, args)
+        assert result.exit_code == 0, result.output
+    scored = tmp_path / "scored.json"
+    result = runner.invoke(main, ["evaluate", str(model), str(part), "--json", str(scored)])
+    assert result.exit_code == 0, result.output
+    summary = tmp_path / "summary.json"
+    result = runner.invoke(main, ["demo", "--recording", str(rec), "--model", str(model),
+                                  "--seconds", "3", "--no-faults", "--sink", "none",
+                                  "--json", str(summary)])
+    assert result.exit_code == 0, result.output
+    s = json.loads(summary.read_text())
+    assert 290 <= s["frames"]["received"] <= 301  # 3 s at 100 Hz, not at 250 Hz
+    expected = json.loads(scored.read_text())["accuracy"]["accuracy.direction_rmse"]
+    assert s["direction_rmse_deg"] == pytest.approx(expected, abs=0.05)
