@@ -141,4 +141,5 @@ def write_reports(out: Path, run: Any, results: list[Any]) -> None:
                             est.target.angles, {"generator": "exohil conform",
                                                 "source": run.target,
                                                 "model_sha256": session.model.sha256,
-                                                "profile": run.profile.name})
+                                                "profile": run.profile.name},
+                            session.sensor_rate_hz)

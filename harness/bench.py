@@ -16,7 +16,8 @@ fill in or override it. Example (every key but ``model`` is optional)::
 
     [sensors]
     names = ["F", "SF", "SR", "R"]  # checked against the model's
-    rate_hz = 250
+    rate_hz = 250   # a real device's frame rate, written into what a session records
+                    # (the emulator streams its recording at that recording's own rate)
 
     [model]
     checkpoint = "fixtures/models/ennet.npz"

@@ -228,7 +228,8 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     write_run_recording(
         out_dir / "run.mcap", result.run, est.sensor_names, est.target.joint, est.target.angles,
         {"generator": "exohil", "source": s["target"] or "", "model_sha256": s["model_sha256"],
-         "latency_ms": json.dumps(s["latency_ms"], separators=(",", ":"))})
+         "latency_ms": json.dumps(s["latency_ms"], separators=(",", ":"))},
+        result.sensor_rate_hz)
     files.append(("run recording", out_dir / "run.mcap"))
     files.append(("angles over time", _save(plot_angles(result), out_dir / "angles.png")))
     files.append(("latency histograms", _save(plot_latency(result), out_dir / "latency.png")))

@@ -18,6 +18,7 @@ import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
 from exohil.formats.recording_writer import RecordingWriter
 from exohil.harness.pipeline import Sample
 
@@ -33,12 +34,13 @@ class RecorderSink:
     """A pipeline sink that records the sensor frames the host received to ``path``."""
 
     def __init__(self, path: str | Path, sensor_names: Sequence[str], *,
-                 sensor_units: str = "mm", metadata: Mapping[str, str] | None = None) -> None:
+                 sensor_units: str = "mm", metadata: Mapping[str, str] | None = None,
+                 sensor_rate_hz: float = DEFAULT_SENSOR_RATE_HZ) -> None:
         self.path = Path(path)
         self.partial_path = partial_path(self.path)
         self._writer = RecordingWriter(self.partial_path, sensor_names,
                                        sensor_units=sensor_units, metadata=metadata,
-                                       durable=True)
+                                       sensor_rate_hz=sensor_rate_hz, durable=True)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self.frames_written = 0
         self.error: BaseException | None = None

@@ -35,12 +35,14 @@ def _object_schema(title: str, numbers: Sequence[str],
 
 def write_run_recording(path: Path, run: PipelineRun, sensor_names: Sequence[str],
                         joint: str, angle_names: Sequence[str],
-                        metadata: Mapping[str, str]) -> None:
+                        metadata: Mapping[str, str], sensor_rate_hz: float) -> None:
     """Write ``run``'s kept rows to ``path`` (see module doc): every frame of a run that fits
-    the pipeline's window, else its first and last frames."""
+    the pipeline's window, else its first and last frames; ``sensor_rate_hz``: the device's
+    nominal frame rate."""
     with replacing(path) as tmp:
         t = np.maximum(run.device_time_s, 0.0)
-        with RecordingWriter(tmp, sensor_names, metadata=dict(metadata), name=path) as writer:
+        with RecordingWriter(tmp, sensor_names, metadata=dict(metadata), name=path,
+                             sensor_rate_hz=sensor_rate_hz) as writer:
             if run.retained:
                 writer.add_sensor_frames(run.seq, t, run.values)
             estimates = writer.add_channel(f"/estimate/{joint}", f"exohil.Estimate.{joint}",

@@ -122,6 +122,14 @@ def reference_path(config: BenchConfig) -> Path | None:
     return None
 
 
+def device_rate_hz(config: BenchConfig, reference: Recording | None) -> float:
+    """The device's nominal frame rate, Hz: the emulator streams its recording at that
+    recording's rate; a serial device at the bench's ``[sensors] rate_hz``."""
+    if isinstance(config.device, EmulatorDevice) and reference is not None:
+        return float(reference.sensor_rate_hz)
+    return config.rate_hz
+
+
 def truth_at(reference: Recording, est: TrainedEstimator, device_time_s: np.ndarray) -> np.ndarray:
     """(N, A) true angles (deg) at the frames' device times, in the estimator's order; NaN
     outside the reference's motion capture."""
@@ -283,6 +291,8 @@ class SessionResult:
     link_tally: LinkTally | None = None
     #: the received readings against those the model was trained on (every frame)
     coverage: CoverageTally | None = None
+    #: the device's nominal frame rate (:func:`device_rate_hz`), Hz
+    sensor_rate_hz: float = 250.0
 
     @property
     def fault_counts(self) -> dict[str, int] | None:
@@ -332,6 +342,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         raise SessionError(f"refusing to record onto an input: {config.record}")
     if progress is not None and reference is not None:
         progress = _with_running_error(progress, reference, est)
+    rate_hz = device_rate_hz(config, reference)
     robots: list[Any] = []
     sinks: list[Sink] = []
     tracer = None
@@ -351,7 +362,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
 
             sinks.append(RecorderSink(config.record, est.sensor_names, metadata={
                 "generator": "exohil", "source": config.device.describe(),
-                "model_sha256": model.sha256}))
+                "model_sha256": model.sha256}, sensor_rate_hz=rate_hz))
         coverage = CoverageTally(est)
         observers: list[RowsObserver] = [lambda rows: coverage.add(rows.values)]
         if reference is not None:
@@ -412,7 +423,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
     return SessionResult(config, model, run, truth, fault_log, seq0, clipped, host_load, robots,
-                         trace, device_lost, scoring, link_tally, coverage)
+                         trace, device_lost, scoring, link_tally, coverage, rate_hz)
 
 
 def _with_running_error(progress: Progress, reference: Recording,

@@ -188,11 +188,17 @@ def test_a_recording_at_another_rate_is_replayed_at_its_own(tmp_path):
     result = runner.invoke(main, ["evaluate", str(model), str(part), "--json", str(scored)])
     assert result.exit_code == 0, result.output
     summary = tmp_path / "summary.json"
+    session, out = tmp_path / "session.mcap", tmp_path / "report"
     result = runner.invoke(main, ["demo", "--recording", str(rec), "--model", str(model),
                                   "--seconds", "3", "--no-faults", "--sink", "none",
-                                  "--json", str(summary)])
+                                  "--json", str(summary), "--record", str(session),
+                                  "--out", str(out)])
     assert result.exit_code == 0, result.output
     s = json.loads(summary.read_text())
     assert 290 <= s["frames"]["received"] <= 301  # 3 s at 100 Hz, not at 250 Hz
     expected = json.loads(scored.read_text())["accuracy"]["accuracy.direction_rmse"]
     assert s["direction_rmse_deg"] == pytest.approx(expected, abs=0.05)
+    from exohil.formats.recording_reader import read_recording
+
+    for written in (session, out / "run.mcap"):  # and what it writes says so
+        assert read_recording(written).sensor_rate_hz == 100.0
