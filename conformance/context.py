@@ -14,6 +14,7 @@ limits; the pytest check (``test_checks.py``) records and judges them.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,6 +27,7 @@ from exohil.conformance.conversions import run_properties
 from exohil.conformance.profile import Profile
 from exohil.estimator.coverage import CoverageTally, stream_coverage
 from exohil.estimator.evaluation import accuracy_measurements
+from exohil.estimator.workflow import same_rate
 from exohil.formats.alignment import angles_at_sensor_times
 from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.formats.recording import Recording
@@ -51,6 +53,7 @@ from exohil.harness.session import (
     run_session,
     session_accuracy,
     sha256_file,
+    streamed_rate_hz,
     teleop_measurements,
 )
 
@@ -188,6 +191,7 @@ class ConformanceRun:
             return [Measurement.judge("compatibility.sensor_mismatch", bad, "count",
                                       limits.get("compatibility.sensor_mismatch"),
                                       "frames of the model's sensor count arrive"),
+                    self._rate(streamed_rate_hz(session.run), "the device streams", limits),
                     self._coverage(session.coverage, limits)]
         stream = rec.mocap.get(est.target.joint)
         missing = [a for a in est.target.angles if stream is None or a not in stream.names]
@@ -201,9 +205,20 @@ class ConformanceRun:
                               limits.get("compatibility.angle_mismatch"),
                               f"estimated angles missing from the reference: {missing}"
                               if missing else "every estimated angle has ground truth"),
+            self._rate(rec.sensor_rate_hz, "the reference's sensors run", limits),
             self._coverage(stream_coverage(est, rec.sensors.values) if sensors_ok else None,
                            limits),
         ]
+
+    def _rate(self, rate_hz: float, what: str, limits: dict[str, Limit]) -> Measurement:
+        """``compatibility.rate_mismatch``: 1 when the device's frame rate is not the
+        model's (its window would span another time); skipped where it is not known."""
+        name, model_hz = "compatibility.rate_mismatch", self.model.estimator.sensor_rate_hz
+        if not math.isfinite(rate_hz):
+            return Measurement.skipped(name, "count", "no frame rate measured", limits.get(name))
+        return Measurement.judge(name, 0 if same_rate(rate_hz, model_hz) else 1, "count",
+                                 limits.get(name), f"{what} at {rate_hz:.5g} Hz, the model's "
+                                 f"at {model_hz:g} Hz")
 
     @staticmethod
     def _coverage(tally: CoverageTally | None, limits: dict[str, Limit]) -> Measurement:

@@ -51,6 +51,7 @@ class ProfileError(InputError, ValueError):
 CHECKS: dict[str, dict[str, str]] = {
     "compatibility": {"compatibility.sensor_mismatch": "count",
                       "compatibility.angle_mismatch": "count",
+                      "compatibility.rate_mismatch": "count",
                       "compatibility.outside_training": "%"},
     "heldout": {"heldout.overlap": "count"},
     "accuracy": {"accuracy.rmse.*": "deg", "accuracy.direction_rmse": "deg",
@@ -74,6 +75,8 @@ BUILTIN_LIMITS: dict[str, dict[str, Limit]] = {
                                                              inclusive=True),
                       "compatibility.angle_mismatch": Limit(high=0, unit="count",
                                                             inclusive=True),
+                      "compatibility.rate_mismatch": Limit(high=0, unit="count",
+                                                           inclusive=True),
                       "compatibility.outside_training": Limit(high=OUTSIDE_SHARE_PERCENT,
                                                               unit="%")},
     "heldout": {"heldout.overlap": Limit(high=0, unit="count", inclusive=True)},

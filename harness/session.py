@@ -26,6 +26,7 @@ frames with ground truth whose robot commands are scored at the end (at most
 
 from __future__ import annotations
 
+import math
 import threading
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
@@ -128,6 +129,15 @@ def device_rate_hz(config: BenchConfig, reference: Recording | None) -> float:
     if isinstance(config.device, EmulatorDevice) and reference is not None:
         return float(reference.sensor_rate_hz)
     return config.rate_hz
+
+
+def streamed_rate_hz(run: PipelineRun) -> float:
+    """The device's frame rate as it streamed, Hz: sequence numbers per second of device
+    time over the run (drops do not lower it); NaN without two frames or with a span of 0."""
+    if run.first_seq is None or run.last_seq is None or run.last_seq <= run.first_seq:
+        return math.nan
+    span = run.last_device_time_s - run.first_device_time_s
+    return (run.last_seq - run.first_seq) / span if span > 0 else math.nan
 
 
 def truth_at(reference: Recording, est: TrainedEstimator, device_time_s: np.ndarray) -> np.ndarray:

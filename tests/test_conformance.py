@@ -384,6 +384,24 @@ def test_a_device_with_another_sensor_count_fails_compatibility(tmp_path, fast_p
     assert verdicts(report)["accuracy"] == "skip" and verdicts(report)["latency"] == "skip"
 
 
+def test_a_device_at_another_rate_than_the_model_fails_compatibility(tmp_path, fast_profile):
+    from estimator_synth import shoulder_recording
+
+    slow = tmp_path / "slow.mcap"
+    write_recording(slow, shoulder_recording(seconds=10.0, rate=100.0))
+    found = {}
+    for target in (slow, HELDOUT):
+        _, _, report = conform(tmp_path / target.stem, fast_profile, "-k", "compatibility",
+                               target=target)
+        found[target] = (verdicts(report)["compatibility"],
+                         measurements(report)["compatibility.rate_mismatch"])
+    verdict, rate = found[slow]
+    assert verdict == "fail" and rate["value"] == 1
+    assert rate["note"] == "the reference's sensors run at 100 Hz, the model's at 250 Hz"
+    verdict, rate = found[HELDOUT]
+    assert verdict == "pass" and rate["value"] == 0
+
+
 def test_conform_reads_its_target_and_model_from_a_bench_file(tmp_path, fast_profile):
     bench = tmp_path / "bench.toml"
     bench.write_text(f'[device]\nemulator = "{HELDOUT}"\n[model]\ncheckpoint = "{ENNET}"\n',
