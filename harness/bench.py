@@ -17,7 +17,8 @@ fill in or override it. Example (every key but ``model`` is optional)::
     [sensors]
     names = ["F", "SF", "SR", "R"]  # checked against the model's
     rate_hz = 250   # a real device's frame rate, written into what a session records
-                    # (the emulator streams its recording at that recording's own rate)
+                    # [default: the reference's, else 250]; the emulator streams its
+                    # recording at that recording's own rate
 
     [model]
     checkpoint = "fixtures/models/ennet.npz"
@@ -91,7 +92,8 @@ class BenchConfig:
     model: Path | None = None
     backend: str = "auto"
     sensor_names: tuple[str, ...] | None = None
-    rate_hz: float = 250.0
+    #: a serial device's frame rate, Hz (None: not stated; see session.device_rate_hz)
+    rate_hz: float | None = None
     robots: tuple[str, ...] = ("simulated",)
     record: Path | None = None
 
@@ -206,8 +208,10 @@ def _flag(path: Path, dev: dict[str, Any], key: str) -> bool:
     return value
 
 
-def _rate(path: Path, sensors: dict[str, Any]) -> float:
-    value = sensors.get("rate_hz", 250.0)
+def _rate(path: Path, sensors: dict[str, Any]) -> float | None:
+    value = sensors.get("rate_hz")
+    if value is None:
+        return None
     if (isinstance(value, bool) or not isinstance(value, int | float)
             or not 0 < value <= MAX_RATE_HZ):
         raise BenchError(f"{path}: [sensors] rate_hz must be a number in (0, {MAX_RATE_HZ:g}], "

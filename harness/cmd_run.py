@@ -18,6 +18,7 @@ from exohil.formats.atomic import write_text
 from exohil.harness.bench import BenchConfig
 from exohil.harness.cli_types import (
     MAX_DURATION_S,
+    MAX_RATE_HZ,
     DeviceUrl,
     Finite,
     InputFile,
@@ -140,6 +141,9 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
               help="Write the frames the host received to this recording (MCAP).")
 @click.option("--duration", type=Finite(0.1, MAX_DURATION_S), default=None,
               help="Seconds to run [default: until Ctrl-C].")
+@click.option("--rate", type=Finite(0.0, MAX_RATE_HZ, min_open=True), default=None,
+              help="The device's frame rate, Hz, written into what the run records "
+                   "[default: the bench's, else the reference's, else 250].")
 @click.option("--backend", type=click.Choice(["auto", "numpy", "torch", "torchscript",
                                               "onnxruntime"]), default=None,
               help="Streaming inference backend [auto].")
@@ -150,7 +154,8 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
                    "mujoco, run.mcap).")
 def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str, ...],
         reference: Path | None, record_path: Path | None, duration: float | None,
-        backend: str | None, json_out: Path | None, out_dir: Path | None) -> None:
+        rate: float | None, backend: str | None, json_out: Path | None,
+        out_dir: Path | None) -> None:
     """Run the pipeline on the device at URL (a serial port such as /dev/ttyACM0, a pty
     printed by `exohil emulate`, or any pyserial URL such as socket://host:port)."""
     from exohil.harness.bench import BenchError, SerialDevice, load_bench
@@ -165,7 +170,8 @@ def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str,
         robots = tuple(s for s in sinks if s != "none")
     config = config.with_overrides(
         device=SerialDevice(url, reference), model=model or config.model or
-        MODELS_DIR / "ennet.npz", backend=backend, record=record_path, robots=robots)
+        MODELS_DIR / "ennet.npz", backend=backend, record=record_path, robots=robots,
+        rate_hz=rate)
     run_and_report(config, duration, json_out, title="exohil run", out_dir=out_dir)
 
 

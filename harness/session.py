@@ -48,6 +48,7 @@ from exohil.formats.digest import sha256_file
 from exohil.formats.errors import InputError, RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import Recording
+from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
 from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, SerialDevice, open_device
 from exohil.harness.machine import HostLoad, HostLoadMeter
 from exohil.harness.pipeline import FrameRows, Pipeline, PipelineRun, RowsObserver, Sink, Status
@@ -125,10 +126,13 @@ def reference_path(config: BenchConfig) -> Path | None:
 
 def device_rate_hz(config: BenchConfig, reference: Recording | None) -> float:
     """The device's nominal frame rate, Hz: the emulator streams its recording at that
-    recording's rate; a serial device at the bench's ``[sensors] rate_hz``."""
+    recording's rate; a serial device at the bench's ``[sensors] rate_hz`` (``run --rate``),
+    else at its reference recording's rate, else at the Due's 250 Hz."""
     if isinstance(config.device, EmulatorDevice) and reference is not None:
         return float(reference.sensor_rate_hz)
-    return config.rate_hz
+    if config.rate_hz is not None:
+        return config.rate_hz
+    return float(reference.sensor_rate_hz) if reference is not None else DEFAULT_SENSOR_RATE_HZ
 
 
 def streamed_rate_hz(run: PipelineRun) -> float:

@@ -7,6 +7,7 @@ import pytest
 from click.testing import CliRunner
 
 from exohil.harness.bench import (
+    BenchConfig,
     BenchError,
     EmulatorDevice,
     SerialDevice,
@@ -102,3 +103,22 @@ def test_the_real_device_passes_the_bench_profile(tmp_path):
         args += ["--reference", os.environ["EXOHIL_DEVICE_REFERENCE"]]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
+
+
+def test_the_device_rate_is_the_emulators_recording_else_the_bench_else_the_reference(
+        tmp_path):
+    from estimator_synth import shoulder_recording
+
+    from exohil.harness.session import device_rate_hz
+
+    slow = shoulder_recording(seconds=1.0, rate=100.0)
+    emulator = BenchConfig(device=EmulatorDevice(tmp_path / "slow.mcap"), rate_hz=500.0)
+    assert device_rate_hz(emulator, slow) == 100.0  # it streams its recording at its rate
+    serial = BenchConfig(device=SerialDevice("/dev/ttyACM0", None))
+    assert device_rate_hz(serial, None) == 250.0  # the Due's
+    assert device_rate_hz(serial, slow) == 100.0  # the reference's
+    assert device_rate_hz(serial.with_overrides(rate_hz=200.0), slow) == 200.0  # stated
+    path = tmp_path / "bench.toml"
+    for text, rate in (('[sensors]\nrate_hz = 125\n', 125.0), ('[sensors]\nnames = ["F"]\n', None)):
+        path.write_text(text, encoding="utf-8")
+        assert load_bench(path).rate_hz == rate
