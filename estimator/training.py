@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from exohil.estimator.classical import ClassicalModel
+from exohil.estimator.coverage import input_statistics
 from exohil.estimator.dataset import Block, DatasetError, TargetSpec
 from exohil.estimator.defaults import DEFAULT_DENSE
 from exohil.estimator.evaluation import evaluate
@@ -136,6 +137,8 @@ def train(
         "train_frames": frames,
         "val_frames": int(sum(len(b) for b in split.val)),
         "train_seconds": round(time.monotonic() - start, 1),
+        # where the training frames lie (estimator.coverage: readings beyond them are told)
+        "training_inputs": input_statistics(split.train),
         **fit_info,
     }
     if split.val:

@@ -13,6 +13,7 @@ from exohil.estimator.coverage import (
     OUTSIDE_SIGMAS,
     CoverageTally,
     block_coverage,
+    input_statistics,
     stream_coverage,
 )
 from exohil.estimator.dataset import Block, initial_baseline
@@ -67,6 +68,31 @@ def test_a_calibrated_model_counts_its_calibration_readings_as_trained_on(ennet)
     # each frame against the readings it lies nearest: 60 and 110 against 100 ± 1
     assert tally.extremes()["R"] == pytest.approx((-40.0, 10.0))
     assert stream_coverage(_model(ennet, [0] * 4, [1] * 4), values).outside == 4
+
+
+def _block(x):
+    n = len(x)
+    return Block(x=np.asarray(x, float), y=np.zeros((n, 2)), t=np.arange(n, dtype=float),
+                 segment=np.full(n, "", dtype=object))
+
+
+def test_readings_in_range_whose_combination_training_never_held_are_outside(ennet):
+    rng = np.random.default_rng(3)
+    pose = rng.uniform(-1.0, 1.0, (5000, 2))  # two degrees of freedom drive four sensors
+    mixing = np.array([[1.0, 0.2, -0.5, 0.8], [0.3, 1.0, 0.9, -0.4]])
+    train = pose @ mixing + rng.normal(0.0, 0.01, (5000, 4))
+    kept = input_statistics([_block(train)])
+    est = _model(ennet, kept["input_mean"], kept["input_std"],
+                 info={"training_inputs": kept})
+    assert stream_coverage(est, train).outside == 0  # the farthest frame is the reach
+    unseen = rng.uniform(-1.0, 1.0, (1000, 2)) @ mixing  # same poses, and ...
+    unseen[500:, 3] = -unseen[500:, 3]  # ... half with one sensor mirrored: each in range
+    tally = stream_coverage(est, unseen)
+    lows, highs = zip(*tally.extremes().values(), strict=True)
+    assert max(highs) < OUTSIDE_SIGMAS and min(lows) > -OUTSIDE_SIGMAS
+    assert 400 <= tally.outside <= 500 and tally.warns and tally.furthest > 10
+    without = _model(ennet, kept["input_mean"], kept["input_std"])  # an older checkpoint
+    assert stream_coverage(without, unseen).outside == 0
 
 
 def test_the_rest_offset_is_removed_as_the_streaming_engine_removes_it(ennet):
