@@ -241,8 +241,9 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     """Score CHECKPOINT on RECORDING files: first exohil's accuracy (RMSE per angle where the
     elevation is at least 20°, and the arm-direction RMSE over all frames), then per-angle
     RMSE, MAE and max |error| (degrees) over all frames, overall and per movement segment.
-    A warning comes first when 1 % or more of the frames read more than 4 training standard
-    deviations from the model's training mean (another suit: calibrate first). Example:
+    A warning comes first when 1 % or more of the frames lie outside the readings the model
+    was trained on (docs/estimator.md; another suit or movement: calibrate first), or when
+    the recordings run at another sensor rate than the model's. Example:
 
     \b
         exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
