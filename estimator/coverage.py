@@ -154,10 +154,11 @@ class CoverageTally:
             return
         if self._offset_frames:
             values = values - self._rest_offset(values)
-        zs, scores = zip(*(inputs.scores(values) for inputs in self._sets), strict=True)
-        nearest = np.argmin(np.stack(scores), axis=0)
+        zs, per_set = zip(*(inputs.scores(values) for inputs in self._sets), strict=True)
+        scores = np.stack(per_set)  # (K, N)
+        nearest = np.argmin(scores, axis=0)
         rows = np.arange(n)
-        z, score = np.stack(zs)[nearest, rows], np.stack(scores)[nearest, rows]
+        z, score = np.stack(zs)[nearest, rows], scores[nearest, rows]
         self.frames += n
         self.outside += int(np.count_nonzero(score > 1.0))
         self.furthest = max(self.furthest, float(score.max()))

@@ -46,6 +46,7 @@ from urllib.parse import parse_qs
 
 from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
+from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
 from exohil.harness.acquisition import SerialFrameSource
 from exohil.harness.cli_types import MAX_RATE_HZ, check_seed
 from exohil.harness.pipeline import DeviceClock
@@ -233,6 +234,18 @@ class OpenDevice:
     emulator: Any = None  # exohil.emulators.arduino.ArduinoEmulator, for its fault log
 
 
+def device_rate_hz(config: BenchConfig, reference: Recording | None) -> float:
+    """The device's nominal frame rate, Hz: the emulator streams its recording at that
+    recording's rate (:func:`open_device`); a serial device at the bench's ``[sensors]
+    rate_hz`` (``run --rate``), else at its reference recording's rate, else at the Due's
+    250 Hz."""
+    if isinstance(config.device, EmulatorDevice) and reference is not None:
+        return float(reference.sensor_rate_hz)
+    if config.rate_hz is not None:
+        return config.rate_hz
+    return float(reference.sensor_rate_hz) if reference is not None else DEFAULT_SENSOR_RATE_HZ
+
+
 @contextmanager
 def open_device(device: Device, expected_sensors: int | None, *, realtime: bool = False,
                 duration_s: float | None = None,
@@ -254,7 +267,8 @@ def open_device(device: Device, expected_sensors: int | None, *, realtime: bool 
 
     if recording is None:
         recording = read_recording(device.recording)
-    # at the recording's own rate, so that device time is the recording's time
+    # at the recording's own rate, so that device time is the recording's time (and
+    # device_rate_hz reports it)
     with ArduinoEmulator.from_recording(recording, rate_hz=recording.sensor_rate_hz,
                                         faults=device.faults, seed=device.seed,
                                         loop=device.loop, realtime=realtime,

@@ -49,7 +49,14 @@ from exohil.formats.errors import InputError, RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import Recording
 from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
-from exohil.harness.bench import BenchConfig, BenchError, EmulatorDevice, SerialDevice, open_device
+from exohil.harness.bench import (
+    BenchConfig,
+    BenchError,
+    EmulatorDevice,
+    SerialDevice,
+    device_rate_hz,
+    open_device,
+)
 from exohil.harness.machine import HostLoad, HostLoadMeter
 from exohil.harness.pipeline import FrameRows, Pipeline, PipelineRun, RowsObserver, Sink, Status
 from exohil.harness.robot_stats import LogHistogram
@@ -122,17 +129,6 @@ def reference_path(config: BenchConfig) -> Path | None:
     if isinstance(device, SerialDevice):
         return device.reference
     return None
-
-
-def device_rate_hz(config: BenchConfig, reference: Recording | None) -> float:
-    """The device's nominal frame rate, Hz: the emulator streams its recording at that
-    recording's rate; a serial device at the bench's ``[sensors] rate_hz`` (``run --rate``),
-    else at its reference recording's rate, else at the Due's 250 Hz."""
-    if isinstance(config.device, EmulatorDevice) and reference is not None:
-        return float(reference.sensor_rate_hz)
-    if config.rate_hz is not None:
-        return config.rate_hz
-    return float(reference.sensor_rate_hz) if reference is not None else DEFAULT_SENSOR_RATE_HZ
 
 
 def streamed_rate_hz(run: PipelineRun) -> float:
@@ -305,8 +301,8 @@ class SessionResult:
     link_tally: LinkTally | None = None
     #: the received readings against those the model was trained on (every frame)
     coverage: CoverageTally | None = None
-    #: the device's nominal frame rate (:func:`device_rate_hz`), Hz
-    sensor_rate_hz: float = 250.0
+    #: the device's nominal frame rate (:func:`~exohil.harness.bench.device_rate_hz`), Hz
+    sensor_rate_hz: float = DEFAULT_SENSOR_RATE_HZ
 
     @property
     def fault_counts(self) -> dict[str, int] | None:

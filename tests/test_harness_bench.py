@@ -11,6 +11,7 @@ from exohil.harness.bench import (
     BenchError,
     EmulatorDevice,
     SerialDevice,
+    device_rate_hz,
     load_bench,
     open_device,
     parse_target,
@@ -108,8 +109,6 @@ def test_the_real_device_passes_the_bench_profile(tmp_path):
 def test_the_device_rate_is_the_emulators_recording_else_the_bench_else_the_reference(
         tmp_path):
     from estimator_synth import shoulder_recording
-
-    from exohil.harness.session import device_rate_hz
 
     slow = shoulder_recording(seconds=1.0, rate=100.0)
     emulator = BenchConfig(device=EmulatorDevice(tmp_path / "slow.mcap"), rate_hz=500.0)
