@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from exohil.estimator.coverage import OUTSIDE_SHARE_PERCENT
 from exohil.estimator.workflow import ModelResult
 from exohil.formats.atomic import write_text
 
@@ -30,7 +31,8 @@ def comparison_markdown(
 ) -> str:
     """The Table-I-style RMSE table in exohil's accuracy definition (RMSE per angle where the
     elevation is at least 20°, plus the arm-direction RMSE over all frames, for a shoulder
-    model), a detail table (all-frames RMSE, MAE, max, training) and provenance."""
+    model), a detail table (all-frames RMSE, MAE, max, the test frames outside the readings
+    each model was trained on, training) and provenance."""
     shoulder = any("accuracy.direction_rmse" in r.test.get("accuracy", {}) for r in results)
     where = " where φ ≥ 20°" if shoulder else ""
     head = ("| Method | " + " | ".join(f"{a} RMSE{where} (°)" for a in angles)
@@ -45,8 +47,9 @@ def comparison_markdown(
         lines.append(f"| {METHOD_NAMES.get(r.kind, r.kind)} | {' | '.join(cells)} |")
     lines += ["", "| Method | " + " | ".join(f"{a} RMSE / MAE / max, all frames (°)"
                                             for a in angles)
-              + " | window | epochs (best) | stopped by | train s |",
-              "|---|" + "---:|" * (len(angles) + 4)]
+              + " | test frames outside training (%) | window | epochs (best) | stopped by "
+              "| train s |",
+              "|---|" + "---:|" * (len(angles) + 5)]
     for r in results:
         info = r.estimator.info
         detail = " | ".join(f"{r.test['rmse'][a]:.2f} / {r.test['mae'][a]:.2f} / "
@@ -55,11 +58,22 @@ def comparison_markdown(
         window = ("—" if r.kind in ("ann", "classical") else "carried state"
                   if cfg.stateful else f"{cfg.window}×{cfg.dilation}")
         epochs = f"{info.get('epochs', '—')} ({info.get('best_epoch', '—')})"
-        lines.append(f"| {r.kind} | {detail} | {window} | {epochs} | "
+        lines.append(f"| {r.kind} | {detail} | {_outside(r)} | {window} | {epochs} | "
                      f"{info.get('stopped_by', 'closed form')} | {info.get('train_seconds')} |")
-    lines += ["", f"Test frames: {results[0].test['frames'] if results else 0}. Made by:", "",
-              "```", command, "```"]
+    lines += ["", f"Test frames: {results[0].test['frames'] if results else 0}."]
+    told = [r.kind for r in results if r.coverage.warns]
+    if told:
+        lines += ["", f"**{', '.join(told)}: {OUTSIDE_SHARE_PERCENT:g} % or more of the test "
+                  "frames lie outside the readings the model was trained on** (another suit "
+                  "or donning, or movements only the test part holds): its figures there "
+                  "measure extrapolation (docs/estimator.md)."]
+    lines += ["", "Made by:", "", "```", command, "```"]
     return "\n".join(lines) + "\n"
+
+
+def _outside(result: ModelResult) -> str:
+    share = result.coverage.outside_percent
+    return "—" if share is None else f"{share:.2f}"
 
 
 def _deg(value: float | None) -> str:

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from exohil.estimator.coverage import CoverageTally, block_coverage
 from exohil.estimator.dataset import (
     Block,
     DatasetError,
@@ -125,6 +126,9 @@ class ModelResult:
     kind: str
     estimator: TrainedEstimator
     test: dict
+    #: the test frames whose readings lie outside the model's training data (another suit
+    #: or movement across recordings, a pose only the test part holds within them)
+    coverage: CoverageTally
 
 
 def compare_models(
@@ -138,6 +142,8 @@ def compare_models(
         est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
                     sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress)
         test = evaluate(est, split.test)
+        coverage = block_coverage(est, split.test)
+        test["training_coverage"] = coverage.to_dict()
         est.info.setdefault("metrics", {})["test"] = test
-        results.append(ModelResult(kind, est, test))
+        results.append(ModelResult(kind, est, test, coverage))
     return results

@@ -350,6 +350,10 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
     base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, dense,
                         output)
     results = wf.compare_models(split, data, kinds, base, offset_frames, progress_printer())
+    for r in results:
+        warning = r.coverage.warning()
+        if warning:
+            click.echo(f"warning: {r.kind}: {warning}", err=True)
     names = ", ".join(p.name for p in train_paths)
     described = f"train {names}" + (
         f"; test {', '.join(p.name for p in test_paths)}" if test_paths else "")

@@ -233,6 +233,7 @@ def test_weights_are_copies():
 
 
 def test_evaluate_reports_the_one_accuracy_definition_beside_all_frames():
+    from exohil.estimator.coverage import block_coverage
     from exohil.estimator.evaluation import OBSERVABLE_ELEVATION_DEG, evaluate
     from exohil.estimator.report import comparison_markdown
     from exohil.estimator.workflow import ModelResult
@@ -245,8 +246,9 @@ def test_evaluate_reports_the_one_accuracy_definition_beside_all_frames():
             observable["rmse"][angle], rel=1e-12)
     assert result["accuracy"]["accuracy.direction_rmse"] > 0
     assert result["accuracy"]["accuracy.frames_scored"] == result["frames"]
-    table = comparison_markdown([ModelResult("ann", est, result)], est.target.angles,
-                                title="t", command="c", split="s", data="d")
+    scored = ModelResult("ann", est, result, block_coverage(est, split.test))
+    table = comparison_markdown([scored], est.target.angles, title="t", command="c", split="s",
+                                data="d")
     header = table.splitlines()[6]
     assert "elv_angle RMSE where φ ≥ 20° (°)" in header and "arm direction" in header
     row = table.splitlines()[8]

@@ -6,6 +6,7 @@ import pytest
 from click.testing import CliRunner
 from estimator_synth import shoulder_recording
 
+from exohil.formats.recording import cut_recording
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 
@@ -83,6 +84,35 @@ def test_table_writes_a_markdown_section(files):
     assert text.count("<!-- table:t1 -->") == 1
     assert "hand-written text" in text
     assert "| Classical" in text and "| ANN" in text
+
+
+def test_table_tells_test_frames_outside_the_training_readings(files):
+    """Across recordings, a test suit whose readings lie 40 mm off the training suit's: the
+    table says so in its column, in a note under it and in a warning line; the training
+    recording's own end, as test part, lies inside."""
+    other = files["dir"] / "other_suit.mcap"
+    write_recording(other, shoulder_recording(seconds=2.0, seed=3, offset_mm=40.0))
+    md, data = files["dir"] / "coverage.md", files["dir"] / "coverage.json"
+    result = CliRunner().invoke(
+        main, ["table", "--train", str(files["good"]), "--test", str(other), "--models",
+               "classical", "--out", str(md), "--json", str(data)])
+    assert result.exit_code == 0, result.output
+    assert "warning: classical: 100.0% of" in result.stderr
+    coverage = json.loads(data.read_text())["classical"]["test"]["training_coverage"]
+    assert coverage["outside_percent"] == 100.0
+    text = md.read_text()
+    assert "test frames outside training (%)" in text
+    assert "| classical | " in text and " | 100.00 | " in text
+    assert "**classical: 1 % or more of the test frames lie outside" in text
+
+    trained_on = files["dir"] / "trained_on.mcap"  # the first 40 % of its first movement
+    write_recording(trained_on, cut_recording(shoulder_recording(seconds=3.0, seed=2), 0, 0.6))
+    inside = CliRunner().invoke(
+        main, ["table", "--train", str(files["good"]), "--test", str(trained_on), "--models",
+               "classical"])
+    assert inside.exit_code == 0, inside.output
+    assert "warning" not in inside.stderr
+    assert "lie outside" not in inside.stdout
 
 
 def test_table_rejects_unknown_models(files):
