@@ -13,7 +13,6 @@ version, missing/extra/misshapen weights — raises :class:`CheckpointError` wit
 
 from __future__ import annotations
 
-import json
 import math
 import zipfile
 from pathlib import Path
@@ -58,7 +57,7 @@ def save_checkpoint(path: str | Path, est: TrainedEstimator) -> None:
         "info": est.info,
     }
     arrays: dict[str, np.ndarray] = {
-        "meta": np.frombuffer(json.dumps(meta, sort_keys=True).encode(), dtype=np.uint8)
+        "meta": np.frombuffer(strict_json.dumps(meta, sort_keys=True).encode(), dtype=np.uint8)
     }
     if est.classical is not None:
         arrays["classical/thresholds"] = est.classical.thresholds

@@ -16,6 +16,23 @@ from typing import Any
 MAX_INT = 2**63 - 1
 
 
+def dumps(value: Any, **kwargs: Any) -> str:
+    """``json.dumps`` of ``value`` with every non-finite float written as ``null`` (a figure
+    not measured, such as an RMSE over no frame), so that :func:`loads` reads it back;
+    ``kwargs`` go to ``json.dumps``."""
+    return json.dumps(_finite(value), allow_nan=False, **kwargs)
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
 def loads(data: str | bytes) -> Any:
     """Parse ``data``; raises ValueError (``UnicodeDecodeError`` and ``JSONDecodeError`` are
     ValueErrors too) for invalid JSON or UTF-8, a non-finite or out-of-range number, or

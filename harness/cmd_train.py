@@ -3,7 +3,6 @@ line (logic in :mod:`exohil.estimator`; see docs/estimator.md)."""
 
 from __future__ import annotations
 
-import json
 import shlex
 import sys
 from typing import TYPE_CHECKING
@@ -12,6 +11,7 @@ import click
 
 from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
 from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
+from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
 from exohil.harness.cli_types import (
     MAX_DURATION_S,
@@ -285,7 +285,7 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         click.echo(f"  {name}: RMSE ({scope}) "
                    + ", ".join(f"{a} {v:.2f}°" for a, v in seg["rmse"].items()))
     if json_out:
-        write_text(json_out, json.dumps(result, indent=2) + "\n")
+        write_text(json_out, strict_json.dumps(result, indent=2) + "\n")
 
 
 def _angle_limits(items: tuple[tuple[str, float], ...],
@@ -371,7 +371,7 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
             save_checkpoint(save_dir / f"{r.kind}.npz", r.estimator)
     if json_out:
         payload = {r.kind: {"test": r.test, "info": r.estimator.info} for r in results}
-        write_text(json_out, json.dumps(payload, indent=2) + "\n")
+        write_text(json_out, strict_json.dumps(payload, indent=2) + "\n")
 
 
 COMMANDS: list[click.Command] = [train_command, evaluate_command, table_command]

@@ -253,3 +253,15 @@ def test_evaluate_reports_the_one_accuracy_definition_beside_all_frames():
     assert "elv_angle RMSE where φ ≥ 20° (°)" in header and "arm direction" in header
     row = table.splitlines()[8]
     assert f"{result['accuracy']['accuracy.rmse.elv_angle']:.2f}" in row
+
+
+def test_a_figure_measured_on_no_frame_is_saved_as_null_and_the_checkpoint_loads(tmp_path):
+    """Validation with no frame at 20° elevation or more leaves its accuracy NaN: the
+    checkpoint keeps it as not measured (null) and every reader can load it."""
+    est = load_checkpoint(ROOT / "fixtures" / "models" / "ann.npz")
+    est.info["metrics"] = {"validation": {"accuracy": {"accuracy.rmse.elv_angle": float("nan"),
+                                                       "accuracy.direction_rmse": 1.5}}}
+    save_checkpoint(tmp_path / "m.npz", est)
+    back = load_checkpoint(tmp_path / "m.npz")
+    assert back.info["metrics"]["validation"]["accuracy"] == {
+        "accuracy.rmse.elv_angle": None, "accuracy.direction_rmse": 1.5}
