@@ -65,12 +65,17 @@ class RecorderSink:
 
     def close(self) -> None:
         """Write everything queued, close the file and rename it into place; re-raises a
-        write error (the ``.partial`` file then stays, readable up to the error)."""
+        write error (the ``.partial`` file then stays, readable up to the error). A session
+        that recorded no frame (a device that never sent one) writes nothing: its empty
+        ``.partial`` file is removed and a recording already at ``path`` stays as it was."""
         self._queue.put(_STOP)
         self._thread.join()
         self._writer.close()
         if self.error is not None:
             raise self.error
+        if self.frames_written == 0:
+            self.partial_path.unlink()
+            return
         self.partial_path.replace(self.path)
 
     def __enter__(self) -> RecorderSink:

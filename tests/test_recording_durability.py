@@ -98,3 +98,18 @@ def test_sigkill_during_a_recorded_demo_leaves_a_readable_recording(tmp_path):
     scan = scan_recording(partial)
     assert len(scan.recording.sensors) > 0 and scan.lost_bytes is not None
     assert scan.recording.metadata.get("generator") == "exohil"
+
+
+def test_a_run_that_records_no_frame_leaves_an_existing_recording_as_it_was(tmp_path):
+    """A device that never sends a frame: run fails with one line, and the recording
+    already at --record is neither replaced by an empty one nor joined by a .partial."""
+    old = tmp_path / "old.mcap"
+    with RecordingWriter(old, ["a", "b"]) as writer:
+        writer.add_sensor_frame(0, 0.0, [1.0, 2.0])
+    before = old.read_bytes()
+    result = CliRunner().invoke(main, ["run", str(tmp_path / "no-such-port"), "--duration", "1",
+                                       "--record", str(old), "--out", str(tmp_path / "out")])
+    assert result.exit_code != 0
+    assert "no frame arrived" in result.output
+    assert old.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.glob("old.mcap*")) == ["old.mcap"]
