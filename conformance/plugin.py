@@ -146,11 +146,18 @@ def check(request: pytest.FixtureRequest, conformance_run, record_property):
         try:
             measurements = produce(conformance_run)
         except CheckBlocked as err:
-            done(Verdict.SKIP, str(err), [])
-            pytest.skip(f"{name}: {err}")
+            blocked, failure = str(err), None
         except SessionError as err:
-            done(Verdict.FAIL, str(err), [])
-            pytest.fail(f"{name}: {err}", pytrace=False)
+            blocked, failure = None, str(err)
+        else:
+            blocked = failure = None
+        # outside the except clauses, so pytest shows the one message, not the chain
+        if blocked is not None:
+            done(Verdict.SKIP, blocked, [])
+            pytest.skip(f"{name}: {blocked}")
+        if failure is not None:
+            done(Verdict.FAIL, failure, [])
+            pytest.fail(f"{name}: {failure}", pytrace=False)
         for m in measurements:
             for key, value in m.junit_properties():
                 record_property(key, value)

@@ -371,6 +371,20 @@ def test_a_recording_the_model_was_trained_on_fails_heldout(tmp_path, fast_profi
     assert "paper_protocol.mcap was used to train the model" in last_line(output)
 
 
+def test_a_target_that_is_no_recording_fails_every_check_that_reads_it(tmp_path, fast_profile):
+    """Not even heldout passes on a file it cannot read (it compared the file's digest with
+    the training recordings' and found no match), and each failure says the reason once,
+    without the chain of exceptions behind it."""
+    text = tmp_path / "text.mcap"
+    text.write_text("hello\n")
+    code, output, report = conform(tmp_path / "out", fast_profile, "-k", "heldout or accuracy",
+                                   target=text)
+    assert code != 0
+    assert verdicts(report)["heldout"] == "fail" and verdicts(report)["accuracy"] == "fail"
+    assert "not an MCAP file" in last_line(output)
+    assert "During handling" not in output
+
+
 def test_a_device_with_another_sensor_count_fails_compatibility(tmp_path, fast_profile):
     from estimator_synth import shoulder_recording
 
