@@ -75,6 +75,8 @@ def _outputs(config: BenchConfig, json_out: Path | None,
     outputs = [("--record", config.record), ("--json", json_out)]
     if out_dir is not None:
         outputs += [("--out", out_dir / name) for name in REPORT_FILES]
+        # the report replaces every arm_*.png in the folder with its numbered stills
+        outputs += [("--out", path) for path in sorted(out_dir.glob("arm_*.png"))]
     return outputs
 
 

@@ -202,3 +202,18 @@ def test_a_recording_at_another_rate_is_replayed_at_its_own(tmp_path):
 
     for written in (session, out / "run.mcap"):  # and what it writes says so
         assert read_recording(written).sensor_rate_hz == 100.0
+
+
+def test_demo_refuses_a_report_folder_whose_arm_stills_would_replace_its_input(tmp_path):
+    """The report replaces every arm_*.png in --out: an input there named so is refused."""
+    import shutil
+
+    from exohil.harness.paths import FIXTURES_DIR
+
+    copy = tmp_path / "arm_00001.png"
+    shutil.copyfile(FIXTURES_DIR / "paper_protocol_heldout.mcap", copy)
+    before = copy.read_bytes()
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--recording", str(copy),
+                                       "--out", str(tmp_path)])
+    assert result.exit_code != 0 and "refusing to overwrite it" in result.output
+    assert copy.read_bytes() == before
