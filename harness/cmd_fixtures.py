@@ -47,8 +47,9 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
         raise click.BadParameter(f"{fixtures_dir} has no {SUMS_FILE} to check against",
                                  param_hint="--dir")
     with tempfile.TemporaryDirectory(prefix="exohil-fixtures-") as tmp:
-        out_dir = Path(tmp) if check else fixtures_dir
-        out_dir.mkdir(parents=True, exist_ok=True)
+        # every fixture is built here first: a build that fails half-way (the real motion
+        # missing) leaves the fixtures folder and its sums as they were
+        out_dir = Path(tmp)
         hashes = {}
         for spec in FIXTURES:
             click.echo(f"building {spec.filename}: {spec.description}", err=True)
@@ -58,8 +59,16 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
                 raise click.ClickException(f"{spec.filename}: {exc} (see --shoulder-ik)") from None
             hashes[spec.filename] = sha256_file(built)
         if not check:
-            for source, target in SHOULDER_IK_NOTICES.items():
-                notice = (shoulder_ik_dir / source).read_bytes()
+            try:
+                notices = {target: (shoulder_ik_dir / source).read_bytes()
+                           for source, target in SHOULDER_IK_NOTICES.items()}
+            except OSError as exc:
+                raise click.ClickException(f"cannot read the shoulder-ik licence notice: {exc} "
+                                           "(see --shoulder-ik)") from None
+            fixtures_dir.mkdir(parents=True, exist_ok=True)
+            for name in hashes:
+                write_bytes(fixtures_dir / name, (out_dir / name).read_bytes())
+            for target, notice in notices.items():
                 write_bytes(fixtures_dir / target, notice)
             write_text(fixtures_dir / SUMS_FILE, format_sums(hashes))
             click.echo(f"wrote {len(hashes)} fixtures and {SUMS_FILE} to {fixtures_dir}", err=True)

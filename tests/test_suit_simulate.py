@@ -291,3 +291,18 @@ def test_fixture_check_fails_on_a_wrong_hash(tmp_path):
     result = CliRunner().invoke(main, ["fixtures", "build", "--check", "--dir", str(tmp_path)])
     assert result.exit_code == 1
     assert "MISMATCH" in result.output
+
+
+def test_a_build_that_fails_half_way_leaves_the_fixtures_folder_as_it_was(tmp_path):
+    """Without the real motion the third fixture cannot be built: the two built before it
+    are not written beside the old sums, and the error is one line."""
+    fixtures, empty = tmp_path / "fixtures", tmp_path / "no-motion"
+    fixtures.mkdir()
+    empty.mkdir()
+    (fixtures / "SHA256SUMS").write_text("kept\n", encoding="utf-8")
+    result = CliRunner().invoke(main, ["fixtures", "build", "--dir", str(fixtures),
+                                       "--shoulder-ik", str(empty)])
+    assert result.exit_code == 1
+    assert "Traceback" not in result.output and "see --shoulder-ik" in result.output
+    assert sorted(p.name for p in fixtures.iterdir()) == ["SHA256SUMS"]
+    assert (fixtures / "SHA256SUMS").read_text(encoding="utf-8") == "kept\n"
