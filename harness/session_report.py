@@ -122,14 +122,17 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
         lines.append(f"{'latency':11s} {stage:22s} p50 {stats['p50']:.3f}  p99 {stats['p99']:.3f}"
                      f"  max {stats['max']:.3f} ms")
     rmse = ", ".join(f"{k} {v:.2f}°" for k, v in s["rmse"].items() if v is not None)
+    direction = s["direction_rmse_deg"]
     if rmse:
-        direction = s["direction_rmse_deg"]
         lines.append(f"accuracy    RMSE {rmse} where elevation ≥ 20° (θ is undefined with the "
                      "arm hanging)")
-        if direction is not None:
-            lines.append(f"            arm-direction RMSE {direction:.2f}° over all frames")
+    elif direction is not None:
+        lines.append("accuracy    RMSE per angle not measured: no frame reached 20° of elevation "
+                     "(θ is undefined with the arm hanging)")
     else:
         lines.append("accuracy    not measured: no reference recording")
+    if direction is not None:
+        lines.append(f"            arm-direction RMSE {direction:.2f}° over all frames")
     teleop = s["teleop"]
     if teleop["rmse_deg"] and any(v is not None for v in teleop["rmse_deg"].values()):
         joints = ", ".join(f"{k} {v:.2f}°" for k, v in teleop["rmse_deg"].items())

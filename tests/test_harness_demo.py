@@ -217,3 +217,15 @@ def test_demo_refuses_a_report_folder_whose_arm_stills_would_replace_its_input(t
                                        "--out", str(tmp_path)])
     assert result.exit_code != 0 and "refusing to overwrite it" in result.output
     assert copy.read_bytes() == before
+
+
+def test_a_demo_that_never_raises_the_arm_reports_the_arm_direction_it_measured(tmp_path):
+    """The fixture's first second holds the arm at rest: no frame reaches 20° of elevation,
+    so there is no RMSE per angle, but there is a reference and the arm-direction RMSE is
+    measured and said; not 'no reference recording'."""
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--sink", "none",
+                                       "--no-faults", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert "no reference recording" not in result.output
+    assert "no frame reached 20° of elevation" in result.output
+    assert "arm-direction RMSE" in result.output
