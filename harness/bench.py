@@ -81,6 +81,20 @@ class SerialDevice:
     def describe(self) -> str:
         return f"serial device {self.url}"
 
+    def path_problem(self) -> str | None:
+        """Why ``url``, a plain path (no ``scheme://``), cannot be a serial device: it does
+        not exist, or it is a regular file or a folder; None for a URL or a device node."""
+        if "://" in self.url:
+            return None
+        path = Path(self.url)
+        if not path.exists():
+            return f"{self.url} does not exist (is the device plugged in?)"
+        if path.is_dir():
+            return f"{self.url} is a folder, not a serial device"
+        if path.is_file():
+            return f"{self.url} is a regular file, not a serial device"
+        return None
+
 
 Device = EmulatorDevice | SerialDevice
 

@@ -121,3 +121,14 @@ def test_the_device_rate_is_the_emulators_recording_else_the_bench_else_the_refe
     for text, rate in (('[sensors]\nrate_hz = 125\n', 125.0), ('[sensors]\nnames = ["F"]\n', None)):
         path.write_text(text, encoding="utf-8")
         assert load_bench(path).rate_hz == rate
+
+
+def test_a_path_that_cannot_be_a_serial_device_says_why(tmp_path):
+    from exohil.harness.bench import SerialDevice
+
+    (tmp_path / "file.mcap").write_bytes(b"")
+    assert "does not exist" in SerialDevice(str(tmp_path / "none")).path_problem()
+    assert "is a folder" in SerialDevice(str(tmp_path)).path_problem()
+    assert "regular file" in SerialDevice(str(tmp_path / "file.mcap")).path_problem()
+    assert SerialDevice("/dev/null").path_problem() is None  # a device node may be one
+    assert SerialDevice("loop://").path_problem() is None
