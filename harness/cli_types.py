@@ -282,8 +282,9 @@ class FaultSpec(click.ParamType):
 
         text = str(value)
         if not text.strip():
-            self.fail("an empty fault spec is not allowed (leave the option out for none)",
-                      param, ctx)
+            self.fail("an empty fault spec is not allowed (for none: --no-faults where the "
+                      "command injects faults by default, as the demo does; elsewhere leave "
+                      "--faults out)", param, ctx)
         if "\x00" in text:
             self.fail(f"{text!r} contains a NUL byte", param, ctx)
         try:

@@ -330,7 +330,10 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
     validation), last 30% test. Across recordings: --test files. Example:
 
     \b
-        exohil table --train fixtures/paper_protocol.mcap --out docs/results.md --section paper
+        exohil table --train fixtures/paper_protocol.mcap --out docs/results.md --section paper \\
+            --title 'Default protocol (simulated suit, fixtures/paper_protocol.mcap)'
+
+    A section is replaced whole, heading included: give its --title again.
     """
     from exohil.estimator.checkpoint import save_checkpoint
     from exohil.estimator.report import comparison_markdown, write_section
