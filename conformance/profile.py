@@ -178,6 +178,9 @@ def profile_path(name_or_path: str) -> Path:
     path = PROFILES_DIR / f"{name_or_path}.toml"
     if not path.is_file():
         bundled = ", ".join(sorted(p.stem for p in PROFILES_DIR.glob("*.toml")))
+        if Path(name_or_path).is_file():  # a file, but not a profile's .toml
+            raise ProfileError(f"{name_or_path}: a profile file must end in .toml; bundled "
+                               f"profiles: {bundled}")
         raise ProfileError(f"no profile {name_or_path!r}; bundled: {bundled} "
                            "(or give a path to a .toml file)")
     return path

@@ -385,6 +385,9 @@ class Target(click.ParamType):
             self.fail(str(exc), param, ctx)
         assert isinstance(device, EmulatorDevice)
         _fail_unusable_path(self, device.recording, param, ctx)
+        if device.recording.is_dir():
+            self.fail(f"{os.fspath(device.recording)!r} is a folder, not a recording", param,
+                      ctx)
         if not device.recording.is_file():
             self.fail(f"no recording {os.fspath(device.recording)!r}", param, ctx)
         if device.faults is not None:

@@ -138,6 +138,15 @@ def test_an_unknown_profile_is_one_error_line(tmp_path):
     assert code != 0 and "no profile 'nonexistent'" in output
 
 
+def test_a_profile_file_without_toml_and_a_folder_as_target_say_so(tmp_path):
+    text = tmp_path / "limits.csv"
+    text.write_text("x\n")
+    code, output, _ = conform(tmp_path / "a", text)
+    assert code != 0 and "a profile file must end in .toml" in output
+    code, output, _ = conform(tmp_path / "b", Path("ci"), target=tmp_path)
+    assert code != 0 and "is a folder, not a recording" in output
+
+
 # ---- the control run -----------------------------------------------------------------------
 def test_the_reference_ennet_passes_and_writes_every_report(tmp_path, fast_profile):
     code, output, report = conform(tmp_path, fast_profile)
