@@ -37,8 +37,9 @@ def status_line(status: Status) -> None:
     link = status.link
     latency = status.recent_latency_ms
     p99 = f"  p99 {np.percentile(latency, 99):5.1f} ms" if latency.size else ""
-    error = "" if status.error_deg is None else f"  error {status.error_deg:5.1f}°"
-    angles = "" if status.last is None else "  " + " ".join(f"{v:6.1f}°" for v in status.last)
+    error = "" if status.error_deg is None else f"  arm error {status.error_deg:5.1f}°"
+    angles = ("" if status.last is None else
+              "  estimate " + " ".join(f"{v:6.1f}°" for v in status.last))
     click.echo(f"  {status.frames:6d} frames  dropped {link.dropped}  crc errors "
                f"{link.crc_errors}{p99}{error}{angles}", err=True)
 

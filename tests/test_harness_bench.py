@@ -132,3 +132,17 @@ def test_a_path_that_cannot_be_a_serial_device_says_why(tmp_path):
     assert "regular file" in SerialDevice(str(tmp_path / "file.mcap")).path_problem()
     assert SerialDevice("/dev/null").path_problem() is None  # a device node may be one
     assert SerialDevice("loop://").path_problem() is None
+
+
+def test_the_status_line_labels_the_error_and_the_estimate(capsys):
+    import numpy as np
+
+    from exohil.harness.cmd_run import status_line
+    from exohil.harness.frame_source import LinkStats
+    from exohil.harness.pipeline import Status
+
+    status_line(Status(frames=250, link=LinkStats(), last=np.array([89.0, 88.4]),
+                       recent_latency_ms=np.array([1.0, 2.0]), recent_device_time_s=np.zeros(2),
+                       recent_estimates=np.zeros((2, 2)), error_deg=1.5))
+    line = capsys.readouterr().err
+    assert "arm error   1.5°" in line and "estimate   89.0°   88.4°" in line
