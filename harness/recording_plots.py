@@ -128,10 +128,12 @@ def plot_timeseries(
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
-    figure = Figure(figsize=(10.0, 6.0), dpi=120, layout="constrained")
-    top, bottom = figure.subplots(2, 1, sharex=True)
     window = window or TimeWindow()
     keep = window.mask(rec.sensors.t)
+    if not keep.any() and not any(window.mask(s.t).any() for s in rec.mocap.values()):
+        raise RecordingError("no sensor frame or mocap sample in the chosen time window")
+    figure = Figure(figsize=(10.0, 6.0), dpi=120, layout="constrained")
+    top, bottom = figure.subplots(2, 1, sharex=True)
     for name in sensors or rec.sensor_names:
         column = _sensor_column(rec, name)
         top.plot(rec.sensors.t[keep], rec.sensors.values[keep, column], lw=0.8, label=name)

@@ -83,3 +83,12 @@ def test_the_cli_group_turns_os_errors_into_one_line():
 def test_bad_option_values_name_the_problem(args, message):
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 2 and message in result.output
+
+
+def test_a_time_window_past_the_recording_is_one_line_and_no_empty_plot(tmp_path):
+    out = tmp_path / "p.png"
+    result = CliRunner().invoke(main, ["plot", FIXTURE, "--kind", "timeseries", "--t0", "5000",
+                                       "--t1", "6000", "--out", str(out)])
+    assert result.exit_code == 1
+    assert "no sensor frame or mocap sample in the chosen time window" in result.output
+    assert not out.exists()
