@@ -94,7 +94,10 @@ def load_recordings(
     sensors = expected_sensors or recs[0].sensor_names
     for p, r in zip(paths, recs, strict=True):
         check_sensors(r, tuple(sensors), str(p))
-    target = resolve_target(recs[0], joint, angles)
+    try:
+        target = resolve_target(recs[0], joint, angles)
+    except DatasetError as exc:
+        raise DatasetError(f"{paths[0]}: {exc}") from None
     rate = float(recs[0].sensor_rate_hz)
     for p, r in zip(paths[1:], recs[1:], strict=True):
         if not same_rate(r.sensor_rate_hz, rate):

@@ -155,3 +155,12 @@ def test_training_on_recordings_at_two_rates_is_one_clear_error(files):
                "--out", str(files["dir"] / "mixed.npz"), "--max-epochs", "1"]))
     assert "sensors at 100 Hz" in line and "at 250 Hz" in line
     assert not (files["dir"] / "mixed.npz").exists()
+
+
+def test_a_recording_without_the_models_joint_is_named_in_the_error(files):
+    rec = shoulder_recording(seconds=1.0)
+    rec.mocap = {"knee": rec.mocap["shoulder"]}
+    knee = files["dir"] / "knee.mcap"
+    write_recording(knee, rec)
+    line = _one_line_error(CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(knee)]))
+    assert str(knee) in line and "joint 'shoulder' not in recording" in line
