@@ -22,7 +22,8 @@ from exohil.harness.cli_types import (
 
 @click.group("record")
 def record_group() -> None:
-    """Inspect recordings (recording format v1, MCAP; see docs/recording-format.md)."""
+    """Inspect, cut and recover recordings (recording format v1, MCAP; see
+    docs/recording-format.md)."""
 
 
 @record_group.command("info")
