@@ -90,16 +90,21 @@ def test_demo_streams_the_fixture_through_the_whole_chain(tmp_path):
     assert report == s  # --json and the folder's summary.json are the same summary
 
 
-def test_demo_refuses_to_record_onto_its_input(tmp_path):
+@pytest.mark.parametrize("name, output", [
+    ("in.mcap", ["--record", "{input}"]),
+    # the report replaces every arm_*.png in --out: an input there named so is refused
+    ("arm_00001.png", ["--out", "{folder}"]),
+])
+def test_demo_refuses_to_write_onto_its_input(tmp_path, name, output):
     import shutil
 
     from exohil.harness.paths import FIXTURES_DIR
 
-    copy = tmp_path / "in.mcap"
+    copy = tmp_path / name
     shutil.copyfile(FIXTURES_DIR / "paper_protocol_heldout.mcap", copy)
     before = copy.read_bytes()
     result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--recording", str(copy),
-                                       "--record", str(copy)])
+                                       *(a.format(input=copy, folder=tmp_path) for a in output)])
     assert result.exit_code != 0 and "refusing to overwrite it" in result.output
     assert copy.read_bytes() == before
 
@@ -202,21 +207,6 @@ def test_a_recording_at_another_rate_is_replayed_at_its_own(tmp_path):
 
     for written in (session, out / "run.mcap"):  # and what it writes says so
         assert read_recording(written).sensor_rate_hz == 100.0
-
-
-def test_demo_refuses_a_report_folder_whose_arm_stills_would_replace_its_input(tmp_path):
-    """The report replaces every arm_*.png in --out: an input there named so is refused."""
-    import shutil
-
-    from exohil.harness.paths import FIXTURES_DIR
-
-    copy = tmp_path / "arm_00001.png"
-    shutil.copyfile(FIXTURES_DIR / "paper_protocol_heldout.mcap", copy)
-    before = copy.read_bytes()
-    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--recording", str(copy),
-                                       "--out", str(tmp_path)])
-    assert result.exit_code != 0 and "refusing to overwrite it" in result.output
-    assert copy.read_bytes() == before
 
 
 def test_a_demo_that_never_raises_the_arm_reports_the_arm_direction_it_measured(tmp_path):
