@@ -3,6 +3,7 @@ line (logic in :mod:`exohil.estimator`; see docs/estimator.md)."""
 
 from __future__ import annotations
 
+import math
 import shlex
 import sys
 from typing import TYPE_CHECKING
@@ -146,7 +147,8 @@ def _accuracy_line(accuracy: dict) -> str:
 
     rmse = {k.removeprefix("accuracy.rmse."): v for k, v in accuracy.items()
             if k.startswith("accuracy.rmse.") and v is not None}
-    text = "accuracy: RMSE " + ", ".join(f"{a} {v:.2f}°" for a, v in rmse.items())
+    text = "accuracy: RMSE " + ", ".join(
+        f"{a} {v:.2f}°" if math.isfinite(v) else f"{a} not measured" for a, v in rmse.items())
     direction = accuracy.get("accuracy.direction_rmse")
     if direction is not None:
         text += (f" where elevation ≥ {OBSERVABLE_ELEVATION_DEG:g}°; arm direction "

@@ -164,3 +164,15 @@ def test_a_recording_without_the_models_joint_is_named_in_the_error(files):
     write_recording(knee, rec)
     line = _one_line_error(CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(knee)]))
     assert str(knee) in line and "joint 'shoulder' not in recording" in line
+
+
+def test_accuracy_on_no_frame_at_20_degrees_is_not_measured_and_null(files):
+    rec = shoulder_recording(seconds=1.0)
+    rec.mocap["shoulder"].angles[:, 1] = 10.0  # the arm never reaches 20° of elevation
+    low, out = files["dir"] / "low.mcap", files["dir"] / "low.json"
+    write_recording(low, rec)
+    result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(low), "--json",
+                                       str(out)])
+    assert result.exit_code == 0, result.output
+    assert "elv_angle not measured" in result.output and "nan" not in result.output
+    assert json.loads(out.read_text())["accuracy"]["accuracy.rmse.elv_angle"] is None
