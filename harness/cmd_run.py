@@ -89,6 +89,9 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
     from exohil.harness.session_report import session_measurements, summary, summary_lines
 
     refuse_overwriting_inputs(_outputs(config, json_out, out_dir), _inputs(config))
+    # the folders made for the report, outermost first, removed again if the run fails
+    made = [] if out_dir is None else [p for p in (*reversed(out_dir.parents), out_dir)
+                                       if not p.exists()]
     if out_dir is not None:  # refused before any work, like the output files
         try:
             out_dir.mkdir(parents=True, exist_ok=True)
@@ -103,6 +106,11 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
         try:
             result = run_session(config, seconds, progress=status_line, stop=stop)
         except SessionError as err:
+            for folder in reversed(made):  # only while empty: nothing written is removed
+                try:
+                    folder.rmdir()
+                except OSError:
+                    break
             raise click.ClickException(str(err)) from None
     measurements = session_measurements(result)
     s = summary(result, measurements)

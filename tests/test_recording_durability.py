@@ -101,15 +101,18 @@ def test_sigkill_during_a_recorded_demo_leaves_a_readable_recording(tmp_path):
 
 
 def test_a_run_that_records_no_frame_leaves_an_existing_recording_as_it_was(tmp_path):
-    """A device that never sends a frame: run fails with one line, and the recording
-    already at --record is neither replaced by an empty one nor joined by a .partial."""
+    """A device that never sends a frame: run fails with one line, the recording already at
+    --record is neither replaced by an empty one nor joined by a .partial, and the report
+    folder made for the run is gone again."""
     old = tmp_path / "old.mcap"
     with RecordingWriter(old, ["a", "b"]) as writer:
         writer.add_sensor_frame(0, 0.0, [1.0, 2.0])
     before = old.read_bytes()
     result = CliRunner().invoke(main, ["run", str(tmp_path / "no-such-port"), "--duration", "1",
-                                       "--record", str(old), "--out", str(tmp_path / "out")])
+                                       "--record", str(old), "--out",
+                                       str(tmp_path / "report" / "out")])
     assert result.exit_code != 0
     assert "no frame arrived" in result.output and "does not exist" in result.output
     assert old.read_bytes() == before
     assert sorted(p.name for p in tmp_path.glob("old.mcap*")) == ["old.mcap"]
+    assert not (tmp_path / "report").exists()  # nor the report folders it made for nothing
