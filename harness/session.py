@@ -424,11 +424,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         stats = run.link
         hint = (f" ({stats.decode_errors} packets of another shape: does the device send "
                 f"{len(est.sensor_names)} sensors?)" if stats.decode_errors else "")
-        why = f": {device_lost}" if device_lost else ""
         problem = (config.device.path_problem() if isinstance(config.device, SerialDevice)
-                   else None)
-        if problem is not None:
-            why = f": {problem}"
+                   else None) or device_lost
+        why = f": {problem}" if problem else ""
         raise SessionError(f"no frame arrived from the {config.device.describe()}{hint}{why}")
     truth = None if reference is None else truth_at(reference, est, run.device_time_s)
     trace = None if tracer is None else tracer.trace()
