@@ -15,7 +15,6 @@ Every file is written to a temporary name and renamed into place when complete.
 
 from __future__ import annotations
 
-import json
 import math
 import platform
 import time
@@ -23,6 +22,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
 from exohil.formats.measurement import Verdict
 from exohil.harness.machine import machine
@@ -130,7 +130,8 @@ def final_line(report: dict[str, Any]) -> str:
 def write_reports(out: Path, run: Any, results: list[Any]) -> None:
     """conformance.json, summary.md and (when the real-time segment ran) run.mcap in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    write_text(out / "conformance.json", json.dumps(report_dict(run, results), indent=2) + "\n")
+    write_text(out / "conformance.json",
+               strict_json.dumps(report_dict(run, results), indent=2) + "\n")
     write_text(out / "summary.md", summary_markdown(run, results))
     session = vars(run).get("session")  # the real-time segment, if a check ran it
     if session is not None:

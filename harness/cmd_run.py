@@ -4,7 +4,6 @@ the recording finalised."""
 
 from __future__ import annotations
 
-import json
 import signal
 import threading
 from collections.abc import Iterator
@@ -14,6 +13,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
 from exohil.harness.bench import BenchConfig
 from exohil.harness.cli_types import (
@@ -115,7 +115,7 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
     measurements = session_measurements(result)
     s = summary(result, measurements)
     if json_out is not None:
-        write_text(json_out, json.dumps(s, indent=2) + "\n")
+        write_text(json_out, strict_json.dumps(s, indent=2) + "\n")
     lines = summary_lines(s)
     if config.record is not None:
         lines.append(f"recorded    {config.record}")

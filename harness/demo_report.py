@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from exohil.formats import strict_json
 from exohil.formats.atomic import write_text, write_with
 from exohil.harness.pipeline import PipelineRun
 from exohil.harness.recording_plots import motion_direction
@@ -243,7 +244,7 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     js = out_dir / "summary.json"
     listed = [*files, ("summary table", md), ("summary JSON", js)]
     write_text(md, summary_markdown(s, listed))
-    write_text(js, json.dumps(s, indent=2) + "\n")
+    write_text(js, strict_json.dumps(s, indent=2) + "\n")
     return listed, notes
 
 
