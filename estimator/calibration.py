@@ -44,6 +44,9 @@ from exohil.formats.errors import InputError
 METHOD = "fine-tune all weights on jittered inputs"
 #: Least calibration data accepted, seconds of frames at the model's rate.
 MIN_CALIBRATION_SECONDS = 5.0
+#: Seconds of calibration frames the protocol is written for (docs/calibration.md): less is
+#: taken, with a warning, since it holds fewer of the protocol's movements.
+ADVISED_CALIBRATION_SECONDS = 30.0
 #: Input jitter levels tried when none is given (σ of the offset, sensor standard deviations).
 JITTER_CANDIDATES = CALIBRATION_JITTERS
 #: σ of the relative gain jitter per unit of offset jitter.

@@ -122,6 +122,28 @@ def make_split(
     return time_block_split(blocks, test_fraction, val_fraction)
 
 
+def setting_warnings(data: LoadedData, split: Split, cfg: TrainConfig,
+                     offset_frames: int) -> list[str]:
+    """One line for each setting the data leave without meaning, for ``cfg`` trained on
+    ``split`` of ``data``: a window longer than every training piece (its windows are then
+    mostly the piece's first frame, repeated by the edge padding), and an offset taken over
+    more frames than a recording holds (its rest value never settles)."""
+    lines: list[str] = []
+    span = ((cfg.window or 1) - 1) * (cfg.dilation or 1) + 1
+    longest = max((len(b) for b in split.train), default=0)
+    if not cfg.stateful and longest and span > longest:
+        lines.append(f"the window spans {span} frames ({span / data.rate_hz:.3g} s), more "
+                     f"than the longest training piece ({longest} frames, "
+                     f"{longest / data.rate_hz:.3g} s): most of each window repeats its "
+                     "piece's first frame (docs/estimator.md, Data)")
+    for path, rec in zip(data.paths, data.recordings, strict=True):
+        if offset_frames > len(rec.sensors):
+            lines.append(f"--offset-frames {offset_frames} is more than the "
+                         f"{len(rec.sensors)} sensor frames of {path}: its rest value is "
+                         "the mean of every frame before, to its last")
+    return lines
+
+
 @dataclass
 class ModelResult:
     """One trained model of a comparison and its test metrics."""

@@ -57,7 +57,13 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
         exohil calibrate ennet.npz calib.mcap --out ennet-wearer2.npz
         exohil evaluate ennet-wearer2.npz wearer2-session.mcap
     """
-    from exohil.estimator.calibration import CalibrationConfig, CalibrationError, calibrate
+    from exohil.estimator.calibration import (
+        ADVISED_CALIBRATION_SECONDS,
+        MIN_CALIBRATION_SECONDS,
+        CalibrationConfig,
+        CalibrationError,
+        calibrate,
+    )
     from exohil.estimator.checkpoint import save_checkpoint
     from exohil.estimator.training import progress_printer
     from exohil.formats.digest import sha256_file
@@ -68,6 +74,11 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     if other_rate:
         raise click.ClickException(other_rate)
     blocks = [b for b in data.blocks(base.offset_frames) if len(b)]
+    seconds = sum(len(b) for b in blocks) / base.sensor_rate_hz
+    if MIN_CALIBRATION_SECONDS <= seconds < ADVISED_CALIBRATION_SECONDS:
+        click.echo(f"warning: {seconds:.1f} s of calibration frames with ground truth; the "
+                   f"calibration protocol takes 60 s and {ADVISED_CALIBRATION_SECONDS:g} s or "
+                   "more is advised (docs/calibration.md)", err=True)
     try:
         est = calibrate(base, blocks, CalibrationConfig(steps=steps, jitter=jitter, seed=seed),
                         base_source={"file": checkpoint.name, "sha256": sha256_file(checkpoint)},

@@ -216,6 +216,8 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, dense,
                         output)
     cfg = wf.model_config(kind, base, data.rate_hz, hidden)
+    for line in wf.setting_warnings(data, split, cfg, offset_frames):
+        click.echo(f"warning: {line}", err=True)
     est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
                 sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress_printer())
     if split.test:
@@ -354,6 +356,13 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
         raise click.ClickException("the split has no training or no test frames")
     base = _base_config(seed, time_budget, max_epochs, patience, window, dilation, dense,
                         output)
+    warned: dict[str, list[str]] = {}  # one line for the models it holds for
+    for kind in kinds:
+        cfg = wf.model_config(kind, base, data.rate_hz)
+        for line in wf.setting_warnings(data, split, cfg, offset_frames):
+            warned.setdefault(line, []).append(kind)
+    for line, which in warned.items():
+        click.echo(f"warning: {', '.join(which)}: {line}", err=True)
     results = wf.compare_models(split, data, kinds, base, offset_frames, progress_printer())
     for r in results:
         warning = r.coverage.warning()

@@ -145,6 +145,8 @@ def test_calibrate_then_evaluate_from_the_command_line(tmp_path, base):
     result = invoke("calibrate", ckpt, cal, "--out", out, "--steps", "150")
     assert result.exit_code == 0, result.output
     assert "calibrated on 11.99 s from 1 recording(s)" in result.output
+    assert "12.0 s of calibration frames" in result.output  # under the 30 s advised
+    assert "30 s or more is advised" in result.output
     est = load_checkpoint(out)
     assert est.info["calibration"]["base_checkpoint"] == {"file": "base.npz",
                                                           "sha256": sha256_file(ckpt)}

@@ -72,6 +72,28 @@ def test_a_file_that_is_not_a_recording(files):
                                               str(files["dir"] / "x.npz")]))
 
 
+def test_settings_the_data_cannot_fill_are_warned_of(files):
+    out = files["dir"] / "wide.npz"
+    plain = CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
+                                      str(out), "--max-epochs", "1"])
+    assert plain.exit_code == 0 and "warning" not in plain.output, plain.output
+    result = CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
+                                       str(out), "--max-epochs", "1", "--window", "200",
+                                       "--dilation", "10", "--offset-frames", "5000"])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.output.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 2, result.output
+    assert "window spans 1991 frames (7.96 s), more than the longest training piece" in \
+        warnings[0]
+    assert "--offset-frames 5000 is more than the 750 sensor frames" in warnings[1]
+    table = CliRunner().invoke(main, ["table", "--train", str(files["good"]), "--models",
+                                      "classical,ann,ennet", "--max-epochs", "1",
+                                      "--window", "200", "--dilation", "10"])
+    assert table.exit_code == 0, table.output
+    spans = [line for line in table.output.splitlines() if "window spans" in line]
+    assert len(spans) == 1 and spans[0].startswith("warning: classical, ann, ennet:"), table.output
+
+
 def test_table_writes_a_markdown_section(files):
     md = files["dir"] / "results.md"
     md.write_text("# Results\n\nhand-written text\n")
