@@ -231,7 +231,7 @@ def import_csv(
         raise click.ClickException(str(exc)) from exc
     click.echo(
         f"wrote {out}: {len(rec.sensors)} rows, sensors {','.join(names_s)}, "
-        f"angles {','.join(names_a) or '-'} at {rate:g} Hz",
+        f"{'angles ' + ','.join(names_a) if names_a else 'no angles'} at {rate:g} Hz",
         err=True,
     )
 

@@ -33,7 +33,7 @@ from exohil.harness.cli_types import (
 @click.option("--t0", type=Finite(-MAX_TIME_S, MAX_TIME_S), help="Start of the time window, s.")
 @click.option("--t1", type=Finite(-MAX_TIME_S, MAX_TIME_S), help="End of the time window, s.")
 @click.option("--out", required=True, type=OutputFile(),
-              help="Output PNG file.")
+              help="Output image: .png, or .svg or .pdf for a vector copy.")
 def plot_command(
     file: Path,
     kind: str,
@@ -45,13 +45,17 @@ def plot_command(
     t1: float | None,
     out: Path,
 ) -> None:
-    """Plot a recording FILE to a PNG. Examples:
+    """Plot a recording FILE to an image (PNG, SVG or PDF, from --out's suffix). Examples:
 
         exohil plot rec.mcap --kind hysteresis --sensor SF --out sf.png
 
         exohil plot rec.mcap --kind timeseries --t0 10 --t1 30 --out ts.png
     """
     refuse_overwriting_inputs([("--out", out)], [file])
+    image_format = out.suffix.lower().lstrip(".")
+    if image_format not in IMAGE_FORMATS:
+        raise click.BadParameter(f"{out.name}: end it in {', '.join(IMAGE_FORMATS)} (the "
+                                 "image's format)", param_hint="--out")
     from exohil.formats.atomic import write_with
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
@@ -78,10 +82,14 @@ def plot_command(
     except RecordingError as exc:
         raise click.ClickException(str(exc)) from exc
     try:
-        write_with(out, lambda tmp: figure.savefig(tmp, format="png"))
+        write_with(out, lambda tmp: figure.savefig(tmp, format=image_format))
     except OSError as exc:
         raise click.ClickException(f"{out}: cannot write: {exc.strerror or exc}") from exc
     click.echo(f"wrote {out}", err=True)
+
+
+#: What ``--out`` may end in: the image formats written (matplotlib's names).
+IMAGE_FORMATS = ("png", "svg", "pdf")
 
 
 def _only_or(names: tuple[str, ...], preferred: str) -> str:

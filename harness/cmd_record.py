@@ -119,15 +119,17 @@ def _as_text(summary: dict[str, Any]) -> str:
             f"  {c['topic']:<{width}}  {c['messages']:>8} msgs  {rate}  {c['schema']}{ignored}"
         )
     sensors = summary["sensors"]
-    names = ",".join(sensors["names"]) or "(none: mocap-only recording)"
-    lines.append(
-        f"sensors   {names} [{sensors['units']}], {sensors['frames']} frames, "
-        f"nominal {sensors['nominal_rate_hz']:g} Hz"
-    )
+    if sensors["names"]:
+        lines.append(
+            f"sensors   {','.join(sensors['names'])} [{sensors['units']}], "
+            f"{sensors['frames']} frames, nominal {sensors['nominal_rate_hz']:g} Hz"
+        )
+    else:
+        lines.append("sensors   none (a mocap-only recording)")
     gaps = summary["sequence_gaps"]
     lines.append(
         f"seq gaps  {gaps['gaps']} gaps, {gaps['frames_missing']} frames missing, "
-        f"largest gap {gaps['largest_gap']} frames"
+        f"largest gap {gaps['largest_gap']} frame{'' if gaps['largest_gap'] == 1 else 's'}"
     )
     for joint, stream in summary["mocap"].items():
         lines.append(
@@ -140,8 +142,9 @@ def _as_text(summary: dict[str, Any]) -> str:
         lines.append(f"  {key} = {shown}")
     if summary["segments"]:
         lines.append(f"segments  {len(summary['segments'])}")
+        name_width = max(len(s["name"]) for s in summary["segments"])
         for s in summary["segments"]:
-            lines.append(f"  {s['name']:<24} {s['t0']:10.3f} → {s['t1']:10.3f} s")
+            lines.append(f"  {s['name']:<{name_width}} {s['t0']:10.3f} → {s['t1']:10.3f} s")
     for note in summary["notes"]:
         lines.append(f"note      {note}")
     return "\n".join(lines)

@@ -73,6 +73,16 @@ def test_record_info_text_lists_channels_and_gaps(
     assert result.exit_code == 0
     assert f"{expected['gaps']} gaps, {expected['missing']} frames missing" in result.output
     assert "/mocap/shoulder" in result.output and "(ignored)" in result.output
+    assert "largest gap 1 frame\n" in result.output
+
+
+def test_record_info_aligns_segment_times_under_long_names() -> None:
+    result = run("record", "info", Path(__file__).resolve().parents[1] / "fixtures"
+                 / "paper_protocol.mcap")
+    assert result.exit_code == 0, result.output
+    rows = result.output.split("\nsegments")[1].splitlines()[1:]
+    assert len(rows) == 5 and "azimuth_fixed_elevation_varied" in result.output
+    assert len({row.index("→") for row in rows}) == 1, rows
 
 
 @pytest.mark.skipif(not FOREIGN.exists(), reason="shared/samples foreign recording absent")
@@ -117,6 +127,15 @@ def test_import_csv_with_bom_header_and_column_lists(tmp_path: Path) -> None:
     assert rec.metadata["license"] == "CC0"
     assert "import csv table.csv" in rec.metadata["command"]
     assert "--sensor-cols 1,2" in rec.metadata["command"]
+    assert "sensors a,b, angles angle,knee at 50 Hz" in result.output
+
+
+def test_import_csv_without_angle_columns_says_so(tmp_path: Path) -> None:
+    source = _write_csv(tmp_path, "1,2\n3,4\n")
+    result = run("import", "csv", source, "--out", tmp_path / "o.mcap", "--rate", "10",
+                 "--sensor-cols", "0,1")
+    assert result.exit_code == 0, result.output
+    assert "sensors c0,c1, no angles at 10 Hz" in result.output
 
 
 @pytest.mark.parametrize(
@@ -184,6 +203,9 @@ def test_import_mot_makes_a_mocap_only_recording(tmp_path: Path) -> None:
     assert rec.mocap_rate_hz == 100.0
     info = json.loads(run("record", "info", out, "--json").output)
     assert [c["topic"] for c in info["channels"]] == ["/mocap/shoulder"]
+    text = run("record", "info", out).output
+    sensors = [line for line in text.splitlines() if line.startswith("sensors")]
+    assert sensors == ["sensors   none (a mocap-only recording)"], text  # no rate of nothing
 
 
 def test_import_mot_without_shoulder_coordinates_is_one_line(tmp_path: Path) -> None:
@@ -241,6 +263,15 @@ def test_plot_writes_a_png(loop_recording: Path, tmp_path: Path, args: list[str]
     assert out.stat().st_size > 10_000
 
 
+@pytest.mark.parametrize(("name", "magic"), [("plot.svg", b"<?xml"), ("plot.PDF", b"%PDF")])
+def test_plot_writes_the_format_its_name_ends_in(
+    loop_recording: Path, tmp_path: Path, name: str, magic: bytes
+) -> None:
+    out = tmp_path / name
+    assert run("plot", loop_recording, "--kind", "hysteresis", "--out", out).exit_code == 0
+    assert out.read_bytes().startswith(magic)
+
+
 @pytest.mark.parametrize(
     ("args", "problem"),
     [
@@ -256,6 +287,13 @@ def test_plot_bad_input_is_one_line(
 ) -> None:
     result = run("plot", loop_recording, *args, "--out", tmp_path / "p.png")
     assert problem in assert_one_line_error(result)
+
+
+def test_plot_to_a_name_of_no_image_format_is_refused(loop_recording: Path,
+                                                       tmp_path: Path) -> None:
+    result = run("plot", loop_recording, "--kind", "hysteresis", "--out", tmp_path / "x.txt")
+    assert "x.txt: end it in png, svg, pdf" in assert_one_line_error(result)
+    assert not (tmp_path / "x.txt").exists()
 
 
 @pytest.mark.parametrize(
