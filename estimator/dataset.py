@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from exohil.formats.alignment import in_mocap_gap
 from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
 
@@ -134,7 +135,9 @@ def recording_blocks(
     """Split a recording into blocks of consecutive, fully labelled sensor frames.
 
     Target angles are linearly interpolated at the sensor times; sensor frames outside the
-    mocap time range or where a target is NaN are dropped and end a block. Frames lost on the
+    mocap time range, inside a mocap dropout (samples more than
+    :data:`~exohil.formats.alignment.MOCAP_GAP_INTERVALS` intervals apart) or where a
+    target is NaN are dropped and end a block. Frames lost on the
     link (gaps in the sequence numbers) do not: a streaming estimator simply sees the next
     frame, and so does the window here. With ``offset_frames > 0`` the
     causal initial baseline (:func:`initial_baseline`, computed over the whole recording) is
@@ -165,6 +168,7 @@ def recording_blocks(
         bad[inside] = ~(ok[gap_idx[inside] - 1] & ok[gap_idx[inside]])
         y[bad, j] = np.nan
     valid = (t >= mt[0]) & (t <= mt[-1]) & np.all(np.isfinite(y), axis=1)
+    valid &= ~in_mocap_gap(t, mt)  # interpolated across a dropout: a line never drawn
     valid &= np.all(np.isfinite(x), axis=1)
     breaks = np.ones(t.shape[0], dtype=bool)
     breaks[1:] = ~valid[:-1]

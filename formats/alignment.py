@@ -9,6 +9,34 @@ import numpy as np
 from exohil.formats.errors import RecordingError
 from exohil.formats.recording import Recording
 
+#: Motion-capture samples further apart than this many median intervals are a dropout.
+MOCAP_GAP_INTERVALS = 4.0
+
+
+def mocap_step(t_mocap: np.ndarray) -> float:
+    """The motion capture's sampling interval, s: the median spacing of its distinct
+    times (inf with fewer than two)."""
+    spacing = np.diff(t_mocap)
+    steps = spacing[spacing > 0]  # repeated timestamps are not the sampling interval
+    return float(np.median(steps)) if len(steps) else np.inf
+
+
+def in_mocap_gap(t: np.ndarray, t_mocap: np.ndarray) -> np.ndarray:
+    """(N,) bool: times that fall in a motion-capture dropout.
+
+    A dropout is a stretch between consecutive mocap samples longer than
+    ``MOCAP_GAP_INTERVALS`` median intervals (markers lost, a paused tracker). The format
+    stores no NaN, so a time gap is how a file marks lost markers; the angles interpolated
+    across it are a straight line the arm never drew, so frames there have no ground truth.
+
+    Args:
+        t: (N,) s, times; t_mocap: (M,) s, sorted mocap times, M ≥ 2.
+    """
+    spacing = np.diff(t_mocap)
+    limit = MOCAP_GAP_INTERVALS * mocap_step(t_mocap)
+    after = np.clip(np.searchsorted(t_mocap, t, side="right"), 1, len(t_mocap) - 1)
+    return (spacing[after - 1] > limit) & (t > t_mocap[after - 1]) & (t < t_mocap[after])
+
 
 def angles_at_sensor_times(
     rec: Recording, joint: str = "shoulder", names: Sequence[str] | None = None
@@ -27,7 +55,8 @@ def angles_at(
     """Mocap angles linearly interpolated at times ``t`` (s, the sensor/device clock).
 
     Both clocks are taken as sharing an origin (seconds). Times before the first or after the
-    last mocap sample get NaN, so callers can drop them explicitly.
+    last mocap sample, and inside a dropout (:func:`in_mocap_gap`), get NaN, so callers can
+    drop them explicitly.
 
     Args:
         rec: the recording.
@@ -55,6 +84,8 @@ def angles_at(
     order = np.argsort(stream.t, kind="stable")
     t_mocap = np.asarray(stream.t, dtype=np.float64)[order]
     inside = (t_sensor >= t_mocap[0]) & (t_sensor <= t_mocap[-1])
+    if len(t_mocap) > 1:
+        inside &= ~in_mocap_gap(t_sensor, t_mocap)
     for k, name in enumerate(wanted):
         column = stream.column(name)[order]
         out[inside, k] = np.interp(t_sensor[inside], t_mocap, column)

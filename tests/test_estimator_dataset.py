@@ -58,6 +58,18 @@ def test_a_mocap_gap_splits_the_recording_and_its_frames_are_dropped():
     assert blocks[0].t[-1] < 1.5 and blocks[1].t[0] > 1.58
 
 
+def test_a_mocap_dropout_splits_the_recording_and_its_frames_are_dropped():
+    """A time gap in the motion capture (the format's only way to mark lost markers) is
+    not filled with a straight line to train or score on."""
+    rec = _knee(400)
+    stream = rec.mocap["knee"]
+    keep = (stream.t < 1.5) | (stream.t > 1.8)
+    rec.mocap["knee"] = AngleStream(stream.t[keep], stream.names, stream.angles[keep])
+    blocks = recording_blocks(rec, TargetSpec("knee", ("knee_flexion",)))
+    assert len(blocks) == 2
+    assert blocks[0].t[-1] < 1.5 and blocks[1].t[0] > 1.8
+
+
 def test_dropped_sensor_frames_do_not_split_a_block():
     rec = _knee(300)
     keep = np.r_[0:100, 103:300]

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from exohil.formats.alignment import angles_at_sensor_times
+from exohil.formats.alignment import angles_at_sensor_times, in_mocap_gap
 from exohil.formats.column_table import TableError, parse_columns, read_table
 from exohil.formats.errors import RecordingError
 from exohil.formats.mot_import import shoulder_recording_from_mot
@@ -52,7 +52,25 @@ def test_interpolating_a_linear_motion_is_exact(
     angles = np.column_stack([slope * mocap_t + offset, mocap_t])
     sensor_t = np.linspace(mocap_t[0], mocap_t[-1], 17)
     out = angles_at_sensor_times(_recording(sensor_t, mocap_t, angles), "shoulder", ["elv_angle"])
-    np.testing.assert_allclose(out[:, 0], slope * sensor_t + offset, atol=1e-9 * (1 + abs(slope)))
+    dropout = in_mocap_gap(sensor_t, mocap_t)  # samples spaced unevenly enough to be one
+    assert np.array_equal(np.isnan(out[:, 0]), dropout)
+    np.testing.assert_allclose(out[~dropout, 0], slope * sensor_t[~dropout] + offset,
+                               atol=1e-9 * (1 + abs(slope)))
+
+
+def test_a_mocap_dropout_has_no_angles() -> None:
+    """The format stores no NaN: a time gap is how a file marks lost markers. Across one the
+    arm drew no straight line, so there is no ground truth (4 sample intervals or more)."""
+    mocap_t = np.r_[np.arange(0.0, 2.0, 0.01), np.arange(2.5, 4.0, 0.01)]  # 0.5 s lost
+    angles = np.column_stack([mocap_t * 10.0, mocap_t])
+    sensor_t = np.arange(0.0, 3.99, 0.004)
+    out = angles_at_sensor_times(_recording(sensor_t, mocap_t, angles), "shoulder", ["elv_angle"])
+    lost = (sensor_t > mocap_t[199]) & (sensor_t < 2.5)
+    assert lost.sum() == 127 and np.isnan(out[lost]).all() and np.isfinite(out[~lost]).all()
+    held = np.r_[np.arange(0.0, 2.0, 0.01), np.arange(2.025, 4.0, 0.01)]  # 3.5 intervals
+    out = angles_at_sensor_times(_recording(sensor_t, held, np.column_stack([held, held])),
+                                 "shoulder", ["elv_angle"])
+    assert np.isfinite(out).all()
 
 
 def test_alignment_rejects_unknown_joint_and_angle() -> None:

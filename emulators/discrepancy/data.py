@@ -17,6 +17,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy.signal import butter, sosfiltfilt
 
+from exohil.formats.alignment import MOCAP_GAP_INTERVALS, in_mocap_gap, mocap_step
 from exohil.formats.errors import InputError
 from exohil.formats.recording import Recording
 
@@ -29,8 +30,6 @@ MIN_BLOCK_S = BLOCK_S
 #: Invalid runs longer than this, s, do not count towards a held-out block's length
 #: (:func:`held_out_blocks`): a dropout, not frames lost here and there.
 SKIPPED_RUN_S = 0.1
-#: Motion-capture samples further apart than this many median intervals are a dropout.
-MOCAP_GAP_INTERVALS = 4.0
 #: The motion capture's angles may be low-passed at this cutoff, Hz, with a Butterworth
 #: filter of order ``MOCAP_FILTER_ORDER`` run forward and back (zero phase: no lag is added
 #: to the pose). Arm movement holds little above 5 Hz, where the filter passes 99.9 % of the
@@ -350,7 +349,7 @@ def smooth_angles(t_mocap: np.ndarray, raw: np.ndarray, cutoff_hz: float | None
     Args:
         t_mocap: (M,) s, sorted sample times; raw: (M, A) degrees.
     """
-    step = _mocap_step(t_mocap)
+    step = mocap_step(t_mocap)
     if (cutoff_hz is None or not np.isfinite(step)
             or cutoff_hz * 2.0 * step >= MOCAP_FILTER_MAX_NYQUIST):
         return raw, None
@@ -362,31 +361,6 @@ def smooth_angles(t_mocap: np.ndarray, raw: np.ndarray, cutoff_hz: float | None
         if len(run) > 2 * MOCAP_FILTER_ORDER:  # too short to filter: kept as sampled
             smooth[run] = sosfiltfilt(sos, raw[run], axis=0, padlen=min(len(run) - 1, pad))
     return smooth, cutoff_hz
-
-
-def _mocap_step(t_mocap: np.ndarray) -> float:
-    """The motion capture's sampling interval, s: the median spacing of its distinct
-    times (inf with fewer than two)."""
-    spacing = np.diff(t_mocap)
-    steps = spacing[spacing > 0]  # repeated timestamps are not the sampling interval
-    return float(np.median(steps)) if len(steps) else np.inf
-
-
-def in_mocap_gap(t: np.ndarray, t_mocap: np.ndarray) -> np.ndarray:
-    """(N,) bool: grid times that fall in a motion-capture dropout.
-
-    A dropout is a stretch between consecutive mocap samples longer than
-    ``MOCAP_GAP_INTERVALS`` median intervals (markers lost, a paused tracker); the angles
-    interpolated across it are a straight line the arm never drew, so sensors there must be
-    neither fitted nor scored.
-
-    Args:
-        t: (N,) s, grid times; t_mocap: (M,) s, sorted mocap times, M ≥ 2.
-    """
-    spacing = np.diff(t_mocap)
-    limit = MOCAP_GAP_INTERVALS * _mocap_step(t_mocap)
-    after = np.clip(np.searchsorted(t_mocap, t, side="right"), 1, len(t_mocap) - 1)
-    return (spacing[after - 1] > limit) & (t > t_mocap[after - 1]) & (t < t_mocap[after])
 
 
 def unusable_sensors(values: np.ndarray, names: Sequence[str],
