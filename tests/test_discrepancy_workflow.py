@@ -31,7 +31,6 @@ from exohil.emulators.discrepancy.data import (
     RESAMPLED_SPREAD,
     SKIPPED_RUN_S,
     held_out_blocks,
-    in_mocap_gap,
     quantisation_step,
     resampled_spread,
     smooth_angles,
@@ -123,6 +122,7 @@ from exohil.emulators.discrepancy.workflow import (
 from exohil.emulators.effects import Signal
 from exohil.emulators.protocols import Trajectory
 from exohil.emulators.suit_profile import ProfileError
+from exohil.formats.alignment import in_mocap_gap
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
@@ -724,6 +724,23 @@ def test_dead_and_unplugged_sensors_are_left_out_with_the_reason(tmp_path):
     dead = _with_values(rec, np.full_like(values, 7.0))
     with pytest.raises(DiscrepancyError, match="no usable sensor"):
         prepare_trial(dead, "x.mcap")
+
+
+@pytest.mark.parametrize("glitches", [1, 3])
+def test_a_dead_sensor_with_a_stray_reading_is_fitted_not_a_crash(tmp_path, glitches):
+    """A dead channel that reads one other value on a frame or three is no longer constant,
+    so it is kept; its stop columns are zero on every fitted frame (the glitch is left out
+    as a spike), which made the effect ridge's static system singular."""
+    rec = make_recording(Case("hysteresis", "lib", 2, seed=3, duration_s=30.0))
+    values = rec.sensors.values.copy()
+    values[:, 2] = 312.5
+    values[len(values) // 2: len(values) // 2 + glitches, 2] = 313.0
+    path, out = tmp_path / "m.mcap", tmp_path / "out"
+    write_recording(path, _with_values(rec, values))
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "discrepancy.json").read_text())
+    assert summary["effects"][0] == "hysteresis" and summary["gap_after"] < summary["gap_before"]
 
 
 def test_noise_floor_recovers_white_noise_under_motion():

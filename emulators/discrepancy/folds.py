@@ -123,9 +123,12 @@ class Ridge:
         if gram_all.shape[0] == n:
             return np.empty(0)
         diag_all = np.diag(gram_all)
-        g_ss = gram_all[:n, :n] + np.diag(self.static_loading(diag_all[:n]))
+        # equilibrated as every fit is: a static column that is zero on every frame (a stop
+        # no reading passes on a dead sensor) gets coefficient 0, not a singular system
+        g_ss, scale = equilibrate(gram_all[:n, :n], self.static_loading(diag_all[:n]))
         g_se = gram_all[:n, n:]
-        return self.added_loading(g_se, diag_all[n:], np.linalg.solve(g_ss, g_se))
+        through = np.linalg.solve(g_ss, g_se / scale[:, None]) / scale[:, None]
+        return self.added_loading(g_se, diag_all[n:], through)
 
     def added_loading(self, g_se: np.ndarray, diag_e: np.ndarray, through: np.ndarray
                       ) -> np.ndarray:
