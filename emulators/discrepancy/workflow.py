@@ -558,6 +558,55 @@ def _read_from_the_start(evidence: dict | None, reading: dict, after_effects: di
     return {**here, "after_effects": after_effects}
 
 
+def _best_of(trial: Trial, inputs: Inputs, spec: Spec, kind: str) -> tuple[str, Fit]:
+    """Effect ``kind``'s best configuration added to ``spec``, with its name."""
+    return kind, best_candidate(trial, inputs, kind, spec)
+
+
+def _fit_in_model(trial: Trial, inputs: Inputs, static_fit: Fit, in_model: tuple[str, ...],
+                  workers: int) -> tuple[Fit, Inputs]:
+    """The model with the effects the profile already has (``in_model``), fitted as named
+    effects are: the one that lowers the held-out gap most first, each refined, the map's
+    degree chosen again and driven by its own static part, so that each is fitted with the
+    larger ones in place (in the profile's order, a loop fitted before the lag took
+    the lag's share: the suit's own profile left 2.6 times the gap of no profile)."""
+    base, missing, previous = static_fit, list(in_model), ""
+    while missing:
+        tried = forked_map(functools.partial(_best_of, trial, inputs, base.spec), missing,
+                           workers)
+        kind, cand = min(tried, key=lambda item: item[1].gap)
+        base, inputs, _, _ = _add_effect(trial, inputs, kind, cand, previous)
+        missing.remove(kind)
+        previous = kind
+    return base, inputs
+
+
+def _add_effect(trial: Trial, inputs: Inputs, kind: str, cand: Fit, previous: str
+                ) -> tuple[Fit, Inputs, dict | None, tuple[tuple, tuple]]:
+    """Effect ``kind``'s candidate ``cand`` made part of the model, as every effect is
+    once named (or given by the profile): its shape refined, the map's degree chosen
+    again, the lag or drift already in the model refitted where that is due, and the
+    terms driven by the model's own static part (:func:`_own_static_part`). ``previous``
+    is the effect added in the step before. Returns the fit, the inputs it was made with,
+    the own-static-part evidence and the lag and drift terms before their refit."""
+    refined = refine(trial, inputs, kind, cand)
+    cand = _best_degree(trial, inputs, refined)
+    if kind == "lag" and cand.spec != refined.spec:  # a lag refined on the map chosen
+        # without it is biased toward that map: refine it again on the map now chosen
+        cand = refine_lag_delay(trial, inputs, cand)
+    if kind == "drift" and cand.spec != refined.spec:  # so is a drift's basis and count
+        cand = refine_drift(trial, inputs, cand)
+    drift_before = cand.spec.drift_term()
+    if kind != "drift" and cand.spec.drift_degree:
+        cand = refine_drift(trial, inputs, cand)
+    lag_before = cand.spec.lag_term()
+    if previous == "lag":  # a lag named while a larger effect was
+        # still missing was fitted against it: refit it once, with the next effect added
+        cand = refine_lag_delay(trial, inputs, cand)
+    cand, inputs, own_input = _own_static_part(trial, inputs, cand, kind == "hysteresis")
+    return cand, inputs, own_input, (lag_before, drift_before)
+
+
 def _run(rec: Recording, name: str, in_model: tuple[str, ...],
          progress: Callable[[str], None], workers: int, mocap_late_s: float = 0.0,
          after_effects: dict | None = None, filter_found: dict | None = None,
@@ -617,15 +666,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                            **late}, rate_found)
     if after_effects is not None:  # read late from the start: found after the effects
         clock = _read_from_the_start(clock, late, after_effects)
-    spec = static_fit.spec
-    inputs = make_inputs(trial, spec)
-    for kind in in_model:
-        spec = refine(trial, inputs, kind, best_candidate(trial, inputs, kind, spec)).spec
-    base = static_fit
-    if in_model:
-        base, inputs, _ = _own_static_part(trial, inputs, fit(trial, inputs, spec),
-                                           spec.hysteresis)
-        spec = base.spec
+    inputs = make_inputs(trial, static_fit.spec)
+    base, inputs = _fit_in_model(trial, inputs, static_fit, in_model, workers)
+    spec = base.spec
     before = base
     runs = [trial.sensor_names[j] for j in inputs.segment_sensors]
     calibrated = _map_summary(spec, inputs, runs)
@@ -666,21 +709,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                      f"{floor:.4g}; tried {table}): nothing added")
             break
         kind, cand, _ = winners[0]
-        refined = refine(trial, inputs, kind, cand)
-        cand = _best_degree(trial, inputs, refined)
-        if kind == "lag" and cand.spec != refined.spec:  # a lag refined on the map chosen
-            # without it is biased toward that map: refine it again on the map now chosen
-            cand = refine_lag_delay(trial, inputs, cand)
-        if kind == "drift" and cand.spec != refined.spec:  # so is a drift's basis and count
-            cand = refine_drift(trial, inputs, cand)
-        drift_before = cand.spec.drift_term()
-        if kind != "drift" and cand.spec.drift_degree:
-            cand = refine_drift(trial, inputs, cand)
-        lag_before = cand.spec.lag_term()
-        if previous == "lag":  # a lag named while a larger effect was
-            # still missing was fitted against it: refit it once, with the next effect added
-            cand = refine_lag_delay(trial, inputs, cand)
-        cand, inputs, own_input = _own_static_part(trial, inputs, cand, kind == "hysteresis")
+        cand, inputs, own_input, (lag_before, drift_before) = _add_effect(
+            trial, inputs, kind, cand, previous)
         previous = kind
         evidence = candidate_evidence(trial, base, cand, floor)
         if kind == "saturation":  # judged against the smooth curve when it was named
