@@ -11,6 +11,7 @@ nanoseconds. A message that violates its schema raises
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,11 @@ from exohil.formats.recording import MOCAP_PREFIX, SENSOR_TOPIC, AngleStream, Se
 from exohil.formats.schemas import SCHEMA_ENCODING
 
 VALUE_DECIMALS = 4
+#: A sensor column written whole (:func:`sensor_decimals`) keeps at least this share of its
+#: range as precision: readings in small units (farads, metres) are not rounded away.
+RANGE_PRECISION = 1e-5
+#: The most decimal places :func:`sensor_decimals` asks for (a double holds about 16 digits).
+MAX_DECIMALS = 15
 TIME_DECIMALS = 6
 _NUMBER = (int, float)
 
@@ -48,6 +54,22 @@ def rounded_times(path: Path, t: np.ndarray, count: int) -> list[float]:
     if not np.all(np.isfinite(times)) or np.any(times < 0):
         raise RecordingError(f"{path}: times must be finite and >= 0 s")
     return np.round(times, TIME_DECIMALS).tolist()
+
+
+def sensor_decimals(values: np.ndarray, decimals: int = VALUE_DECIMALS) -> int:
+    """``decimals``, or more where a sensor column (of (N, S) ``values``) spans so little
+    that rounding to ``decimals`` places would step by more than :data:`RANGE_PRECISION`
+    of its range (readings of 5·10⁻⁴ F rounded to 10⁻⁴ keep two levels); at most
+    :data:`MAX_DECIMALS`."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 2 or not values.size or not np.all(np.isfinite(values)):
+        return decimals  # nothing to write, or refused by rounded_values
+    spans = np.ptp(values, axis=0)
+    spans = spans[spans > 0]
+    if not spans.size:
+        return decimals
+    needed = math.ceil(-math.log10(float(spans.min()) * RANGE_PRECISION))
+    return int(min(max(decimals, needed), MAX_DECIMALS))
 
 
 def rounded_values(

@@ -34,6 +34,7 @@ from exohil.formats.recording_messages import (
     rounded_times,
     rounded_values,
     seconds_to_ns,
+    sensor_decimals,
 )
 from exohil.formats.recording_metadata import (
     DEFAULT_MOCAP_RATE_HZ,
@@ -82,6 +83,8 @@ class RecordingWriter:
         compression: chunk compression, "lz4" (default), "zstd" or "none".
         decimals: decimal places kept for sensor values and angles (default 4: 1e-4 mm / deg;
             importers of finer data may keep more).
+        sensor_decimals: decimal places kept for sensor values, where they differ from
+            ``decimals`` (:func:`write_recording` keeps more for readings in small units).
         durable: write the metadata first and close a chunk and sync the file at least every
             :data:`DURABLE_FLUSH_S` s, so a killed writer leaves a readable file (module doc).
         name: the file as error messages name it (default ``path``; the final name when
@@ -100,6 +103,7 @@ class RecordingWriter:
         metadata: Mapping[str, str] | None = None,
         compression: Compression = "lz4",
         decimals: int = VALUE_DECIMALS,
+        sensor_decimals: int | None = None,
         durable: bool = False,
         name: str | Path | None = None,
     ) -> None:
@@ -107,6 +111,7 @@ class RecordingWriter:
         self.name = Path(name) if name is not None else self.path
         self.durable = durable
         self.decimals = decimals
+        self.sensor_decimals = decimals if sensor_decimals is None else sensor_decimals
         self.sensor_names = tuple(sensor_names)
         self.mocap_joints = {joint: tuple(names) for joint, names in (mocap_joints or {}).items()}
         _check_names(self.name, self.sensor_names, self.mocap_joints)
@@ -184,7 +189,7 @@ class RecordingWriter:
         if np.any(np.diff(previous) <= 0):
             raise RecordingError(f"{self.name}: sensor seq must increase strictly")
         times = rounded_times(self.name, t, seq.size)
-        rows = rounded_values(self.name, values, self.decimals, "sensor values")
+        rows = rounded_values(self.name, values, self.sensor_decimals, "sensor values")
         for frame_seq, frame_t, frame_values in zip(seq.tolist(), times, rows, strict=True):
             payload = {"seq": frame_seq, "t": frame_t, "values": frame_values}
             self._emit(self._sensor_channel, frame_t, payload)
@@ -298,8 +303,10 @@ def write_recording(
 ) -> None:
     """Write ``rec`` to ``path``, all streams interleaved in time order (ties: sensors first,
     then mocap joints in dict order). Identical input gives identical bytes. ``compression``
-    and ``decimals`` as for :class:`RecordingWriter`. Written under a temporary name and
-    renamed when complete (:mod:`formats.atomic`): ``path`` is never left half-written."""
+    and ``decimals`` as for :class:`RecordingWriter`; sensor values keep more decimals where
+    a sensor's range needs them (:func:`~exohil.formats.recording_messages.sensor_decimals`).
+    Written under a temporary name and renamed when complete (:mod:`formats.atomic`):
+    ``path`` is never left half-written."""
     with replacing(path) as tmp:
         _write_recording(tmp, Path(path), rec, compression, decimals)
 
@@ -318,6 +325,7 @@ def _write_recording(path: Path, name: Path, rec: Recording, compression: Compre
         metadata=rec.metadata,
         compression=compression,
         decimals=decimals,
+        sensor_decimals=sensor_decimals(rec.sensors.values, decimals),
     ) as writer:
         for segment in rec.segments:
             writer.add_segment(segment)

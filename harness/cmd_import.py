@@ -147,7 +147,8 @@ def _command_line() -> str:
 @click.option("--delimiter", type=Delimiter(), default=",", show_default=True,
               help="Field separator (one character).")
 @click.option("--decimals", type=Count(0, 9), default=6, show_default=True,
-              help="Decimal places kept for sensor values and angles.")
+              help="Decimal places kept for sensor values and angles; a sensor whose "
+              "range needs more to keep 10⁻⁵ of it keeps more.")
 @click.option("--license", "license_note", type=Name(),
               help="License note stored in the metadata.")
 def import_csv(

@@ -23,6 +23,7 @@ from recording_raw_mcap import (
 
 from exohil.formats.errors import RecordingError
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
+from exohil.formats.recording_messages import sensor_decimals
 from exohil.formats.recording_reader import read_recording, scan_recording
 from exohil.formats.recording_writer import RecordingWriter, write_recording
 from exohil.formats.schemas import joint_angles_schema, sensor_frame_schema
@@ -86,7 +87,8 @@ def test_round_trip_preserves_everything_up_to_documented_rounding(
     assert back.sensor_names == rec.sensor_names
     np.testing.assert_array_equal(back.sensors.seq, rec.sensors.seq)
     np.testing.assert_array_equal(back.sensors.t, np.round(rec.sensors.t, 6))
-    np.testing.assert_array_equal(back.sensors.values, np.round(rec.sensors.values, 4))
+    kept = sensor_decimals(rec.sensors.values)  # 4, or more for a column of a small range
+    np.testing.assert_array_equal(back.sensors.values, np.round(rec.sensors.values, kept))
     assert list(back.mocap) == list(rec.mocap)
     for joint, stream in rec.mocap.items():
         order = np.argsort(np.round(stream.t, 6), kind="stable")
@@ -99,6 +101,20 @@ def test_round_trip_preserves_everything_up_to_documented_rounding(
     assert back.segments == rec.segments
     for key, value in rec.metadata.items():
         assert back.metadata[key] == value
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e-6, 1e-9])
+def test_readings_in_small_units_keep_their_levels(tmp_path: Path, scale: float) -> None:
+    """Rounding to the default 4 places would leave two levels of readings of 5·10⁻⁴ F;
+    a recording written whole keeps 10⁻⁵ of each sensor's range."""
+    rec = _demo_recording(4.0)
+    rec.sensors = SensorStream(rec.sensors.seq, rec.sensors.t, rec.sensors.values * scale)
+    path = tmp_path / "small.mcap"
+    write_recording(path, rec)
+    back = read_recording(path).sensors.values
+    span = np.ptp(rec.sensors.values, axis=0)
+    assert np.all(np.abs(back - rec.sensors.values) <= 0.5e-5 * span)
+    assert (sensor_decimals(rec.sensors.values) == 4) == (scale == 1.0)  # mm: as ever
 
 
 def _demo_recording(seconds: float = 20.0) -> Recording:
