@@ -113,7 +113,8 @@ def decode_sensors(path: Path, messages: list[tuple[int, bytes]], width: int) ->
         k = int(bad[0]) + 1
         raise RecordingError(
             f"{path}: non-monotonic seq in {SENSOR_TOPIC}: frame {k} has seq {seq[k]} "
-            f"after {seq[k - 1]}"
+            f"(t {t[k]:.6f} s) after seq {seq[k - 1]} (t {t[k - 1]:.6f} s), in the order "
+            "of the messages' log times; seq must increase with it"
         )
     _check_times(path, SENSOR_TOPIC, t)
     _check_finite(path, SENSOR_TOPIC, values, "sensor value")

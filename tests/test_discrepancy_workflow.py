@@ -340,8 +340,12 @@ def test_a_grid_mostly_empty_is_one_clear_error():
     rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
     seq = rec.sensors.seq.copy()
     seq[100:] += 10**9  # a counter that jumped: a grid of 10⁹ points would not fit in memory
-    with pytest.raises(DiscrepancyError, match="over 90% of the frames are missing"):
+    with pytest.raises(DiscrepancyError, match="over 90% of the frames are missing") as err:
         prepare_trial(replace(rec, sensors=replace(rec.sensors, seq=seq)), "x.mcap")
+    assert "jump by 1000000001 between frames 99 and 100" in str(err.value)  # times run on
+    keep = np.random.default_rng(2).random(len(rec.sensors)) < 0.05  # 95 % really lost
+    with pytest.raises(DiscrepancyError, match="missing$"):
+        prepare_trial(frames_kept(rec, keep), "x.mcap")
 
 
 def test_mocap_samples_without_finite_angles_are_not_interpolated():

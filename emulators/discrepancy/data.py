@@ -208,7 +208,8 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     if n > MAX_GRID_PER_FRAME * len(index):
         raise DiscrepancyError(
             f"{name}: the {len(index)} sensor frames are spread over {n} frame times ({placed_by}):"
-            f" over {1 - 1 / MAX_GRID_PER_FRAME:.0%} of the frames are missing")
+            f" over {1 - 1 / MAX_GRID_PER_FRAME:.0%} of the frames are missing"
+            + _times_run_on(np.asarray(rec.sensors.seq, dtype=np.int64), t_frames))
     grid = np.arange(n)
     t = np.interp(grid, index, t_frames)
     present = np.zeros(n, dtype=bool)
@@ -304,6 +305,24 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """(start, stop) index ranges of the runs of True in the 1-D bool ``mask``, in order."""
     edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]])))
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def _times_run_on(seq: np.ndarray, t: np.ndarray) -> str:
+    """Where the frames' times hold under half the frame periods their sequence numbers
+    count: the words that say where the numbers jump (a counter that jumped or was
+    reset), else nothing. ``seq``, ``t`` (s): the frames in order; the frame period is
+    the median time per count between consecutive frames."""
+    counts = np.diff(seq)
+    period = float(np.median(np.diff(t) / counts)) if counts.size else 0.0
+    if period <= 0:
+        return ""
+    periods = (t[-1] - t[0]) / period + 1
+    if periods > (seq[-1] - seq[0] + 1) / 2:
+        return ""
+    k = int(np.argmax(counts))
+    return (f"; but by their times they span {periods:.0f} frame periods: the sequence "
+            f"numbers jump by {seq[k + 1] - seq[k]} between frames {k} and {k + 1} (t "
+            f"{t[k]:.6g} → {t[k + 1]:.6g} s), a counter that jumped or was reset")
 
 
 def frame_grid(seq: np.ndarray) -> tuple[np.ndarray, str]:
