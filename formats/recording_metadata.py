@@ -150,10 +150,14 @@ def rate(
             value = math.nan
         if not (math.isfinite(value) and value > 0):
             raise RecordingError(f"{path}: metadata {key}={text!r} is not a positive number")
+        if math.isfinite(estimate) and estimate > 0 and not 0.5 < value / estimate < 2.0:
+            notes.append(f"metadata {key}={text} but the timestamps give "
+                         f"{estimate:.4g} Hz: are the times in seconds?")
         return value
     default = DEFAULT_SENSOR_RATE_HZ if key == "sensor_rate_hz" else DEFAULT_MOCAP_RATE_HZ
     value = estimate if math.isfinite(estimate) and estimate > 0 else default
-    notes.append(f"metadata has no {key}; using {format_number(value)} Hz")
+    notes.append(f"metadata has no {key}; using {value:.6g} Hz (from the timestamps)"
+                 if value == estimate else f"metadata has no {key}; using {value:g} Hz")
     return value
 
 

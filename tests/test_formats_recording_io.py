@@ -117,6 +117,22 @@ def test_readings_in_small_units_keep_their_levels(tmp_path: Path, scale: float)
     assert (sensor_decimals(rec.sensors.values) == 4) == (scale == 1.0)  # mm: as ever
 
 
+def test_times_in_milliseconds_are_noted_against_the_nominal_rate(tmp_path: Path) -> None:
+    from exohil.emulators.discrepancy.workflow import rate_words
+
+    rec = _demo_recording(4.0)
+    path = tmp_path / "ms.mcap"
+    write_recording(path, rec)
+    assert not [n for n in scan_recording(path).notes if "timestamps give" in n]
+    rec.sensors = SensorStream(rec.sensors.seq, rec.sensors.t * 1000, rec.sensors.values)
+    write_recording(path, rec)
+    notes = [n for n in scan_recording(path).notes if "timestamps give" in n]
+    assert notes == ["metadata sensor_rate_hz=250 but the timestamps give 0.25 Hz: are the "
+                     "times in seconds?"]
+    assert rate_words(0.25, 250.0).startswith("the frames' times give 0.25 Hz where")
+    assert rate_words(249.0, 250.0) == ""
+
+
 def _demo_recording(seconds: float = 20.0) -> Recording:
     seq = np.arange(int(seconds * 250))
     seq = seq[seq % 101 != 50]

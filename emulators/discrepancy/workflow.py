@@ -558,6 +558,15 @@ def _read_from_the_start(evidence: dict | None, reading: dict, after_effects: di
     return {**here, "after_effects": after_effects}
 
 
+def rate_words(rate_hz: float, nominal_hz: float) -> str:
+    """What to say where the frames' times give a rate (``rate_hz``) more than twice or
+    under half the recording's nominal one (its metadata's): nothing otherwise."""
+    if 0.5 < nominal_hz / rate_hz < 2.0:
+        return ""
+    return (f"the frames' times give {rate_hz:.4g} Hz where the metadata says {nominal_hz:g} "
+            "Hz: are the times in seconds (recording format v1)?")
+
+
 def _best_of(trial: Trial, inputs: Inputs, spec: Spec, kind: str) -> tuple[str, Fit]:
     """Effect ``kind``'s best configuration added to ``spec``, with its name."""
     return kind, best_candidate(trial, inputs, kind, spec)
@@ -627,6 +636,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
+    other_rate = rate_words(trial.rate_hz, rec.sensor_rate_hz)
+    if other_rate:
+        progress(f"    {other_rate}")
     for sensor, reason in trial.ignored:
         progress(f"    left out sensor {sensor}: it {reason}")
     if trial.spikes.any():
