@@ -8,6 +8,7 @@ hand-written text can live in one ``docs/results.md``.
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -55,12 +56,15 @@ def comparison_markdown(
         detail = " | ".join(f"{r.test['rmse'][a]:.2f} / {r.test['mae'][a]:.2f} / "
                             f"{r.test['max'][a]:.1f}" for a in angles)
         cfg = r.estimator.config
-        window = ("—" if r.kind in ("ann", "classical") else "carried state"
-                  if cfg.stateful else f"{cfg.window}×{cfg.dilation}")
+        window = ("carried state" if cfg.stateful else "—" if cfg.window in (None, 1)
+                  else f"{cfg.window}×{cfg.dilation}")
         epochs = f"{info.get('epochs', '—')} ({info.get('best_epoch', '—')})"
         lines.append(f"| {r.kind} | {detail} | {_outside(r)} | {window} | {epochs} | "
                      f"{info.get('stopped_by', 'closed form')} | {info.get('train_seconds')} |")
     lines += ["", f"Test frames: {results[0].test['frames'] if results else 0}."]
+    if any(_deg(r.test.get("accuracy", {}).get(f"accuracy.rmse.{a}")) == "—"
+           for r in results for a in angles):
+        lines += ["", "—: not measured (no test frame reached 20° of elevation)."]
     told = [r.kind for r in results if r.coverage.warns]
     if told:
         lines += ["", f"**{', '.join(told)}: {OUTSIDE_SHARE_PERCENT:g} % or more of the test "
@@ -77,7 +81,8 @@ def _outside(result: ModelResult) -> str:
 
 
 def _deg(value: float | None) -> str:
-    return "—" if value is None else f"{value:.2f}"
+    """Degrees to two places; "—" for a figure not measured (None, or NaN: no frame)."""
+    return "—" if value is None or not math.isfinite(value) else f"{value:.2f}"
 
 
 def write_section(path: Path, name: str, text: str) -> None:

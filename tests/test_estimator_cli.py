@@ -92,6 +92,8 @@ def test_settings_the_data_cannot_fill_are_warned_of(files):
     assert table.exit_code == 0, table.output
     spans = [line for line in table.output.splitlines() if "window spans" in line]
     assert len(spans) == 1 and spans[0].startswith("warning: classical, ann, ennet:"), table.output
+    ann = next(line for line in table.output.splitlines() if line.startswith("| ann |"))
+    assert "| 200×10 |" in ann  # the window it was trained with, not "—"
 
 
 def test_table_writes_a_markdown_section(files):
@@ -198,3 +200,10 @@ def test_accuracy_on_no_frame_at_20_degrees_is_not_measured_and_null(files):
     assert result.exit_code == 0, result.output
     assert "elv_angle not measured" in result.output and "nan" not in result.output
     assert json.loads(out.read_text())["accuracy"]["accuracy.rmse.elv_angle"] is None
+    longer = shoulder_recording(seconds=4.0)
+    longer.mocap["shoulder"].angles[:, 1] = 10.0
+    write_recording(low, longer)
+    table = CliRunner().invoke(main, ["table", "--train", str(low), "--models", "classical"])
+    assert table.exit_code == 0, table.output
+    assert "nan" not in table.output and "| — | — |" in table.output
+    assert "—: not measured (no test frame reached 20° of elevation)." in table.output
