@@ -47,6 +47,9 @@ MIN_CALIBRATION_SECONDS = 5.0
 #: Seconds of calibration frames the protocol is written for (docs/calibration.md): less is
 #: taken, with a warning, since it holds fewer of the protocol's movements.
 ADVISED_CALIBRATION_SECONDS = 30.0
+#: Calibration frames whose every angle stays within this range, degrees, hold about one
+#: pose: fine-tuning on them teaches that pose (taken, with a warning).
+MIN_CALIBRATION_RANGE_DEG = 10.0
 #: Input jitter levels tried when none is given (σ of the offset, sensor standard deviations).
 JITTER_CANDIDATES = CALIBRATION_JITTERS
 #: σ of the relative gain jitter per unit of offset jitter.

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import click
+import numpy as np
 
 from exohil.estimator.defaults import CALIBRATION_JITTERS
 from exohil.harness.cli_types import (
@@ -59,6 +60,7 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     """
     from exohil.estimator.calibration import (
         ADVISED_CALIBRATION_SECONDS,
+        MIN_CALIBRATION_RANGE_DEG,
         MIN_CALIBRATION_SECONDS,
         CalibrationConfig,
         CalibrationError,
@@ -79,6 +81,12 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
         click.echo(f"warning: {seconds:.1f} s of calibration frames with ground truth; the "
                    f"calibration protocol takes 60 s and {ADVISED_CALIBRATION_SECONDS:g} s or "
                    "more is advised (docs/calibration.md)", err=True)
+    if blocks:
+        spans = np.ptp(np.concatenate([b.y for b in blocks]), axis=0)
+        if spans.max() < MIN_CALIBRATION_RANGE_DEG:
+            click.echo(f"warning: the calibration frames' angles span {spans.max():.1f}° at "
+                       f"most: one pose, which is all the model will be fitted to; calibrate "
+                       "on the movements of the protocol (docs/calibration.md)", err=True)
     try:
         est = calibrate(base, blocks, CalibrationConfig(steps=steps, jitter=jitter, seed=seed),
                         base_source={"file": checkpoint.name, "sha256": sha256_file(checkpoint)},

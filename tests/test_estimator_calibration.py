@@ -147,6 +147,7 @@ def test_calibrate_then_evaluate_from_the_command_line(tmp_path, base):
     assert "calibrated on 11.99 s from 1 recording(s)" in result.output
     assert "12.0 s of calibration frames" in result.output  # under the 30 s advised
     assert "30 s or more is advised" in result.output
+    assert "one pose" not in result.output
     est = load_checkpoint(out)
     assert est.info["calibration"]["base_checkpoint"] == {"file": "base.npz",
                                                           "sha256": sha256_file(ckpt)}
@@ -160,6 +161,22 @@ def test_calibrate_then_evaluate_from_the_command_line(tmp_path, base):
         scores[name] = json.loads((tmp_path / f"{name.stem}.json").read_text())
     direction = {k: v["accuracy"]["accuracy.direction_rmse"] for k, v in scores.items()}
     assert direction[out] < 0.5 * direction[ckpt]
+
+
+def test_calibration_frames_of_one_pose_are_warned_of(tmp_path, base):
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal = tmp_path / "base.npz", tmp_path / "still.mcap"
+    save_checkpoint(ckpt, base)
+    rec = wearer_b(8.0, seed=5)
+    for stream in rec.mocap.values():
+        stream.angles[:] = stream.angles[0]  # the arm held still the whole time
+    write_recording(cal, rec)
+    result = invoke("calibrate", ckpt, cal, "--out", tmp_path / "c.npz", "--steps", "2",
+                    "--jitter", "0.1")
+    assert result.exit_code == 0, result.output
+    assert "warning: the calibration frames' angles span 0.0° at most: one pose" in \
+        result.output
 
 
 @pytest.mark.parametrize("problem", ["out is input", "rate", "sensors"])
