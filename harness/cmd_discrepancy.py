@@ -32,22 +32,28 @@ def memory_warning(frames: int, available: int | None) -> str | None:
             f"--start S --stop S --out PART)")
 
 
-def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...]]:
-    """The profile's name and the vocabulary effects its model already has."""
+def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...], str | None]:
+    """The profile's name, the vocabulary effects its model already has, and (for a
+    calibrated profile) the sensors and unit it was calibrated on, in words."""
     from exohil.emulators.discrepancy import VOCABULARY
     from exohil.emulators.discrepancy.profile import CalibratedSuit, load_any_profile
     from exohil.emulators.suit_profile import ProfileError
 
     if profile_path is None:
-        return "calibrated", ()
+        return "calibrated", (), None
     try:
         profile = load_any_profile(profile_path)
     except ProfileError as exc:
         raise click.ClickException(str(exc)) from exc
     if isinstance(profile, CalibratedSuit):
-        return profile.name, tuple(e for e in profile.effects if e in VOCABULARY)
+        return (profile.name, tuple(e for e in profile.effects if e in VOCABULARY),
+                _sensors_words(profile.sensors, profile.units))
     kinds = {e.name for e in profile.effects.effects}
-    return profile.name, tuple(k for k in VOCABULARY if k in kinds)
+    return profile.name, tuple(k for k in VOCABULARY if k in kinds), None
+
+
+def _sensors_words(sensors: tuple[str, ...], units: str) -> str:
+    return f"{len(sensors)} sensors ({', '.join(sensors)}) in {units}"
 
 
 @click.command("discrepancy")
@@ -86,9 +92,14 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
 
     refuse_overwriting_inputs([("--out", out_dir / name) for name in OUTPUT_NAMES],
                               [measured, profile_path])
-    name, in_model = _in_model(profile_path)
+    name, in_model, calibrated_on = _in_model(profile_path)
     try:
         rec = read_recording(measured)
+        measured_on = _sensors_words(tuple(rec.sensor_names), rec.sensor_units)
+        if calibrated_on is not None and calibrated_on != measured_on:
+            click.echo(f"warning: {profile_path} was calibrated on {calibrated_on}, "
+                       f"{measured.name} has {measured_on}: only its effects' names are "
+                       "taken, and every term is fitted to this recording", err=True)
         warning = memory_warning(len(rec.sensors), available_memory_bytes())
         if warning is not None:
             click.echo(warning, err=True)

@@ -2075,6 +2075,7 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
                                       str(out / "suit_profile.toml"), "--out", str(tmp_path / "b")])
     assert again.exit_code == 0, again.output
     second = json.loads((tmp_path / "b" / "discrepancy.json").read_text())
+    assert "warning" not in again.stderr  # its own sensors and unit
     assert second["already_in_model"] == summary["effects"]
     assert not set(second["effects"]) & set(summary["effects"])
     assert second["gap_before"] < 1.05 * summary["gap_after"]  # its effects fitted again
@@ -2185,6 +2186,30 @@ def test_profile_effects_already_in_the_model_are_not_proposed(tmp_path):
     assert outcome.summary["gap_before"] < 0.5  # already explained by the fitted term
 
 
+def test_a_profile_calibrated_on_other_sensors_is_said(hysteresis_outcome, tmp_path,
+                                                        monkeypatch):
+    import exohil.emulators.discrepancy as discrepancy
+    from exohil.emulators.discrepancy.report import write_outputs
+
+    _, outcome = hysteresis_outcome
+    write_outputs(outcome, tmp_path / "disc", "test", workers=1)
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    rec = replace(rec, sensor_units="V")
+    path = tmp_path / "volts.mcap"
+    write_recording(path, rec)
+
+    def stop(*args, **kwargs):
+        raise DiscrepancyError("stopped here")
+
+    monkeypatch.setattr(discrepancy, "run", stop)
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--profile",
+                                       str(tmp_path / "disc" / "suit_profile.toml"),
+                                       "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1 and "stopped here" in result.stderr
+    assert "was calibrated on " in result.stderr and " in mm, volts.mcap has " in \
+        result.stderr and "in V: only its effects' names are taken" in result.stderr
+
+
 def test_the_suits_own_profile_leaves_no_more_than_no_profile(tmp_path):
     """Effects a profile already has are fitted as named ones are, largest first, each with
     the map chosen again and the lag refitted after the next one: fitted in the profile's
@@ -2222,7 +2247,8 @@ def test_a_profile_with_a_gain_effect_offers_only_vocabulary_effects():
     from exohil.harness.cmd_discrepancy import _in_model
 
     assert "gain" not in VOCABULARY  # the pots' gain and zero are not a discrepancy term
-    name, in_model = _in_model(PROFILES_DIR / "donning-b.toml")
+    name, in_model, calibrated_on = _in_model(PROFILES_DIR / "donning-b.toml")
+    assert calibrated_on is None  # a geometric profile: tendons in mm, nothing calibrated
     assert name == "donning-b" and in_model == VOCABULARY
 
 
