@@ -110,7 +110,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     written = write_outputs(outcome, out_dir, f"{name}+{measured.stem}", workers)
     s = outcome.summary
     click.echo(f"{s['conclusion']}: held-out gap {s['gap_before']:.4g} -> {s['gap_after']:.4g} "
-               f"{s['units']}; wrote {', '.join(str(p) for p in written)}", err=True)
+               f"{s['units']}; wrote {', '.join(str(p) for p in written)}")
 
 
 COMMANDS: list[click.Command] = [discrepancy]
