@@ -573,12 +573,13 @@ def _best_of(trial: Trial, inputs: Inputs, spec: Spec, kind: str) -> tuple[str, 
 
 
 def _fit_in_model(trial: Trial, inputs: Inputs, static_fit: Fit, in_model: tuple[str, ...],
-                  workers: int) -> tuple[Fit, Inputs]:
+                  workers: int) -> tuple[Fit, Inputs, str]:
     """The model with the effects the profile already has (``in_model``), fitted as named
     effects are: the one that lowers the held-out gap most first, each refined, the map's
     degree chosen again and driven by its own static part, so that each is fitted with the
     larger ones in place (in the profile's order, a loop fitted before the lag took
-    the lag's share: the suit's own profile left 2.6 times the gap of no profile)."""
+    the lag's share: the suit's own profile left 2.6 times the gap of no profile). Returns
+    the fit, its inputs and the effect added last ("" for none)."""
     base, missing, previous = static_fit, list(in_model), ""
     while missing:
         tried = forked_map(functools.partial(_best_of, trial, inputs, base.spec), missing,
@@ -587,7 +588,7 @@ def _fit_in_model(trial: Trial, inputs: Inputs, static_fit: Fit, in_model: tuple
         base, inputs, _, _ = _add_effect(trial, inputs, kind, cand, previous)
         missing.remove(kind)
         previous = kind
-    return base, inputs
+    return base, inputs, previous
 
 
 def _add_effect(trial: Trial, inputs: Inputs, kind: str, cand: Fit, previous: str
@@ -679,7 +680,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     if after_effects is not None:  # read late from the start: found after the effects
         clock = _read_from_the_start(clock, late, after_effects)
     inputs = make_inputs(trial, static_fit.spec)
-    base, inputs = _fit_in_model(trial, inputs, static_fit, in_model, workers)
+    # previous: the effect added in the step before (the profile's last one, or none)
+    base, inputs, previous = _fit_in_model(trial, inputs, static_fit, in_model, workers)
     spec = base.spec
     before = base
     runs = [trial.sensor_names[j] for j in inputs.segment_sensors]
@@ -695,7 +697,6 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         + ", ".join(_rms_words(c["rms"]) for c in local_before["by_speed"]))
     steps: list[dict] = []
     rejected: list[dict] = []
-    previous = ""  # the effect named in the previous step
     step = 4
     while True:
         missing = [k for k in VOCABULARY if k not in spec.effects()]
