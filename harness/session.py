@@ -59,6 +59,7 @@ from exohil.harness.bench import (
 )
 from exohil.harness.machine import HostLoad, HostLoadMeter
 from exohil.harness.pipeline import FrameRows, Pipeline, PipelineRun, RowsObserver, Sink, Status
+from exohil.harness.recorder import RecorderSink, partial_path
 from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.robot_trace import RobotTrace, RobotTraceSink
 from exohil.harness.teleop import SHOULDER_ANGLES, SimulatedNao, TeleopSink
@@ -350,6 +351,10 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     inputs = [p for p in (config.model, ref_path) if p is not None]
     if config.record is not None and same_file(config.record, inputs) is not None:
         raise SessionError(f"refusing to record onto an input: {config.record}")
+    if config.record is not None and partial_path(config.record).exists():
+        left = partial_path(config.record)
+        raise SessionError(f"{left} is what a run that was stopped short recorded; recover it "
+                           f"(exohil record recover {left} --out FILE) or remove it first")
     if progress is not None and reference is not None:
         progress = _with_running_error(progress, reference, est)
     rate_hz = device_rate_hz(config, reference)
@@ -368,8 +373,6 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 sinks.append(tracer)
         sinks.extend(extra_sinks)
         if config.record is not None:
-            from exohil.harness.recorder import RecorderSink
-
             sinks.append(RecorderSink(config.record, est.sensor_names, metadata={
                 "generator": "exohil", "source": config.device.describe(),
                 "model_sha256": model.sha256}, sensor_rate_hz=rate_hz))

@@ -125,6 +125,18 @@ def test_a_session_refuses_to_record_onto_its_model(tmp_path):
         run_session(config, 1.0)
 
 
+def test_a_session_keeps_what_a_run_stopped_short_left(tmp_path):
+    """A killed run leaves NAME.partial for `record recover`; the next run to NAME used to
+    write its own .partial over it."""
+    left = tmp_path / "session.mcap.partial"
+    left.write_bytes(b"a killed run's frames")
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--record",
+                                       str(tmp_path / "session.mcap")])
+    assert result.exit_code != 0
+    assert "stopped short" in result.output and "exohil record recover" in result.output
+    assert left.read_bytes() == b"a killed run's frames"
+
+
 def test_demo_rejects_a_missing_model_with_one_line(tmp_path):
     result = CliRunner().invoke(main, ["demo", "--model", str(tmp_path / "nope.npz")])
     assert result.exit_code != 0
