@@ -234,12 +234,15 @@ class ConformanceRun:
         path = self.reference_file
         if path is None:
             raise CheckBlocked("no reference recording to compare with the training data")
-        self.reference  # noqa: B018 -- a file that is no recording fails here, not passes
-        digest = sha256_file(path)
+        # a part cut from a training recording (exohil record cut) is training data too
+        reference = self.reference  # a file that is no recording fails here, not passes
+        meta = reference.metadata if reference is not None else {}
+        digests = {sha256_file(path), meta.get("cut.source_sha256", ""),
+                   *meta.get("cut.origins_sha256", "").split(",")} - {""}
         sources = self.model.estimator.info.get("sources", [])
-        trained = [s.get("file", "?") for s in sources if s.get("sha256") == digest]
-        note = (f"{path.name} was used to train the model (as {', '.join(trained)}): score "
-                "it on a recording it never saw" if trained else
+        trained = [s.get("file", "?") for s in sources if s.get("sha256") in digests]
+        note = (f"{path.name} was used to train the model, or cut from a recording that was "
+                f"(as {', '.join(trained)}): score it on a recording it never saw" if trained else
                 f"{path.name} is not among the model's {len(sources)} training recording(s)")
         if not sources:
             note = "the checkpoint records no training recordings; cannot prove held-out"

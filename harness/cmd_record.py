@@ -193,7 +193,8 @@ def recover_command(file: Path, out: Path) -> None:
 def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> None:
     """Write the part of FILE from --start to --stop as recording OUT: its sensor frames, the
     motion capture of the same span and the segments clipped to it, with times and sequence
-    numbers as they were. OUT's metadata names FILE, its sha256 and the span. Example, the
+    numbers as they were. OUT's metadata names FILE, its sha256 (and those of the recordings
+    FILE was cut from, if it was) and the span. Example, the
     first 12 s of a session for calibration and the rest to test on:
 
     \b
@@ -213,6 +214,10 @@ def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> 
     except (RecordingError, ValueError) as exc:
         raise click.ClickException(f"{file}: {exc}" if isinstance(exc, ValueError)
                                    else str(exc)) from None
+    earlier = [d for d in (rec.metadata.get("cut.source_sha256"),
+                           *rec.metadata.get("cut.origins_sha256", "").split(",")) if d]
+    if earlier:  # a part of a part: every recording it came from, for the heldout check
+        part.metadata["cut.origins_sha256"] = ",".join(earlier)
     part.metadata.update({"cut.source": file.name, "cut.source_sha256": sha256_file(file),
                           "cut.start_s": f"{start_s:g}",
                           "cut.stop_s": "end" if stop_s is None else f"{stop_s:g}"})

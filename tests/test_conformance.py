@@ -380,6 +380,22 @@ def test_a_recording_the_model_was_trained_on_fails_heldout(tmp_path, fast_profi
     assert "paper_protocol.mcap was used to train the model" in last_line(output)
 
 
+def test_a_part_cut_from_a_training_recording_fails_heldout(tmp_path, fast_profile):
+    """`record cut` gives the part a digest of its own; its metadata names the recording it
+    came from, and the recordings that one came from, which the check compares too."""
+    part, part_of_part = tmp_path / "part.mcap", tmp_path / "part2.mcap"
+    for source, out, stop in ((TRAINED_ON, part, "30"), (part, part_of_part, "20")):
+        cut = CliRunner().invoke(main, ["record", "cut", str(source), "--stop", stop,
+                                        "--out", str(out)])
+        assert cut.exit_code == 0, cut.output
+    for target in (part, part_of_part):
+        code, output, report = conform(tmp_path / target.stem, fast_profile, "-k", "heldout",
+                                       target=target)
+        assert code != 0 and verdicts(report)["heldout"] == "fail", output
+        assert f"{target.name} was used to train the model, or cut from a recording" in \
+            last_line(output)
+
+
 def test_a_target_that_is_no_recording_fails_every_check_that_reads_it(tmp_path, fast_profile):
     """Not even heldout passes on a file it cannot read (it compared the file's digest with
     the training recordings' and found no match), and each failure says the reason once,
