@@ -109,6 +109,9 @@ def parse_limit(text: str) -> Limit:
     try:
         check_unit(unit)
         if op is None:
+            if float(low) > float(high):
+                raise ValueError(f"its low end {low} is above its high end {high}: no value "
+                                 "can pass")
             return Limit(low=float(low), high=float(high), unit=unit, inclusive=True)
         x = float(value)
     except ValueError as err:
@@ -149,7 +152,7 @@ class Profile:
 
 #: numeric setting → (low, high), both inclusive; the values are finite.
 _SETTING_RANGES: dict[str, tuple[float, float]] = {
-    "realtime_seconds": (0.0, MAX_DURATION_S), "conversion_examples": (1, 100_000),
+    "realtime_seconds": (0.1, MAX_DURATION_S), "conversion_examples": (1, 100_000),
     "seed": (0, SEED_MAX), "regression_accuracy_margin_deg": (0.0, 360.0),
     "regression_latency_factor": (1.0, 1000.0), "latency_attempts": (1, 10),
 }
@@ -196,6 +199,10 @@ def load_profile(name_or_path: str) -> Profile:
     unknown = sorted(set(data) - {"name", "description", "settings", "checks"})
     if unknown:
         raise ProfileError(f"{path}: unknown key(s) {', '.join(unknown)}")
+    for key in ("settings", "checks"):
+        if not isinstance(data.get(key, {}), dict):
+            raise ProfileError(f"{path}: {key} must be a table ([{key}]), got "
+                               f"{type(data[key]).__name__} {data[key]!r}")
     settings = dict(data.get("settings", {}))
     for key, value in settings.items():
         if key not in SETTINGS:

@@ -117,6 +117,10 @@ def test_bundled_profiles_load():
     ('[settings]\nlatency_attempts = 0\n', "setting latency_attempts must be within"),
     ('[settings]\nlatency_attempts = 2.5\n', "setting latency_attempts must be an integer"),
     ('[settings]\nfaults = "drop:rate=nan"\n', "setting faults: drop"),
+    ('[settings]\nrealtime_seconds = 0\n', "setting realtime_seconds must be within 0.1"),
+    ('checks = "accuracy"\n', r"checks must be a table \(\[checks\]\), got str"),
+    ('settings = 3\n', r"settings must be a table"),
+    ('[checks.conversions]\n"conversions.failures" = "5 .. 1 count"\n', "above its high end"),
 ])
 def test_bad_profiles_are_clear_errors(tmp_path, text, message):
     path = tmp_path / "p.toml"
