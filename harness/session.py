@@ -49,6 +49,7 @@ from exohil.formats.errors import InputError, RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import Recording
 from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
+from exohil.formats.wire import SEQ_MODULUS
 from exohil.harness.bench import (
     BenchConfig,
     BenchError,
@@ -385,7 +386,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         with open_device(config.device, len(est.sensor_names), realtime=realtime,
                          duration_s=seconds, recording=reference) as opened:
             if opened.emulator is not None:
-                link_tally = LinkTally(opened.emulator.wire_values_mm, opened.emulator.seq0)
+                # the host counts from the first wire seq (mod 65536): in its numbering
+                link_tally = LinkTally(opened.emulator.wire_values_mm,
+                                       opened.emulator.seq0 % SEQ_MODULUS)
                 observers.append(link_tally)
             keep = {} if keep_frames is None else {"keep_first": keep_frames[0],
                                                    "keep_last": keep_frames[1]}
@@ -562,7 +565,11 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
             out.append(Measurement.skipped(name, "count", why, limits.get(name)))
         return out
     first, last = run.first_seq, run.last_seq
-    lost = {r.seq for r in result.fault_log if r.kind in LOSING_KINDS and first <= r.seq <= last}
+    # the device logs its own numbering; the host counts from the first wire seq (mod 65536)
+    seq0 = result.emulator_seq0 or 0
+    hidden = seq0 - seq0 % SEQ_MODULUS
+    lost = {r.seq - hidden for r in result.fault_log
+            if r.kind in LOSING_KINDS and first <= r.seq - hidden <= last}
     expected = last - first + 1 - len(lost)
     late = f"; {tally.late} frames arrived out of order" if tally.late else ""
     out += [

@@ -358,6 +358,28 @@ def test_a_sign_error_in_the_elevation_conversion_fails_conversions(tmp_path, fa
     assert "humerus_axis_oracle" in last_line(output)
 
 
+def test_link_counts_a_recording_numbered_past_the_wire_counters_wrap(tmp_path,
+                                                                       fast_profile):
+    """The wire carries seq mod 65536 and the host counts from the first one it receives;
+    a part cut 262 s or more into a session starts past the wrap, and the device's fault
+    log and values were compared in its own numbering: 1,243 frames 'bad', 6 'lost'."""
+    from dataclasses import replace
+
+    from exohil.formats.recording_reader import read_recording
+    from exohil.formats.recording_writer import write_recording
+
+    rec = read_recording(HELDOUT)
+    late = tmp_path / "late.mcap"
+    write_recording(late, replace(rec, sensors=replace(rec.sensors,
+                                                       seq=rec.sensors.seq + 70_000)))
+    code, output, report = conform(tmp_path / "out", fast_profile, "-k", "link", target=late)
+    assert code == 0 and verdicts(report)["link"] == "pass", output
+    link = {m["name"]: m["value"] for c in report["checks"] if c["name"] == "link"
+            for m in c["measurements"]}
+    assert link["link.bad_frames_delivered"] == 0 and link["link.lost_on_host"] == 0
+    assert link["link.dropped_unexplained"] == 0
+
+
 def test_a_decoder_that_accepts_bad_crcs_fails_link(tmp_path, fast_profile, monkeypatch):
     from exohil.formats import wire
     from exohil.harness import link_decoder
