@@ -57,6 +57,11 @@ from exohil.harness.session import (
     teleop_measurements,
 )
 
+#: The share of the profile's ``realtime_seconds`` a real-time segment must cover.
+SEGMENT_SHARE = 0.9
+#: The device time, s, a segment streamed to the reference's end must cover at least.
+MIN_SEGMENT_S = 1.0
+
 
 class CheckBlocked(Exception):
     """A check cannot be measured (the message says why); it is reported as skipped."""
@@ -181,6 +186,24 @@ class ConformanceRun:
         self.say(f"segment done; the host meanwhile: {result.host_load.describe()}")
         return result
 
+    def _whole_segment(self, result: SessionResult | None = None) -> SessionResult:
+        """The real-time segment (``result``, default :attr:`session`), refused where it
+        covered under :data:`SEGMENT_SHARE` of the device time the profile asks for (at
+        least :data:`MIN_SEGMENT_S` to the reference's end for a device with a reference):
+        latency, link and teleop figures of a few frames measure nothing."""
+        result = self.session if result is None else result
+        run = result.run
+        span = run.last_device_time_s - run.first_device_time_s if run.frames > 1 else 0.0
+        to_reference = isinstance(self.device, SerialDevice) and self.reference is not None
+        wanted = MIN_SEGMENT_S if to_reference else self.profile.setting("realtime_seconds")
+        if span >= SEGMENT_SHARE * wanted:
+            return result
+        why = ("the device's clock may be past the reference's end" if to_reference else
+               "the recording ends before that (it is also the reference, so it is not "
+               "looped), or the device stopped")
+        raise CheckBlocked(f"the real-time segment covered {span:.3g} s of device time "
+                           f"({run.frames} frames) where {wanted:g} s are asked for: {why}")
+
     # ---- checks ----------------------------------------------------------------------
     def compatibility_measurements(self) -> list[Measurement]:
         limits = self.profile.limits("compatibility")
@@ -269,7 +292,7 @@ class ConformanceRun:
         ``latency.attempts`` counts the segments; its note gives each one's figures."""
         limits = self.profile.limits("latency")
         attempts = self.profile.setting("latency_attempts")
-        result = self.session
+        result = self._whole_segment()
         tried: list[str] = []
         while True:
             measured = latency_measurements(result.run, limits)
@@ -280,16 +303,17 @@ class ConformanceRun:
                 break
             self.say(f"latency: {failed.describe()}; {result.host_load.describe()} during the "
                      "segment, and a busy host only adds time: measuring a fresh segment")
-            result = self._segment(f" (latency attempt {len(tried) + 1} of {attempts})")
+            result = self._whole_segment(
+                self._segment(f" (latency attempt {len(tried) + 1} of {attempts})"))
         note = "; ".join(f"{i}: {line}" for i, line in enumerate(tried, 1))
         return measured + [Measurement.judge("latency.attempts", len(tried), "count",
                                              limits.get("latency.attempts"), note)]
 
     def link_measurements(self) -> list[Measurement]:
-        return link_measurements(self.session, self.profile.limits("link"))
+        return link_measurements(self._whole_segment(), self.profile.limits("link"))
 
     def teleop_measurements(self) -> list[Measurement]:
-        return teleop_measurements(self.session, self.profile.limits("teleop"))
+        return teleop_measurements(self._whole_segment(), self.profile.limits("teleop"))
 
     def conversions_measurements(self) -> list[Measurement]:
         """How many conversion properties failed, how many examples ran, the largest error."""

@@ -358,6 +358,21 @@ def test_a_sign_error_in_the_elevation_conversion_fails_conversions(tmp_path, fa
     assert "humerus_axis_oracle" in last_line(output)
 
 
+def test_a_segment_shorter_than_the_profile_asks_for_is_not_passed(tmp_path, fast_profile):
+    """A 2 s recording streamed for the profile's 3 s segment ended after 2 s, and latency
+    and link passed on it without a word."""
+    short = tmp_path / "short.mcap"
+    cut = CliRunner().invoke(main, ["record", "cut", str(HELDOUT), "--stop", "2", "--out",
+                                    str(short)])
+    assert cut.exit_code == 0, cut.output
+    code, output, report = conform(tmp_path / "out", fast_profile, "-k", "latency or link",
+                                   target=short)
+    assert code != 0 and verdicts(report) == {"latency": "skip", "link": "skip"}, output
+    line = last_line(output)  # the frames lost to the profile's faults vary
+    assert "the real-time segment covered 1.99 s of device time (" in line
+    assert "frames) where 3 s are asked for: the recording ends before that" in line
+
+
 def test_link_counts_a_recording_numbered_past_the_wire_counters_wrap(tmp_path,
                                                                        fast_profile):
     """The wire carries seq mod 65536 and the host counts from the first one it receives;
