@@ -277,6 +277,19 @@ class LinkTally:
         return int(np.sum(gaps[:, 1] - gaps[:, 0] + 1 - logged))
 
 
+def _nothing_decoded_hint(crc_errors: int, decode_errors: int, sensors: int) -> str:
+    """Why no frame was decoded, from what the link rejected (" (…)", or "" if nothing):
+    packets of another shape alone suggest another sensor count; failed CRCs, a link that
+    corrupts what it carries."""
+    seen = [f"{n} packets {what}" for n, what in ((crc_errors, "failed their CRC"),
+                                                  (decode_errors, "had another shape")) if n]
+    if not seen:
+        return ""
+    guess = (f"does the device send {sensors} sensors?" if not crc_errors else
+             "a link that corrupts what it carries?")
+    return f" ({', '.join(seen)}: {guess})"
+
+
 @dataclass
 class SessionResult:
     """Everything one session produced (see :func:`run_session`).
@@ -427,9 +440,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         if link_tally is not None:
             link_tally.release()
     if run.frames == 0:
-        stats = run.link
-        hint = (f" ({stats.decode_errors} packets of another shape: does the device send "
-                f"{len(est.sensor_names)} sensors?)" if stats.decode_errors else "")
+        hint = _nothing_decoded_hint(run.link.crc_errors, run.link.decode_errors,
+                                     len(est.sensor_names))
         problem = (config.device.path_problem() if isinstance(config.device, SerialDevice)
                    else None) or device_lost
         why = f": {problem}" if problem else ""

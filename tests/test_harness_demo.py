@@ -125,6 +125,19 @@ def test_a_session_refuses_to_record_onto_its_model(tmp_path):
         run_session(config, 1.0)
 
 
+def test_a_link_that_corrupts_every_frame_is_told_from_another_sensor_count():
+    from exohil.harness.session import _nothing_decoded_hint
+
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--sink", "none",
+                                       "--faults", "corrupt:rate=1"])
+    assert result.exit_code != 0 and "packets failed their CRC" in result.output
+    assert "a link that corrupts what it carries?" in result.output
+    assert "sensors?" not in result.output  # it used to ask whether 4 sensors were sent
+    assert _nothing_decoded_hint(0, 7, 4) == (" (7 packets had another shape: does the "
+                                              "device send 4 sensors?)")
+    assert _nothing_decoded_hint(0, 0, 4) == ""
+
+
 def test_a_session_keeps_what_a_run_stopped_short_left(tmp_path):
     """A killed run leaves NAME.partial for `record recover`; the next run to NAME used to
     write its own .partial over it."""
