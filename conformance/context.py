@@ -27,7 +27,7 @@ from exohil.conformance.conversions import run_properties
 from exohil.conformance.profile import Profile
 from exohil.estimator.coverage import CoverageTally, stream_coverage
 from exohil.estimator.evaluation import accuracy_measurements
-from exohil.estimator.workflow import same_rate
+from exohil.estimator.rates import same_rate
 from exohil.formats.alignment import angles_at_sensor_times
 from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.formats.recording import Recording

@@ -25,14 +25,13 @@ from exohil.estimator.dataset import (
 )
 from exohil.estimator.defaults import DEFAULT_HIDDEN, MODEL_NAMES, default_window
 from exohil.estimator.evaluation import evaluate
+from exohil.estimator.rates import same_rate
 from exohil.estimator.splits import Split, cut_at_segments, time_block_split, trial_split
 from exohil.estimator.trained import TrainedEstimator
 from exohil.estimator.training import TrainConfig, train
 from exohil.formats.digest import sha256_file
 from exohil.formats.recording import Recording
 
-#: Relative difference of sensor rates beyond which a model's window would span another time.
-RATE_TOLERANCE = 0.01
 
 def model_config(name: str, base: TrainConfig, rate_hz: float,
                  hidden: int | None = None) -> TrainConfig:
@@ -69,12 +68,6 @@ class LoadedData:
             out += recording_blocks(self.recordings[i], self.target,
                                     offset_frames=offset_frames, source=self.paths[i].name)
         return cut_at_segments(out)
-
-
-def same_rate(rate_hz: float, model_rate_hz: float) -> bool:
-    """Whether sensors at ``rate_hz`` suit a model of ``model_rate_hz`` (within
-    :data:`RATE_TOLERANCE`): otherwise its window and time constants span another time."""
-    return abs(rate_hz - model_rate_hz) <= RATE_TOLERANCE * model_rate_hz
 
 
 def load_recordings(

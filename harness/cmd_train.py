@@ -135,10 +135,9 @@ def _model_and_recordings(checkpoint, recordings):
 
 def _rate_mismatch(est: TrainedEstimator, rate_hz: float) -> str | None:
     """Why recordings at ``rate_hz`` do not suit ``est``, or None."""
-    if _workflow().same_rate(rate_hz, est.sensor_rate_hz):
-        return None
-    return (f"the recordings' sensor rate is {rate_hz:g} Hz, the model's "
-            f"{est.sensor_rate_hz:g} Hz: its window would span another time")
+    from exohil.estimator.rates import rate_mismatch
+
+    return rate_mismatch(rate_hz, est.sensor_rate_hz)
 
 
 def _accuracy_line(accuracy: dict) -> str:

@@ -14,6 +14,7 @@ module lays them out as the summary JSON and the lines a person reads.
      "training_coverage": {"frames", "outside_percent", "outside_bound_sigmas",
                            "extremes_sigmas": {sensor: [low, high]}},
      "training_coverage_warning": text or null,
+     "sensor_rate_warning": text or null (a device at another frame rate than the model's),
      "measurements": [Measurement.to_dict(), ...],
      "model", "model_sha256", "backend", "target", "machine", "finished_at"}
 """
@@ -24,6 +25,7 @@ import math
 import time
 from typing import Any
 
+from exohil.estimator.rates import rate_mismatch
 from exohil.formats.measurement import Measurement
 from exohil.harness.machine import machine
 from exohil.harness.session import (
@@ -82,6 +84,8 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
         "training_coverage": None if result.coverage is None else result.coverage.to_dict(),
         "training_coverage_warning": (None if result.coverage is None
                                       else result.coverage.warning()),
+        "sensor_rate_warning": rate_mismatch(result.sensor_rate_hz, est.sensor_rate_hz,
+                                             "the device's frame rate"),
         "teleop": {
             "rmse_deg": {m.name.removeprefix("teleop.rmse."): _value(measurements, m.name)
                          for m in measurements if m.name.startswith("teleop.rmse.")},
@@ -144,6 +148,8 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
                      f"p99 {axis['p99']:.1f}°  max {axis['max']:.1f}°")
     if s.get("training_coverage_warning"):
         lines.append(f"warning     {s['training_coverage_warning']}")
+    if s.get("sensor_rate_warning"):
+        lines.append(f"warning     {s['sensor_rate_warning']}; train or calibrate at this rate")
     if s["values_clipped_to_wire_range"]:
         lines.append(f"warning     {s['values_clipped_to_wire_range']} sensor values were outside "
                      "the wire's 0..655.35 mm and were clipped")

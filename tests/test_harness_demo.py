@@ -125,6 +125,29 @@ def test_a_session_refuses_to_record_onto_its_model(tmp_path):
         run_session(config, 1.0)
 
 
+def test_a_session_at_another_frame_rate_than_the_models_says_so(tmp_path):
+    """evaluate warned and conform failed on a recording at 100 Hz for a 250 Hz model; the
+    demo scored it (13.9° off) without a word."""
+    from dataclasses import replace
+
+    from exohil.formats.recording import cut_recording
+    from exohil.formats.recording_reader import read_recording
+    from exohil.formats.recording_writer import write_recording
+    from exohil.harness.paths import FIXTURES_DIR
+
+    rec = cut_recording(read_recording(FIXTURES_DIR / "paper_protocol_heldout.mcap"), 0, 20)
+    slow = replace(rec, sensors=replace(rec.sensors, t=rec.sensors.t * 2.5),
+                   sensor_rate_hz=100.0)
+    path, summary = tmp_path / "hz100.mcap", tmp_path / "s.json"
+    write_recording(path, slow)
+    result = CliRunner().invoke(main, ["demo", "--recording", str(path), "--seconds", "2",
+                                       "--sink", "none", "--no-faults", "--json", str(summary)])
+    assert result.exit_code == 0, result.output
+    said = "the device's frame rate is 100 Hz, the model's 250 Hz"
+    assert f"warning     {said}" in result.output
+    assert json.loads(summary.read_text())["sensor_rate_warning"].startswith(said)
+
+
 def test_a_link_that_corrupts_every_frame_is_told_from_another_sensor_count():
     from exohil.harness.session import _nothing_decoded_hint
 
