@@ -31,6 +31,7 @@ from exohil.estimator.rates import same_rate
 from exohil.formats.alignment import angles_at_sensor_times
 from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.formats.recording import Recording
+from exohil.formats.recording_metadata import cut_lineage
 from exohil.harness.bench import (
     BenchConfig,
     Device,
@@ -259,9 +260,8 @@ class ConformanceRun:
             raise CheckBlocked("no reference recording to compare with the training data")
         # a part cut from a training recording (exohil record cut) is training data too
         reference = self.reference  # a file that is no recording fails here, not passes
-        meta = reference.metadata if reference is not None else {}
-        digests = {sha256_file(path), meta.get("cut.source_sha256", ""),
-                   *meta.get("cut.origins_sha256", "").split(",")} - {""}
+        digests = {sha256_file(path),
+                   *(cut_lineage(reference.metadata) if reference is not None else [])}
         sources = self.model.estimator.info.get("sources", [])
         trained = [s.get("file", "?") for s in sources if s.get("sha256") in digests]
         note = (f"{path.name} was used to train the model, or cut from a recording that was "

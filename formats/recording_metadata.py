@@ -138,6 +138,25 @@ def sensor_units(path: Path, metadata: dict[str, str]) -> str:
     return sensor_unit.strip()
 
 
+#: A nominal rate more than this factor from what the timestamps give (either way) is noted:
+#: times written in another unit than seconds, most likely.
+RATE_DISAGREEMENT = 2.0
+
+
+def rates_disagree(nominal_hz: float, measured_hz: float) -> bool:
+    """Whether a nominal rate and the rate the timestamps give differ by more than
+    :data:`RATE_DISAGREEMENT` times either way."""
+    return not 1 / RATE_DISAGREEMENT < nominal_hz / measured_hz < RATE_DISAGREEMENT
+
+
+def cut_lineage(metadata: dict[str, str]) -> list[str]:
+    """The sha256 of every recording a recording was cut from (``exohil record cut``
+    writes ``cut.source_sha256``, and ``cut.origins_sha256`` for a part of a part),
+    nearest first; empty for one that was not cut."""
+    return [d for d in (metadata.get("cut.source_sha256", ""),
+                        *metadata.get("cut.origins_sha256", "").split(",")) if d]
+
+
 def rate(
     path: Path, metadata: dict[str, str], key: str, estimate: float, notes: list[str]
 ) -> float:
@@ -150,7 +169,7 @@ def rate(
             value = math.nan
         if not (math.isfinite(value) and value > 0):
             raise RecordingError(f"{path}: metadata {key}={text!r} is not a positive number")
-        if math.isfinite(estimate) and estimate > 0 and not 0.5 < value / estimate < 2.0:
+        if math.isfinite(estimate) and estimate > 0 and rates_disagree(value, estimate):
             notes.append(f"metadata {key}={text} but the timestamps give "
                          f"{estimate:.4g} Hz: are the times in seconds?")
         return value

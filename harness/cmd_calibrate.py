@@ -7,6 +7,7 @@ import click
 import numpy as np
 
 from exohil.estimator.defaults import CALIBRATION_JITTERS
+from exohil.estimator.rates import rate_mismatch
 from exohil.harness.cli_types import (
     Count,
     Finite,
@@ -19,7 +20,6 @@ from exohil.harness.cmd_train import (
     _accuracy_line,
     _command_line,
     _model_and_recordings,
-    _rate_mismatch,
 )
 
 #: Most fine-tuning steps accepted (far beyond any useful value; a typo cannot run for days).
@@ -72,7 +72,7 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
 
     refuse_overwriting_inputs([("--out", out)], [checkpoint, *recordings])
     base, data = _model_and_recordings(checkpoint, recordings)
-    other_rate = _rate_mismatch(base, data.rate_hz)
+    other_rate = rate_mismatch(data.rate_hz, base.sensor_rate_hz)
     if other_rate:
         raise click.ClickException(other_rate)
     blocks = [b for b in data.blocks(base.offset_frames) if len(b)]

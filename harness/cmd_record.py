@@ -204,6 +204,7 @@ def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> 
     from exohil.formats.digest import sha256_file
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording import cut_recording
+    from exohil.formats.recording_metadata import cut_lineage
     from exohil.formats.recording_reader import read_recording
     from exohil.formats.recording_writer import write_recording
 
@@ -214,8 +215,7 @@ def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> 
     except (RecordingError, ValueError) as exc:
         raise click.ClickException(f"{file}: {exc}" if isinstance(exc, ValueError)
                                    else str(exc)) from None
-    earlier = [d for d in (rec.metadata.get("cut.source_sha256"),
-                           *rec.metadata.get("cut.origins_sha256", "").split(",")) if d]
+    earlier = cut_lineage(rec.metadata)
     if earlier:  # a part of a part: every recording it came from, for the heldout check
         part.metadata["cut.origins_sha256"] = ",".join(earlier)
     part.metadata.update({"cut.source": file.name, "cut.source_sha256": sha256_file(file),

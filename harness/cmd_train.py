@@ -12,6 +12,7 @@ import click
 
 from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
 from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
+from exohil.estimator.rates import rate_mismatch
 from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
 from exohil.harness.cli_types import (
@@ -29,7 +30,7 @@ from exohil.harness.cli_types import (
 )
 
 if TYPE_CHECKING:
-    from exohil.estimator.trained import TrainedEstimator
+    pass
 
 OUTPUT_CHOICES = ("auto", *OUTPUTS)
 
@@ -131,13 +132,6 @@ def _model_and_recordings(checkpoint, recordings):
     except CheckpointError as exc:
         raise click.ClickException(str(exc)) from None
     return est, data
-
-
-def _rate_mismatch(est: TrainedEstimator, rate_hz: float) -> str | None:
-    """Why recordings at ``rate_hz`` do not suit ``est``, or None."""
-    from exohil.estimator.rates import rate_mismatch
-
-    return rate_mismatch(rate_hz, est.sensor_rate_hz)
 
 
 def _accuracy_line(accuracy: dict) -> str:
@@ -268,7 +262,7 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         result = evaluate(est, blocks, limits)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
-    other_rate = _rate_mismatch(est, data.rate_hz)
+    other_rate = rate_mismatch(data.rate_hz, est.sensor_rate_hz)
     if other_rate:
         click.echo(f"warning: {other_rate}; train or calibrate at this rate", err=True)
     coverage = block_coverage(est, blocks)

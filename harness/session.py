@@ -277,6 +277,13 @@ class LinkTally:
         return int(np.sum(gaps[:, 1] - gaps[:, 0] + 1 - logged))
 
 
+def unseen_wraps(seq0: int) -> int:
+    """The counts of a device's numbering that the host cannot see, for a device whose first
+    frame is numbered ``seq0``: the wire carries seq mod 65536 and the host counts on from
+    the first value it receives, so host seq = device seq − this."""
+    return seq0 - seq0 % SEQ_MODULUS
+
+
 def _nothing_decoded_hint(crc_errors: int, decode_errors: int, sensors: int) -> str:
     """Why no frame was decoded, from what the link rejected (" (…)", or "" if nothing):
     packets of another shape alone suggest another sensor count; failed CRCs, a link that
@@ -399,9 +406,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         with open_device(config.device, len(est.sensor_names), realtime=realtime,
                          duration_s=seconds, recording=reference) as opened:
             if opened.emulator is not None:
-                # the host counts from the first wire seq (mod 65536): in its numbering
+                seq0 = opened.emulator.seq0
                 link_tally = LinkTally(opened.emulator.wire_values_mm,
-                                       opened.emulator.seq0 % SEQ_MODULUS)
+                                       seq0 - unseen_wraps(seq0))
                 observers.append(link_tally)
             keep = {} if keep_frames is None else {"keep_first": keep_frames[0],
                                                    "keep_last": keep_frames[1]}
@@ -577,9 +584,7 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
             out.append(Measurement.skipped(name, "count", why, limits.get(name)))
         return out
     first, last = run.first_seq, run.last_seq
-    # the device logs its own numbering; the host counts from the first wire seq (mod 65536)
-    seq0 = result.emulator_seq0 or 0
-    hidden = seq0 - seq0 % SEQ_MODULUS
+    hidden = unseen_wraps(result.emulator_seq0 or 0)  # the device logs in its numbering
     lost = {r.seq - hidden for r in result.fault_log
             if r.kind in LOSING_KINDS and first <= r.seq - hidden <= last}
     expected = last - first + 1 - len(lost)

@@ -77,6 +77,7 @@ from exohil.emulators.discrepancy.timing import (
 )
 from exohil.emulators.discrepancy.workers import forked_map, one_blas_thread, workers_for
 from exohil.formats.recording import Recording
+from exohil.formats.recording_metadata import rates_disagree
 
 #: Refits of a named effect's model with its history terms driven by its own static part
 #: (:func:`_static_input_again`); the first does most (0.301 → 0.194 → 0.188 mm on the
@@ -559,9 +560,10 @@ def _read_from_the_start(evidence: dict | None, reading: dict, after_effects: di
 
 
 def rate_words(rate_hz: float, nominal_hz: float) -> str:
-    """What to say where the frames' times give a rate (``rate_hz``) more than twice or
-    under half the recording's nominal one (its metadata's): nothing otherwise."""
-    if 0.5 < nominal_hz / rate_hz < 2.0:
+    """What to say where the frames' times give a rate (``rate_hz``) that disagrees with
+    the recording's nominal one (its metadata's; :func:`rates_disagree`): nothing
+    otherwise."""
+    if not rates_disagree(nominal_hz, rate_hz):
         return ""
     return (f"the frames' times give {rate_hz:.4g} Hz where the metadata says {nominal_hz:g} "
             "Hz: are the times in seconds (recording format v1)?")
