@@ -83,7 +83,9 @@ REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
               show_default=True,
               help="Folder for junit.xml, conformance.json, summary.md, run.mcap.")
 @click.option("-k", "select", type=KeywordExpression(), default=None,
-              help="Run only the checks matching this pytest -k expression.")
+              help="Run only the checks matching this pytest -k expression (to debug "
+                   "one); the required checks left out are reported as not run, so such a "
+                   "run never passes the profile.")
 def conform(target: str | None, model: Path | None, bench_file: Path | None, profile: str,
             baseline: Path | None, reference: Path | None, backend: str | None, out_dir: Path,
             select: str | None) -> None:

@@ -8,7 +8,9 @@ Each check of ``test_checks.py`` records its measurements (name, value, unit, li
 as JUnit properties and into the run's report. A check whose limits are all met passes; one
 that cannot be measured (no reference, not in the profile, no baseline) is skipped, and a
 skipped *required* check (one the profile names, other than ``regression`` without a
-baseline) makes the run fail: skipped is never passed. With ``--exohil-out DIR`` the run
+baseline) makes the run fail: skipped is never passed. A required check left out of the
+session (``-k``, a node id) is reported as skipped, "not run", so a subset never passes the
+profile; the checks that did run keep their own verdicts. With ``--exohil-out DIR`` the run
 writes ``conformance.json``, ``summary.md`` and ``run.mcap`` there (``exohil conform`` adds
 ``junit.xml``).
 """
@@ -116,6 +118,31 @@ def _progress_writer(config: pytest.Config) -> Callable[[str], None]:
     return say
 
 
+def _required(name: str, run) -> bool:
+    """Whether the run passes only with ``name`` passed: every check the profile names,
+    except ``regression`` without a baseline."""
+    return name in run.profile.checks and not (name == "regression" and
+                                               run.baseline_path is None)
+
+
+def _with_checks_not_run(run, results: list[CheckResult]) -> list[CheckResult]:
+    """``results`` with a skipped entry for each check the session left out (``-k``, a node
+    id), in the suite's order."""
+    from exohil.conformance.profile import CHECKS
+    from exohil.conformance.report import NOT_RUN
+
+    ran = {r.name: r for r in results}
+    out = []
+    for name in CHECKS:
+        if name in ran:
+            out.append(ran.pop(name))
+        else:
+            message = (NOT_RUN if name in run.profile.checks
+                       else f"not in profile {run.profile.name}")
+            out.append(CheckResult(name, Verdict.SKIP, _required(name, run), message, 0.0))
+    return out + list(ran.values())
+
+
 @pytest.fixture(scope="session")
 def conformance_run(request: pytest.FixtureRequest):
     """The run under test (:class:`exohil.conformance.context.ConformanceRun`)."""
@@ -133,8 +160,7 @@ def check(request: pytest.FixtureRequest, conformance_run, record_property):
 
     def run_check(name: str, produce: Callable[[object], list[Measurement]]) -> None:
         start = time.perf_counter()
-        required = name in profile.checks and not (
-            name == "regression" and conformance_run.baseline_path is None)
+        required = _required(name, conformance_run)
 
         def done(verdict: Verdict, message: str, measurements: list[Measurement]) -> None:
             results.append(CheckResult(name, verdict, required, message,
@@ -182,7 +208,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     config = session.config
     if _RESULTS not in config.stash:
         return
-    results = config.stash[_RESULTS]
+    results = _with_checks_not_run(config.stash[_RUN], config.stash[_RESULTS])
+    config.stash[_RESULTS] = results
     from exohil.conformance.report import overall
 
     # the exit status follows the same verdict as conformance.json (skipped is not passed)

@@ -28,6 +28,8 @@ from exohil.formats.measurement import Verdict
 from exohil.harness.machine import machine
 
 SCHEMA = "exohil-conformance/1"
+#: The message of a check the session left out (``-k``, a node id).
+NOT_RUN = "not run: left out of this session (-k or a node id)"
 
 
 def _version(package: str) -> str | None:
@@ -119,8 +121,13 @@ def final_line(report: dict[str, Any]) -> str:
     checks = report["checks"]
     if report["verdict"] == Verdict.PASS.value:
         return f"PASS: {sum(c['verdict'] == 'pass' for c in checks)} checks passed"
+    unmet = [c for c in checks if c["required"] and c["verdict"] != "pass"]
     bad = next((c for c in checks if c["verdict"] == "fail"), None) or next(
-        (c for c in checks if c["required"] and c["verdict"] != "pass"), None)
+        (c for c in unmet if c["message"] != NOT_RUN), None)
+    if bad is None and unmet:
+        ran = [c for c in checks if c["verdict"] == "pass"]
+        return (f"FAIL: {len(unmet)} required check(s) not run (-k or a node id): "
+                f"{', '.join(c['name'] for c in unmet)}; the {len(ran)} that ran passed")
     if bad is None:
         return "FAIL: no required check ran"
     state = "" if bad["verdict"] == "fail" else "skipped, not passed: "

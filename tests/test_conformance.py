@@ -188,9 +188,28 @@ def test_the_same_suite_runs_as_plain_pytest(tmp_path, fast_profile):
                         "--exohil-target", f"emulator:{HELDOUT}", "--exohil-model", str(ENNET),
                         "--exohil-profile", str(fast_profile), "-k", "heldout or conversions",
                         "--exohil-out", str(tmp_path)])
-    assert code == 0
     report = json.loads((tmp_path / "conformance.json").read_text())
-    assert verdicts(report)["heldout"] == "pass"
+    assert verdicts(report)["heldout"] == verdicts(report)["conversions"] == "pass"
+    # the checks -k left out are not passed, so neither is the run (plain pytest too)
+    assert code == pytest.ExitCode.TESTS_FAILED and report["verdict"] == "fail"
+
+
+def test_a_subset_of_the_checks_never_passes_the_profile(tmp_path, fast_profile):
+    """``conform -k conversions`` reported PASS: the profile's other required checks were
+    left out, not passed."""
+    code, output, report = conform(tmp_path, fast_profile, "-k", "conversions")
+    assert code != 0 and report["verdict"] == "fail"
+    checks = {c["name"]: c for c in report["checks"]}
+    assert checks["conversions"]["verdict"] == "pass"
+    left_out = ["compatibility", "heldout", "accuracy", "latency", "link", "teleop"]
+    for name in left_out:
+        assert checks[name]["verdict"] == "skip" and checks[name]["required"], name
+        assert checks[name]["message"].startswith("not run: left out of this session")
+    assert not checks["regression"]["required"]  # no baseline
+    assert last_line(output) == (f"FAIL: 6 required check(s) not run (-k or a node id): "
+                                 f"{', '.join(left_out)}; the 1 that ran passed")
+    assert "| accuracy | skip | — | — | — | not run: left out" in \
+        (tmp_path / "summary.md").read_text()
 
 
 def test_a_baseline_enables_the_regression_check(tmp_path, fast_profile):
@@ -321,7 +340,7 @@ def test_a_latency_failure_is_measured_again_and_every_attempt_reported(tmp_path
     monkeypatch.setattr(context, "latency_measurements", stalled_first)
     profile = latency_profile(tmp_path, 3, '"latency.end_to_end.p50" = "< 1000 ms"')
     code, output, report = conform(tmp_path / "out", profile, "-k", "latency")
-    assert code == 0, output
+    assert verdicts(report)["latency"] == "pass", output
     assert len(calls) == 2 and calls[0] is not calls[1]
     measured = measurements(report)
     assert measured["latency.attempts"]["value"] == 2
@@ -367,7 +386,8 @@ def test_a_segment_shorter_than_the_profile_asks_for_is_not_passed(tmp_path, fas
     assert cut.exit_code == 0, cut.output
     code, output, report = conform(tmp_path / "out", fast_profile, "-k", "latency or link",
                                    target=short)
-    assert code != 0 and verdicts(report) == {"latency": "skip", "link": "skip"}, output
+    assert code != 0 and verdicts(report)["latency"] == verdicts(report)["link"] == "skip", \
+        output
     line = last_line(output)  # the frames lost to the profile's faults vary
     assert "the real-time segment covered 1.99 s of device time (" in line
     assert "frames) where 3 s are asked for: the recording ends before that" in line
@@ -388,7 +408,7 @@ def test_link_counts_a_recording_numbered_past_the_wire_counters_wrap(tmp_path,
     write_recording(late, replace(rec, sensors=replace(rec.sensors,
                                                        seq=rec.sensors.seq + 70_000)))
     code, output, report = conform(tmp_path / "out", fast_profile, "-k", "link", target=late)
-    assert code == 0 and verdicts(report)["link"] == "pass", output
+    assert verdicts(report)["link"] == "pass", output
     link = {m["name"]: m["value"] for c in report["checks"] if c["name"] == "link"
             for m in c["measurements"]}
     assert link["link.bad_frames_delivered"] == 0 and link["link.lost_on_host"] == 0
