@@ -29,6 +29,9 @@ from exohil.harness.cli_types import (
 )
 from exohil.harness.pipeline import Status
 
+#: The exit status of a run whose device was lost before its end (the report is written).
+EXIT_DEVICE_LOST = 3
+
 
 def status_line(status: Status) -> None:
     """The live status line (stderr), about once a second: frames, drops, CRC errors, the
@@ -84,7 +87,8 @@ def _outputs(config: BenchConfig, json_out: Path | None,
 def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | None,
                    title: str, out_dir: Path | None = None) -> dict:
     """Run one session on ``config``, print the report, write the JSON and, with ``out_dir``,
-    the report folder (``demo_report``); returns the summary."""
+    the report folder (``demo_report``); returns the summary. A device lost before the end
+    exits with :data:`EXIT_DEVICE_LOST` once everything is written."""
     from exohil.harness.session import SessionError, run_session
     from exohil.harness.session_report import session_measurements, summary, summary_lines
 
@@ -132,6 +136,10 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
         lines.append(f"report      {out_dir}/")
         lines += [f"            {path}  ({label})" for label, path in files]
     click.echo("\n".join(lines))
+    if s.get("device_lost"):  # a script must not take a run cut short for a whole one
+        click.echo(f"{title}: the device was lost before the end (exit status "
+                   f"{EXIT_DEVICE_LOST})", err=True)
+        raise SystemExit(EXIT_DEVICE_LOST)
     return s
 
 
@@ -168,7 +176,11 @@ def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str,
         rate: float | None, backend: str | None, json_out: Path | None,
         out_dir: Path | None) -> None:
     """Run the pipeline on the device at URL (a serial port such as /dev/ttyACM0, a pty
-    printed by `exohil emulate`, or any pyserial URL such as socket://host:port)."""
+    printed by `exohil emulate`, or any pyserial URL such as socket://host:port).
+
+    Exit status 0 when the run ended as asked (its duration, the reference's end or Ctrl-C);
+    3 when the device sent nothing for 10 s before that (the report is still written); 1 for
+    an error (no frame at all, a bad file), 2 for a bad command line."""
     from exohil.harness.bench import BenchError, SerialDevice, load_bench
     from exohil.harness.paths import MODELS_DIR
 

@@ -210,6 +210,34 @@ def test_run_against_a_separately_started_emulator_records_and_reports(tmp_path)
     assert all(np.isfinite(v) for v in s["rmse"].values())
 
 
+def test_a_run_whose_device_is_lost_exits_3_with_its_report(tmp_path, monkeypatch):
+    """An emulator that stops after 6 s of a 30 s run: the run said "the run ended before
+    its time" and exited 0, so a script took it for a whole run."""
+    from exohil.harness import bench
+
+    monkeypatch.setattr(bench, "DEVICE_TIMEOUT_S", 1.0)
+    fixture = FIXTURES_DIR / "paper_protocol_heldout.mcap"
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "exohil"), "emulate",
+                             str(fixture), "--duration", "6"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        port = proc.stdout.readline().strip()
+        assert port, proc.stderr.read()
+        summary = tmp_path / "summary.json"
+        result = CliRunner().invoke(main, ["run", port, "--duration", "30", "--json",
+                                           str(summary)])
+        assert proc.wait(timeout=30) == 0, proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert result.exit_code == 3, result.output
+    assert "the device was lost before the end (exit status 3)" in result.output
+    s = json.loads(summary.read_text())
+    assert s["device_lost"] and s["frames"]["received"] > 0
+    assert f"device lost {s['device_lost']}: the run ended before its time" in result.output
+
+
 def test_run_rejects_a_bad_sink_with_one_line(tmp_path):
     result = CliRunner().invoke(main, ["run", "loop://", "--duration", "1", "--sink",
                                        "udp:localhost"])
