@@ -325,6 +325,8 @@ class SessionResult:
     coverage: CoverageTally | None = None
     #: the device's nominal frame rate (:func:`~exohil.harness.bench.device_rate_hz`), Hz
     sensor_rate_hz: float = DEFAULT_SENSOR_RATE_HZ
+    #: why an emulator streamed less than the seconds asked for (its recording ended), or None
+    ended_early: str | None = None
 
     @property
     def fault_counts(self) -> dict[str, int] | None:
@@ -460,7 +462,22 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
     return SessionResult(config, model, run, truth, fault_log, seq0, clipped, host_load, robots,
-                         trace, device_lost, scoring, link_tally, coverage, rate_hz)
+                         trace, device_lost, scoring, link_tally, coverage, rate_hz,
+                         _recording_ended(config, reference, seconds))
+
+
+def _recording_ended(config: BenchConfig, recording: Recording | None,
+                     seconds: float | None) -> str | None:
+    """Why an emulator replaying ``recording`` once streamed less than ``seconds``, or None."""
+    device = config.device
+    if not isinstance(device, EmulatorDevice) or device.loop or seconds is None \
+            or recording is None:
+        return None
+    held_s = len(recording.sensors) / recording.sensor_rate_hz
+    if held_s + 1.0 / recording.sensor_rate_hz >= seconds:
+        return None
+    return (f"the recording holds {held_s:.1f} s of frames, so the run streamed those, not the "
+            f"{seconds:g} s asked for (loop = true under a bench file's [device] replays it)")
 
 
 def _with_running_error(progress: Progress, reference: Recording,

@@ -10,6 +10,8 @@ module lays them out as the summary JSON and the lines a person reads.
      "teleop": {"rmse_deg": {joint: deg}, "clamped_share",
                 "robot_tracking_deg": {"p50", "p99", "max"}, "robot_axis_error_deg": {...},
                 "robots": {class: summary}},
+     "device_lost": text or null, "ended_early": text or null (an emulator's recording
+     shorter than the seconds asked for),
      "device_log": {kind: count}, "values_clipped_to_wire_range": count,
      "training_coverage": {"frames", "outside_percent", "outside_bound_sigmas",
                            "extremes_sigmas": {sensor: [low, high]}},
@@ -79,6 +81,7 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
                    "crc_errors": run.link.crc_errors},
         "link": vars(run.link),
         "device_lost": result.device_lost,
+        "ended_early": result.ended_early,
         "device_log": counts,
         "values_clipped_to_wire_range": result.clipped_values,
         "training_coverage": None if result.coverage is None else result.coverage.to_dict(),
@@ -117,6 +120,8 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
     ]
     if s.get("device_lost"):
         lines.append(f"device lost {s['device_lost']}: the run ended before its time")
+    if s.get("ended_early"):
+        lines.append(f"note        {s['ended_early']}")
     if s["device_log"] is not None:
         log = ", ".join(f"{k} {v}" for k, v in sorted(s["device_log"].items()))
         lines.append(f"device log  {log or 'nothing injected or lost'}")

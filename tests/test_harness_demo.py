@@ -295,3 +295,29 @@ def test_a_demo_that_never_raises_the_arm_reports_the_arm_direction_it_measured(
     assert "no reference recording" not in result.output
     assert "no frame reached 20° of elevation" in result.output
     assert "arm-direction RMSE" in result.output
+
+
+def test_a_demo_longer_than_its_recording_says_it_streamed_less(tmp_path):
+    """`demo --seconds 4` on a 1.5 s recording stopped at its end without a word."""
+    part = tmp_path / "part.mcap"
+    runner = CliRunner()
+    result = runner.invoke(main, ["record", "cut", str(FIXTURES_DIR /
+                                                       "paper_protocol_heldout.mcap"),
+                                  "--stop", "1.5", "--out", str(part)])
+    assert result.exit_code == 0, result.output
+    from exohil.formats.recording_reader import read_recording
+
+    frames = len(read_recording(part).sensors)
+    summary = tmp_path / "summary.json"
+    note = ("note        the recording holds 1.5 s of frames, so the run streamed those, "
+            "not the 4 s asked for")
+    for seconds, said in (("4", True), ("1.5", False)):
+        result = runner.invoke(main, ["demo", "--recording", str(part), "--seconds", seconds,
+                                      "--sink", "none", "--no-faults", "--json", str(summary),
+                                      "--out", str(tmp_path / "report")])
+        assert result.exit_code == 0, result.output
+        s = json.loads(summary.read_text())
+        # all of it, both times (a frame sent while the host attaches is logged not read)
+        assert frames - 1 <= s["frames"]["received"] <= frames
+        assert bool(s["ended_early"]) == said, s["ended_early"]
+        assert (note in result.output) == said, result.output
