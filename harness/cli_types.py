@@ -260,8 +260,10 @@ def refuse_overwriting_inputs(outputs: Iterable[tuple[str, Path | None]],
                               inputs: Iterable[Path | None]) -> None:
     """Refuse (a usage error naming both) when an output file is one of the input files, by
     any path to it: a command never replaces what it reads. ``outputs`` holds (option that
-    names it, path) of each output; None paths are ignored."""
+    names it, path) of each output; None paths are ignored. Two options that name the same
+    output file are refused too: one would replace what the other wrote."""
     sources = [path for path in inputs if path is not None]
+    written: dict[str, tuple[str, Path]] = {}
     for option, path in outputs:
         if path is None:
             continue
@@ -269,6 +271,12 @@ def refuse_overwriting_inputs(outputs: Iterable[tuple[str, Path | None]],
         if clash is not None:
             raise click.UsageError(f"{option} {path} is the input {clash}; refusing to overwrite "
                                    "it (choose another output)")
+        key = os.path.realpath(path)
+        other = written.get(key)
+        if other is not None and other[0] != option:
+            raise click.UsageError(f"{other[0]} {other[1]} and {option} {path} name the same "
+                                   "file; one would replace the other (choose another output)")
+        written.setdefault(key, (option, path))
 
 
 class FaultSpec(click.ParamType):
