@@ -279,6 +279,24 @@ def refuse_overwriting_inputs(outputs: Iterable[tuple[str, Path | None]],
         written.setdefault(key, (option, path))
 
 
+def refuse_repeated_inputs(inputs: Iterable[tuple[str, Path]]) -> None:
+    """Refuse (a usage error naming both) an input file given twice, by any path to it:
+    ``inputs`` holds (how it was given: an option or an argument's name, path). A recording
+    read twice counts its frames twice; one given to ``--train`` and to ``--test`` would score
+    a model on what it was trained on."""
+    seen: list[tuple[str, Path]] = []
+    for given, path in inputs:
+        clash = same_file(path, [p for _, p in seen])
+        if clash is not None:
+            first = next(g for g, p in seen if p == clash)
+            why = ("a model would be scored on a recording it was trained on"
+                   if {first, given} == {"--train", "--test"}
+                   else "its frames would count twice")
+            raise click.UsageError(f"{first} {clash} and {given} {path} are the same file: "
+                                   f"{why}")
+        seen.append((given, path))
+
+
 class FaultSpec(click.ParamType):
     """An emulator fault spec string or TOML file (docs/emulator.md), parsed here so a bad one
     is refused before the emulator starts; the text is returned unchanged."""

@@ -15,6 +15,7 @@ from exohil.harness.cli_types import (
     OutputFile,
     Seed,
     refuse_overwriting_inputs,
+    refuse_repeated_inputs,
 )
 from exohil.harness.cmd_train import (
     _accuracy_line,
@@ -71,6 +72,7 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     from exohil.formats.digest import sha256_file
 
     refuse_overwriting_inputs([("--out", out)], [checkpoint, *recordings])
+    refuse_repeated_inputs(("RECORDING", r) for r in recordings)
     base, data = _model_and_recordings(checkpoint, recordings)
     other_rate = rate_mismatch(data.rate_hz, base.sensor_rate_hz)
     if other_rate:

@@ -27,6 +27,7 @@ from exohil.harness.cli_types import (
     Seed,
     Widths,
     refuse_overwriting_inputs,
+    refuse_repeated_inputs,
 )
 
 if TYPE_CHECKING:
@@ -200,6 +201,7 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     if kind == "ennet-stateful" and (window or dilation):
         raise click.UsageError("a stateful ENNet has no window: drop --window/--dilation")
     refuse_overwriting_inputs([("--out", out)], recordings)
+    refuse_repeated_inputs(("RECORDING", r) for r in recordings)
     wf = _workflow()
     data = _load(recordings, joint, angles)
     split = wf.make_split(data, offset_frames, test_fraction=test_fraction,
@@ -250,6 +252,7 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     from exohil.estimator.splits import tail_cut
 
     refuse_overwriting_inputs([("--json", json_out)], [checkpoint, *recordings])
+    refuse_repeated_inputs(("RECORDING", r) for r in recordings)
     est, data = _model_and_recordings(checkpoint, recordings)
     blocks = data.blocks(est.offset_frames)
     if test_fraction > 0:
@@ -338,6 +341,8 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
 
     refuse_overwriting_inputs([("--out", out), ("--json", json_out)],
                               [*train_paths, *test_paths])
+    refuse_repeated_inputs([*(("--train", p) for p in train_paths),
+                            *(("--test", p) for p in test_paths)])
     kinds = [k.strip() for k in models.split(",")]
     wf = _workflow()
     data = _load(train_paths, joint, angles)

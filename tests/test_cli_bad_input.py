@@ -467,3 +467,27 @@ def test_a_multi_line_message_becomes_one_line():
 def test_help_is_still_help():
     result = _runner().invoke(main, ["simulate", "--help"])
     assert result.exit_code == 0 and "--seed" in result.stdout
+
+
+@pytest.mark.parametrize("args, message", [
+    (["evaluate", "{model}", "{rec}", "{link}"], "its frames would count twice"),
+    (["calibrate", "{model}", "{rec}", "{rec}", "--out", "{tmp}/c.npz"],
+     "its frames would count twice"),
+    (["train", "{rec}", "{link}", "--out", "{tmp}/m.npz"], "its frames would count twice"),
+    (["table", "--train", "{rec}", "--test", "{link}", "--out", "{tmp}/t.md"],
+     "a model would be scored on a recording it was trained on"),
+])
+def test_a_recording_given_twice_is_refused(tmp_path, args, message):
+    """`evaluate M X X` scored every frame twice; `table --train X --test X` scored a model on
+    its own training recording."""
+    from exohil.harness.paths import FIXTURES_DIR
+
+    rec = FIXTURES_DIR / "paper_protocol_heldout.mcap"
+    link = tmp_path / "link.mcap"
+    link.symlink_to(rec)
+    values = {"model": str(FIXTURES_DIR / "models" / "ennet.npz"), "rec": str(rec),
+              "link": str(link), "tmp": str(tmp_path)}
+    result = CliRunner().invoke(main, [a.format(**values) for a in args])
+    assert result.exit_code == 2, result.output
+    assert "are the same file: " + message in result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.mcap"]
