@@ -436,6 +436,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
             device_lost = None
             if opened.source.device_timed_out:
                 device_lost = opened.source.last_error or "the device stopped sending"
+            last_error = opened.source.last_error
             emulator = opened.emulator
             fault_log = None if emulator is None else emulator.fault_log
             seq0 = None if emulator is None else emulator.seq0
@@ -452,7 +453,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         hint = _nothing_decoded_hint(run.link.crc_errors, run.link.decode_errors,
                                      len(est.sensor_names))
         problem = (config.device.path_problem() if isinstance(config.device, SerialDevice)
-                   else None) or device_lost
+                   else None) or device_lost or last_error
         why = f": {problem}" if problem else ""
         raise SessionError(f"no frame arrived from the {config.device.describe()}{hint}{why}")
     truth = None if reference is None else truth_at(reference, est, run.device_time_s)

@@ -339,3 +339,16 @@ def test_two_outputs_naming_one_file_are_refused_before_any_work(tmp_path):
                                        str(tmp_path / "a.mcap"), "--json",
                                        str(tmp_path / "." / "a.mcap")])
     assert result.exit_code == 2 and "name the same file" in result.output
+
+
+def test_a_refused_connection_is_named(tmp_path):
+    """`run socket://127.0.0.1:PORT` with nothing listening said only "no frame arrived"."""
+    import socket
+
+    with socket.socket() as sock:  # a port nothing listens on once it is closed
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    result = CliRunner().invoke(main, ["run", f"socket://127.0.0.1:{port}", "--duration", "1"])
+    assert result.exit_code == 1, result.output
+    assert "no frame arrived from the serial device" in result.output
+    assert "Connection refused" in result.output
