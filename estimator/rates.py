@@ -5,6 +5,8 @@ from __future__ import annotations
 
 #: Relative difference of sensor rates beyond which a model's window would span another time.
 RATE_TOLERANCE = 0.01
+#: What to do about it: calibration keeps the base model's rate and refuses another.
+RATE_REMEDY = "train a model at this rate (calibration cannot change a model's rate)"
 
 
 def same_rate(rate_hz: float, model_rate_hz: float) -> bool:

@@ -7,7 +7,7 @@ import click
 import numpy as np
 
 from exohil.estimator.defaults import CALIBRATION_JITTERS
-from exohil.estimator.rates import rate_mismatch
+from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
 from exohil.harness.cli_types import (
     Count,
     Finite,
@@ -76,7 +76,7 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     base, data = _model_and_recordings(checkpoint, recordings)
     other_rate = rate_mismatch(data.rate_hz, base.sensor_rate_hz)
     if other_rate:
-        raise click.ClickException(other_rate)
+        raise click.ClickException(f"{other_rate}; {RATE_REMEDY}")
     blocks = [b for b in data.blocks(base.offset_frames) if len(b)]
     seconds = sum(len(b) for b in blocks) / base.sensor_rate_hz
     if MIN_CALIBRATION_SECONDS <= seconds < ADVISED_CALIBRATION_SECONDS:

@@ -12,7 +12,7 @@ import click
 
 from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
 from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
-from exohil.estimator.rates import rate_mismatch
+from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
 from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
 from exohil.harness.cli_types import (
@@ -267,7 +267,7 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         raise click.ClickException(str(exc)) from None
     other_rate = rate_mismatch(data.rate_hz, est.sensor_rate_hz)
     if other_rate:
-        click.echo(f"warning: {other_rate}; train or calibrate at this rate", err=True)
+        click.echo(f"warning: {other_rate}; {RATE_REMEDY}", err=True)
     coverage = block_coverage(est, blocks)
     result["checkpoint"] = str(checkpoint)
     result["model"] = est.kind

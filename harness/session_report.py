@@ -27,7 +27,7 @@ import math
 import time
 from typing import Any
 
-from exohil.estimator.rates import rate_mismatch
+from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
 from exohil.formats.measurement import Measurement
 from exohil.harness.machine import machine
 from exohil.harness.session import (
@@ -154,7 +154,7 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
     if s.get("training_coverage_warning"):
         lines.append(f"warning     {s['training_coverage_warning']}")
     if s.get("sensor_rate_warning"):
-        lines.append(f"warning     {s['sensor_rate_warning']}; train or calibrate at this rate")
+        lines.append(f"warning     {s['sensor_rate_warning']}; {RATE_REMEDY}")
     if s["values_clipped_to_wire_range"]:
         lines.append(f"warning     {s['values_clipped_to_wire_range']} sensor values were outside "
                      "the wire's 0..655.35 mm and were clipped")

@@ -166,7 +166,13 @@ def test_evaluate_warns_when_the_recording_runs_at_another_rate(files):
     result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(slow)])
     assert result.exit_code == 0, result.output
     assert result.output.startswith("warning: the recordings' sensor rate is 100 Hz, the "
-                                    "model's 250 Hz: its window would span another time")
+                                    "model's 250 Hz: its window would span another time; "
+                                    "train a model at this rate (calibration cannot change "
+                                    "a model's rate)")
+    calibrated = CliRunner().invoke(main, ["calibrate", str(files["ckpt"]), str(slow), "--out",
+                                           str(files["dir"] / "cal.npz")])
+    assert calibrated.exit_code == 1 and "calibration cannot change a model's rate" in \
+        calibrated.output
     same = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(files["good"])])
     assert same.exit_code == 0 and "sensor rate" not in same.output
 
