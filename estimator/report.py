@@ -9,12 +9,12 @@ hand-written text can live in one ``docs/results.md``.
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 
 from exohil.estimator.coverage import OUTSIDE_SHARE_PERCENT
 from exohil.estimator.workflow import ModelResult
 from exohil.formats.atomic import write_text
+from exohil.formats.errors import InputError
 
 METHOD_NAMES = {
     "ann": "ANN (memoryless MLP, Varghese 2019 baseline)",
@@ -85,14 +85,38 @@ def _deg(value: float | None) -> str:
     return "—" if value is None or not math.isfinite(value) else f"{value:.2f}"
 
 
+def _markers(name: str) -> tuple[str, str]:
+    return f"<!-- table:{name} -->", f"<!-- /table:{name} -->"
+
+
+def check_section(path: Path, name: str) -> None:
+    """Refuse (:class:`InputError`) a ``path`` whose markers of section ``name`` do not make
+    one section: :func:`write_section` would replace text outside it. Absent file: fine."""
+    if not path.exists():
+        return
+    start, end = _markers(name)
+    old = path.read_text(encoding="utf-8")
+    opened, closed = old.count(start), old.count(end)
+    if (opened, closed) in ((0, 0), (1, 1)) and (opened == 0 or old.index(start) <
+                                                 old.index(end)):
+        return
+    raise InputError(f"{path}: the markers of section {name!r} do not make one section "
+                     f"({opened} × '{start}', {closed} × '{end}', in that order or not); "
+                     "mend them by hand or choose another --section, so that no text of "
+                     "yours is replaced")
+
+
 def write_section(path: Path, name: str, text: str) -> None:
-    """Put ``text`` between the section markers of ``name`` in ``path`` (created if absent)."""
-    start, end = f"<!-- table:{name} -->", f"<!-- /table:{name} -->"
+    """Put ``text`` between the section markers of ``name`` in ``path`` (created if absent);
+    every other byte of the file stays. Markers that do not pair up are refused
+    (:func:`check_section`)."""
+    check_section(path, name)
+    start, end = _markers(name)
     block = f"{start}\n{text}{end}"
     old = path.read_text(encoding="utf-8") if path.exists() else ""
-    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.DOTALL)
-    if pattern.search(old):
-        new = pattern.sub(lambda _m: block, old)
+    if start in old:
+        head, _, rest = old.partition(start)
+        new = head + block + rest.partition(end)[2]
     else:
         new = (old.rstrip("\n") + "\n\n" if old else "") + block + "\n"
     write_text(path, new)

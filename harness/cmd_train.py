@@ -336,11 +336,13 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
     A section is replaced whole, heading included: give its --title again.
     """
     from exohil.estimator.checkpoint import save_checkpoint
-    from exohil.estimator.report import comparison_markdown, write_section
+    from exohil.estimator.report import check_section, comparison_markdown, write_section
     from exohil.estimator.training import progress_printer
 
     refuse_overwriting_inputs([("--out", out), ("--json", json_out)],
                               [*train_paths, *test_paths])
+    if out:  # before the training, not after it
+        check_section(out, section)
     refuse_repeated_inputs([*(("--train", p) for p in train_paths),
                             *(("--test", p) for p in test_paths)])
     kinds = [k.strip() for k in models.split(",")]

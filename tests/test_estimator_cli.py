@@ -110,6 +110,30 @@ def test_table_writes_a_markdown_section(files):
     assert "| Classical" in text and "| ANN" in text
 
 
+def test_table_refuses_a_file_whose_section_markers_do_not_pair_up(files):
+    """A stray opening marker: the first run appended a second section, the second replaced
+    everything from the stray marker to the new end, the text in between with it."""
+    md = files["dir"] / "stray.md"
+    before = "# R\n\n<!-- table:s1 -->\nold\n\n## After\n\nkeep me after\n"
+    md.write_text(before)
+    args = ["table", "--train", str(files["good"]), "--models", "classical", "--out", str(md),
+            "--section", "s1"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1, result.output
+    assert "the markers of section 's1' do not make one section" in result.output
+    assert "| Classical" not in result.output  # refused before the training
+    assert md.read_text() == before
+    md.write_text("<!-- /table:s1 -->\nmine\n<!-- table:s1 -->\n")  # out of order
+    assert CliRunner().invoke(main, args).exit_code == 1
+    md.write_text("a\n<!-- table:s1 -->\nOLD TABLE\n<!-- /table:s1 -->\n"
+                  "keep <!-- /table:s1x --> b\n")
+    result = CliRunner().invoke(main, args)  # one section: replaced, the rest kept
+    assert result.exit_code == 0, result.output
+    text = md.read_text()
+    assert text.startswith("a\n<!-- table:s1 -->\n") and "OLD TABLE" not in text
+    assert text.endswith("<!-- /table:s1 -->\nkeep <!-- /table:s1x --> b\n")
+
+
 def test_table_tells_test_frames_outside_the_training_readings(files):
     """Across recordings, a test suit whose readings lie 40 mm off the training suit's: the
     table says so in its column, in a note under it and in a warning line; the training
