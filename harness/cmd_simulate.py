@@ -117,7 +117,25 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
         click.echo(f"simulating {trajectory.duration_s:.1f} s of {trajectory.source} on suit "
                    f"profile '{profile.name}'", err=True)
         recording = simulate(trajectory, profile, seed, effects=profile.effects.without(*without))
+    if recording.sensor_units == "mm":
+        _warn_beyond_the_wire(recording)
     _write(out_path, recording)
+
+
+def _warn_beyond_the_wire(recording: Recording) -> None:
+    """A warning line naming each sensor with readings outside the wire's 0..655.35 mm: the
+    emulator (and so demo, run and conform) clips them; evaluate, train and calibrate do not."""
+    from exohil.formats.wire import MAX_VALUE_MM
+
+    values = recording.sensors.values
+    outside = ((values < 0) | (values > MAX_VALUE_MM)).mean(axis=0) if len(values) else []
+    shares = [f"{name} {100 * share:.1f} %" for name, share in
+              zip(recording.sensor_names, outside, strict=True) if share > 0]
+    if shares:
+        click.echo(f"warning: readings outside the wire's 0..{MAX_VALUE_MM:g} mm on "
+                   f"{', '.join(shares)} of the frames: the emulator (demo, run, conform) "
+                   "clips them there, as a pot at the end of its travel would; evaluate, "
+                   "train and calibrate read them unclipped", err=True)
 
 
 def _calibrated(suit: CalibratedSuit, protocol: str, seed: int,

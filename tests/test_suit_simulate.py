@@ -255,6 +255,12 @@ def test_simulate_command_writes_a_calibration_recording(tmp_path, profile_args)
     np.testing.assert_array_equal(rec.sensors.seq, expected.sensors.seq)
     np.testing.assert_allclose(rec.sensors.values, expected.sensors.values, atol=1e-4)
     np.testing.assert_allclose(mocap.angles, expected.mocap["shoulder"].angles, atol=1e-4)
+    # donning-b's SF runs past the wire's 655.35 mm: the emulator would clip it, so say so
+    beyond = (rec.sensors.values > 655.35).mean(axis=0)
+    warned = "warning: readings outside the wire's 0..655.35 mm on " in result.output
+    assert warned == bool(profile_args) == (beyond[1] > 0.3)
+    if warned:
+        assert f"SF {100 * beyond[1]:.1f} %" in result.output
 
 
 @pytest.mark.parametrize(("args", "message"), [
