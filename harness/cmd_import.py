@@ -248,6 +248,7 @@ def import_mot(input_file: Path, out: Path, license_note: str | None) -> None:
     /mocap/shoulder with plane_elv → elv_angle, shoulder_elv → shoulder_elv,
     axial_rot → shoulder_rot (degrees), and no sensors. Example:
 
+    \b
         exohil import mot ABD01.mot --out abd01.mcap --license "CC BY 4.0, rmr-solver"
     """
     from exohil.formats.errors import RecordingError
