@@ -19,29 +19,39 @@ MOT_TO_SHOULDER = {
     "shoulder_elv": "shoulder_elv",
     "axial_rot": "shoulder_rot",
 }
-SINGLE_SAMPLE_RATE_HZ = 100.0
 
 
 def shoulder_recording_from_mot(mot: MotData, metadata: dict[str, str]) -> Recording:
     """A recording whose only stream is ``/mocap/shoulder`` from the ``.mot`` coordinates.
 
     Times are the file's ``time`` column (seconds); the nominal mocap rate is the file's mean
-    rate rounded to 1e-3 Hz (``SINGLE_SAMPLE_RATE_HZ`` for a one-row file).
-    Raises RecordingError when a needed coordinate is missing.
+    rate rounded to 1e-3 Hz. Raises RecordingError, naming the row and column, when a needed
+    coordinate is missing or not a finite number, a time is negative (a recording's times
+    start at 0 or later) or there are fewer than two rows.
     """
     missing = [name for name in MOT_TO_SHOULDER if name not in mot.columns]
     if missing:
         raise RecordingError(f".mot data lacks shoulder coordinate(s) {missing}")
     angles = np.column_stack([mot.columns[name] for name in MOT_TO_SHOULDER])
+    bad = ~np.isfinite(angles)
+    if bad.any():
+        row, col = (int(i) for i in np.argwhere(bad)[0])
+        raise RecordingError(f"data row {row + 1}, column {list(MOT_TO_SHOULDER)[col]}: "
+                             f"{angles[row, col]} is not a finite number")
+    if len(mot.time) and mot.time[0] < 0:
+        raise RecordingError(f"data row 1: time {mot.time[0]:g} s; a recording's times start "
+                             "at 0 or later")
+    rate = mot.rate_hz
+    if not np.isfinite(rate):
+        raise RecordingError(f"{len(mot.time)} data row(s): a motion needs at least two")
     if not mot.in_degrees:
         angles = np.degrees(angles)
-    rate = mot.rate_hz
     return Recording(
         sensor_names=(),
         sensors=SensorStream(
             seq=np.empty(0, dtype=np.int64), t=np.empty(0), values=np.empty((0, 0))
         ),
         mocap={"shoulder": AngleStream(mot.time.copy(), tuple(MOT_TO_SHOULDER.values()), angles)},
-        mocap_rate_hz=round(rate, 3) if np.isfinite(rate) else SINGLE_SAMPLE_RATE_HZ,
+        mocap_rate_hz=round(rate, 3),
         metadata=metadata,
     )

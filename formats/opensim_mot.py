@@ -51,7 +51,8 @@ def read_mot(path: str | Path) -> MotData:
 
     Raises:
         MotError: missing ``endheader``, no ``time`` column, ragged or non-numeric rows,
-            decreasing time, or a row count that contradicts the header's ``nRows``.
+            fewer than two rows, times that do not increase, or a row count that contradicts
+            the header's ``nRows``.
     """
     path = Path(path)
     try:
@@ -75,9 +76,16 @@ def read_mot(path: str | Path) -> MotData:
     expected_rows = header.get("nRows")
     if expected_rows is not None and expected_rows.isdigit() and int(expected_rows) != len(data):
         raise MotError(f"{path}: header says nRows={expected_rows} but {len(data)} rows follow")
+    if len(data) < 2:
+        raise MotError(f"{path}: {len(data)} data row(s); a motion needs at least two, "
+                       "to give its times a rate")
     time = data[:, 0]
-    if np.any(np.diff(time) < 0):
-        raise MotError(f"{path}: time column decreases")
+    steps = np.diff(time)
+    if np.any(steps <= 0):
+        row = int(np.argmax(steps <= 0)) + 2  # the later of the two rows, counted from 1
+        how = "repeats" if steps[row - 2] == 0 else "goes back from"
+        raise MotError(f"{path}: data row {row}: time {time[row - 1]:g} s {how} the row "
+                       f"before's {time[row - 2]:g} s; times must increase")
     in_degrees = header.get("inDegrees", "yes").strip().lower() != "no"
     columns = {label: data[:, k].copy() for k, label in enumerate(labels) if k > 0}
     return MotData(time=time.copy(), columns=columns, in_degrees=in_degrees, header=header)

@@ -43,7 +43,14 @@ def test_synthetic_file_parses_columns_and_flags(tmp_path: Path) -> None:
         (HEADER.format(n=1, deg="yes") + "time\ta\n0\t1\t2\n", "row 1 has 3 values"),
         (HEADER.format(n=1, deg="yes") + "time\ta\n0\tx\n", "data row 1"),
         (HEADER.format(n=3, deg="yes") + "time\ta\n0\t1\n", "nRows=3"),
-        (HEADER.format(n=2, deg="yes") + "time\ta\n1\t1\n0\t1\n", "time column decreases"),
+        (HEADER.format(n=2, deg="yes") + "time\ta\n1\t1\n0\t1\n",
+         "data row 2: time 0 s goes back from the row before's 1 s"),
+        # a repeated time: accepted by import mot, then refused by simulate naming no file
+        (HEADER.format(n=3, deg="yes") + "time\ta\n0\t1\n0.01\t1\n0.01\t2\n",
+         "data row 3: time 0.01 s repeats the row before's 0.01 s"),
+        # no data row, one row: import mot wrote "0 samples at 100 Hz", simulate crashed
+        (HEADER.format(n=0, deg="yes") + "time\ta\n", "0 data row"),
+        (HEADER.format(n=1, deg="yes") + "time\ta\n0\t1\n", "1 data row"),
     ],
 )
 def test_malformed_files_raise_named_error(tmp_path: Path, text: str, problem: str) -> None:

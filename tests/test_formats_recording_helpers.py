@@ -123,6 +123,20 @@ def test_mot_in_radians_becomes_degrees_and_has_no_sensors() -> None:
     assert rec.mocap_rate_hz == 100.0
 
 
+@pytest.mark.parametrize(("time", "plane", "problem"), [
+    ([0.0, 0.01, 0.02], [0.0, np.nan, 1.0], "data row 2, column plane_elv: nan is not a finite"),
+    ([-1.0, 0.0, 1.0], [0.0, 0.0, 1.0], "data row 1: time -1 s; a recording's times start at 0"),
+])
+def test_a_mot_row_the_format_cannot_hold_is_named(time, plane, problem) -> None:
+    """These were refused by the writer, naming the output file and no row."""
+    mot = MotData(time=np.array(time), columns={"plane_elv": np.array(plane),
+                                                "shoulder_elv": np.zeros(3),
+                                                "axial_rot": np.zeros(3)},
+                  in_degrees=True, header={})
+    with pytest.raises(RecordingError, match=problem):
+        shoulder_recording_from_mot(mot, {})
+
+
 def _small_file(tmp_path: Path, compression: str) -> bytes:
     t = np.arange(200) * 0.004
     rec = Recording(
