@@ -210,7 +210,7 @@ def test_import_mot_makes_a_mocap_only_recording(tmp_path: Path) -> None:
 
 def test_import_mot_without_shoulder_coordinates_is_one_line(tmp_path: Path) -> None:
     source = tmp_path / "knee.mot"
-    source.write_text("endheader\ntime\tknee_angle\n0\t1\n")
+    source.write_text("endheader\ntime\tknee_angle\n0\t1\n0.01\t2\n")
     line = assert_one_line_error(run("import", "mot", source, "--out", tmp_path / "k.mcap"))
     assert "plane_elv" in line and "knee.mot" in line
 
