@@ -58,16 +58,20 @@ def time_window(
 def motion_direction(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """(N,) +1 rising, −1 falling, 0 still (|dθ/dt| < STILL_DEG_PER_S) after smoothing.
 
-    ``t`` seconds, ``angle`` degrees; NaN angles give 0.
+    ``t`` seconds, ``angle`` degrees; NaN angles give 0. Frames that share a time (the
+    format allows it) take the median step between the others.
     """
-    if t.size < 3:
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if t.size < 3 or not steps.size:
         return np.zeros(t.shape, dtype=np.int8)
-    step = float(np.median(np.diff(t)))
-    width = max(1, int(round(SMOOTH_S / step))) if step > 0 else 1
+    step = float(np.median(steps))
+    width = max(1, int(round(SMOOTH_S / step)))
     kernel = np.ones(width) / width
     padded = np.pad(np.nan_to_num(angle), (width // 2, width - 1 - width // 2), mode="edge")
     smooth = np.convolve(padded, kernel, mode="valid")
-    speed = np.gradient(smooth, t)
+    dt = np.gradient(t)
+    speed = np.gradient(smooth) / np.where(dt > 0, dt, step)
     direction = np.where(speed > STILL_DEG_PER_S, 1, np.where(speed < -STILL_DEG_PER_S, -1, 0))
     direction[~np.isfinite(angle)] = 0
     return direction.astype(np.int8)

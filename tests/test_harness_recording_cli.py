@@ -324,3 +324,21 @@ def test_record_cut_splits_a_recording_in_two(tmp_path: Path) -> None:
         run("record", "cut", src, "--stop", "1", "--out", src))
     assert "no sensor frames from 20 s" in assert_one_line_error(
         run("record", "cut", src, "--start", "20", "--out", tmp_path / "x.mcap"))
+
+
+def test_motion_direction_reads_frames_that_share_a_time() -> None:
+    """Every second frame stamped with the time of the one before (the format allows it):
+    the plot warned of a division by zero and coloured a moving arm 'still'."""
+    import warnings
+
+    from exohil.harness.recording_plots import motion_direction
+
+    t = np.arange(2000) * 0.004
+    angle = 80 + 60 * np.sin(2 * np.pi * t / 4)
+    shared = t.copy()
+    shared[1::2] = shared[0::2]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plain, doubled = motion_direction(t, angle), motion_direction(shared, angle)
+    assert set(np.unique(plain)) == {-1, 0, 1}
+    assert np.mean(doubled == plain) > 0.98
