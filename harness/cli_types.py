@@ -118,8 +118,8 @@ class Name(click.ParamType):
 
 
 class NameList(Name):
-    """Comma-separated names, each a :class:`Name` (and one of ``choices`` when given); the
-    text is returned unchanged."""
+    """Comma-separated names, each a :class:`Name` (and one of ``choices`` when given), none
+    twice; the text is returned unchanged."""
 
     name = "names"
 
@@ -131,6 +131,9 @@ class NameList(Name):
         names = [part.strip() for part in text.split(",")]
         if not all(names):
             self.fail(f"{text!r} has an empty name (allowed: NAME[,NAME...])", param, ctx)
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            self.fail(f"{text!r} names {', '.join(map(repr, twice))} twice", param, ctx)
         if self.choices is not None:
             unknown = [n for n in names if n not in self.choices]
             if unknown:

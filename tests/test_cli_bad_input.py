@@ -491,3 +491,16 @@ def test_a_recording_given_twice_is_refused(tmp_path, args, message):
     assert result.exit_code == 2, result.output
     assert "are the same file: " + message in result.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link.mcap"]
+
+
+@pytest.mark.parametrize("args", [
+    ["train", "--angles", "elv_angle,elv_angle", "x.mcap", "--out", "m.npz"],
+    ["table", "--models", "ann,classical,ann", "--train", "x.mcap"],
+    ["import", "csv", "x.csv", "--rate", "100", "--sensor-names", "a, a", "--out", "y.mcap"],
+])
+def test_a_name_given_twice_in_a_list_is_refused(args):
+    """`train --angles elv_angle,elv_angle` trained a model of two equal outputs whose metrics
+    showed one."""
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2, result.output
+    assert "twice" in result.output and "Traceback" not in result.output
