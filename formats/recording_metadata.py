@@ -48,6 +48,9 @@ def metadata_record(
 ) -> dict[str, str]:
     """The record a writer stores: ``extra`` (str → str, reserved keys dropped) plus the
     reserved keys computed from the arguments (segments are added at close)."""
+    if not sensor_units or "," in sensor_units or sensor_units != sensor_units.strip():
+        raise RecordingError(f"{path}: invalid sensor unit {sensor_units!r} (empty, comma, "
+                             "spaces): `units` is '<sensor unit>,deg'")
     record: dict[str, str] = {}
     for key, value in (extra or {}).items():
         if not isinstance(key, str) or not isinstance(value, str):

@@ -114,7 +114,7 @@ class RecordingWriter:
         self.sensor_decimals = decimals if sensor_decimals is None else sensor_decimals
         self.sensor_names = tuple(sensor_names)
         self.mocap_joints = {joint: tuple(names) for joint, names in (mocap_joints or {}).items()}
-        _check_names(self.name, self.sensor_names, self.mocap_joints)
+        check_names(self.name, self.sensor_names, self.mocap_joints)
         if compression not in _COMPRESSION:
             raise ValueError(f"compression must be one of {sorted(_COMPRESSION)}")
         self._metadata = metadata_record(
@@ -279,19 +279,22 @@ class RecordingWriter:
             self._file.close()
 
 
-def _check_names(
-    path: Path, sensor_names: tuple[str, ...], joints: Mapping[str, tuple[str, ...]]
+def check_names(
+    where: str | Path, sensor_names: tuple[str, ...], joints: Mapping[str, tuple[str, ...]]
 ) -> None:
+    """Refuse (:class:`RecordingError`, prefixed by ``where``: the file written, or where the
+    names came from) names the format cannot hold: empty, with a comma or outer spaces, or
+    twice; a joint with a slash; an angle named ``t``."""
     for name in sensor_names:
         if not name or "," in name or name != name.strip():
-            raise RecordingError(f"{path}: invalid sensor name {name!r} (empty, comma, spaces)")
+            raise RecordingError(f"{where}: invalid sensor name {name!r} (empty, comma, spaces)")
     if len(set(sensor_names)) != len(sensor_names):
-        raise RecordingError(f"{path}: duplicate sensor names {sensor_names}")
+        raise RecordingError(f"{where}: duplicate sensor names {sensor_names}")
     for joint, names in joints.items():
         if not joint or "/" in joint:
-            raise RecordingError(f"{path}: invalid joint name {joint!r}")
+            raise RecordingError(f"{where}: invalid joint name {joint!r}")
         if "t" in names or len(set(names)) != len(names):
-            raise RecordingError(f"{path}: invalid angle names {names} for joint {joint}")
+            raise RecordingError(f"{where}: invalid angle names {names} for joint {joint}")
 
 
 def write_recording(

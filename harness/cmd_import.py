@@ -180,7 +180,7 @@ def import_csv(
         recording_from_table,
     )
     from exohil.formats.errors import RecordingError
-    from exohil.formats.recording_writer import write_recording
+    from exohil.formats.recording_writer import check_names, write_recording
 
     refuse_overwriting_inputs([("--out", out)], [input_file])
 
@@ -192,6 +192,9 @@ def import_csv(
         raise click.BadParameter("give a positive --rate (Hz) or a --preset", param_hint="--rate")
     if not sensor_cols:
         raise click.BadParameter("give --sensor-cols or a --preset", param_hint="--sensor-cols")
+    if sensor_units is not None and "," in sensor_units:
+        raise click.BadParameter(f"{sensor_units!r}: a unit without commas (the format's "
+                                 "`units` is '<sensor unit>,deg')", param_hint="--sensor-units")
     try:
         sensor_idx = parse_columns(sensor_cols)
         angle_idx = parse_columns(angle_cols) if angle_cols else []
@@ -206,15 +209,23 @@ def import_csv(
     except TableError as exc:
         raise click.ClickException(str(exc)) from exc
     header = table.header or []
-    names_s = _names(sensor_names) or (chosen.sensor_names if chosen else None)
+    # a preset's names go with its columns: columns of the user's own take the header's
+    preset_s = chosen is not None and sensor_cols == chosen.sensor_cols
+    preset_a = chosen is not None and angle_cols == chosen.angle_cols
+    names_s = _names(sensor_names) or (chosen.sensor_names if preset_s and chosen else None)
     names_s = names_s or tuple(header[: len(sensor_idx)]) or tuple(f"c{c}" for c in sensor_idx)
-    names_a = _names(angle_names) or (chosen.angle_names if chosen else None)
+    names_a = _names(angle_names) or (chosen.angle_names if preset_a and chosen else None)
     names_a = names_a or tuple(header[len(sensor_idx) :]) or tuple(f"angle{c}" for c in angle_idx)
     if len(names_s) != len(sensor_idx) or len(names_a) != len(angle_idx):
         raise click.BadParameter(
             f"{len(names_s)} sensor / {len(names_a)} angle names for "
             f"{len(sensor_idx)} / {len(angle_idx)} columns"
         )
+    joint = joint or (chosen.joint if chosen else "joint")
+    try:  # names from the header are the input's fault: say so before writing
+        check_names(f"{input_file}: column names", names_s, {joint: names_a})
+    except RecordingError as exc:
+        raise click.ClickException(str(exc)) from exc
     metadata = _provenance(input_file, license_note or (chosen.license if chosen else None))
     metadata["generator"] = "exohil import csv"
     rec = recording_from_table(
@@ -222,7 +233,7 @@ def import_csv(
         rate_hz=rate,
         sensor_names=names_s,
         angle_names=names_a,
-        joint=joint or (chosen.joint if chosen else "joint"),
+        joint=joint,
         sensor_units=sensor_units or (chosen.sensor_units if chosen else "mm"),
         metadata=metadata,
     )

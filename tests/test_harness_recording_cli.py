@@ -342,3 +342,36 @@ def test_motion_direction_reads_frames_that_share_a_time() -> None:
         plain, doubled = motion_direction(t, angle), motion_direction(shared, angle)
     assert set(np.unique(plain)) == {-1, 0, 1}
     assert np.mean(doubled == plain) > 0.98
+
+
+@pytest.mark.parametrize(("header", "args", "problem"), [
+    ("knee,,s2", [], "in.csv: column names: invalid sensor name ''"),
+    ("knee,s,s", [], "in.csv: column names: duplicate sensor names ('s', 's')"),
+    ("knee,a,b", ["--sensor-units", "dR/R0,x"], "'dR/R0,x': a unit without commas"),
+])
+def test_import_csv_names_the_input_for_what_its_header_holds(tmp_path: Path, header: str,
+                                                               args: list[str],
+                                                               problem: str) -> None:
+    """A bad header name was reported against the output file; a unit with a comma was
+    written into `units` ('<sensor unit>,<angle unit>'), which then reads two ways."""
+    source = tmp_path / "in.csv"
+    source.write_text(header + "\n1,2,3\n4,5,6\n")
+    line = assert_one_line_error(run("import", "csv", source, "--rate", "100", "--sensor-cols",
+                                     "1-2", "--angle-cols", "0", *args, "--out",
+                                     tmp_path / "out.mcap"))
+    assert problem in line
+    assert not (tmp_path / "out.mcap").exists()
+
+
+def test_import_csv_columns_of_ones_own_take_the_header_not_the_presets_names(
+        tmp_path: Path) -> None:
+    """`--preset graphene-knee --sensor-cols 1-2` failed with '5 sensor / 1 angle names for
+    2 / 1 columns': the preset's five names went with the user's two columns."""
+    source = tmp_path / "knee.csv"
+    source.write_text("".join(f"{k},{k % 3},{k % 5},{k % 7},1,2\n" for k in range(10)))
+    out = tmp_path / "knee.mcap"
+    result = run("import", "csv", source, "--preset", "graphene-knee", "--sensor-cols", "1-2",
+                 "--out", out)
+    assert result.exit_code == 0, result.output
+    rec = read_recording(out)
+    assert rec.sensor_names == ("c1", "c2") and rec.mocap["knee"].names == ("knee_flexion",)
