@@ -168,17 +168,25 @@ def recover_command(file: Path, out: Path) -> None:
     except RecordingError as exc:
         raise click.ClickException(str(exc)) from exc
     rec = scan.recording
+    mocap = sum(len(stream) for stream in rec.mocap.values())
+    if scan.lost_bytes is not None and not len(rec.sensors) and not mocap:
+        raise click.ClickException(
+            f"nothing to recover from {file}: no complete record of a frame or a sample "
+            f"before the {scan.lost_bytes} bytes where it ends (a recording written whole "
+            "keeps its records in chunks of up to 1 MiB, and one cut inside its first chunk "
+            "loses them all; the durable NAME.partial of run/demo --record closes a chunk "
+            "every second)")
     write_recording(out, rec)
     span = (f", {rec.sensors.t[0]:.3f} → {rec.sensors.t[-1]:.3f} s" if len(rec.sensors)
             else "")
-    mocap = sum(len(stream) for stream in rec.mocap.values())
     click.echo(f"recovered {len(rec.sensors)} sensor frames{span} and {mocap} mocap samples "
                f"into {out}")
     if scan.lost_bytes is None:
         click.echo("lost: nothing (the file was complete)")
     else:
         click.echo(f"lost: the {scan.lost_bytes} bytes after the last complete record (the file "
-                   "was never closed; a durable recording loses at most its last second)")
+                   "was never closed; the durable recording of run/demo --record loses at most "
+                   "its last second, a file written whole the rest of its chunk)")
 
 
 @record_group.command("cut")

@@ -75,6 +75,20 @@ def test_recover_writes_a_clean_copy_and_says_what_was_lost(tmp_path):
     assert refused.exit_code != 0 and "refusing to overwrite it" in refused.output
 
 
+def test_recover_refuses_a_file_cut_before_its_first_record(tmp_path):
+    """The first 200 kB of a recording written whole (one 1 MiB chunk): recover wrote an empty
+    recording, said "recovered 0 sensor frames" and exited 0."""
+    from exohil.harness.paths import FIXTURES_DIR
+
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes((FIXTURES_DIR / "paper_protocol_heldout.mcap").read_bytes()[:200_000])
+    out = tmp_path / "clean.mcap"
+    result = CliRunner().invoke(main, ["record", "recover", str(cut), "--out", str(out)])
+    assert result.exit_code == 1, result.output
+    assert f"nothing to recover from {cut}: no complete record" in result.output
+    assert not out.exists()
+
+
 @pytest.mark.slow
 def test_sigkill_during_a_recorded_demo_leaves_a_readable_recording(tmp_path):
     target = tmp_path / "k.mcap"
