@@ -76,12 +76,19 @@ def test_recover_writes_a_clean_copy_and_says_what_was_lost(tmp_path):
 
 
 def test_recover_refuses_a_file_cut_before_its_first_record(tmp_path):
-    """The first 200 kB of a recording written whole (one 1 MiB chunk): recover wrote an empty
-    recording, said "recovered 0 sensor frames" and exited 0."""
-    from exohil.harness.paths import FIXTURES_DIR
+    """The first third of a recording written whole (one chunk of 20 s): recover wrote an
+    empty recording, said "recovered 0 sensor frames" and exited 0."""
+    from exohil.formats.recording import Recording, SensorStream
+    from exohil.formats.recording_writer import write_recording
 
-    cut = tmp_path / "cut.mcap"
-    cut.write_bytes((FIXTURES_DIR / "paper_protocol_heldout.mcap").read_bytes()[:200_000])
+    n = 5000
+    whole, cut = tmp_path / "whole.mcap", tmp_path / "cut.mcap"
+    values = 500 + 50 * np.random.default_rng(0).random((n, 4))
+    write_recording(whole, Recording(("F", "SF", "SR", "R"),
+                                     SensorStream(np.arange(n), np.arange(n) / 250, values)))
+    data = whole.read_bytes()
+    cut.write_bytes(data[: len(data) // 3])
+    assert scan_recording(cut).lost_bytes  # the metadata is read, no frame is
     out = tmp_path / "clean.mcap"
     result = CliRunner().invoke(main, ["record", "recover", str(cut), "--out", str(out)])
     assert result.exit_code == 1, result.output
