@@ -14,6 +14,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from exohil.estimator.coverage import CoverageTally, block_coverage
 from exohil.estimator.dataset import (
     Block,
@@ -120,8 +122,19 @@ def setting_warnings(data: LoadedData, split: Split, cfg: TrainConfig,
     """One line for each setting the data leave without meaning, for ``cfg`` trained on
     ``split`` of ``data``: a window longer than every training piece (its windows are then
     mostly the piece's first frame, repeated by the edge padding), and an offset taken over
-    more frames than a recording holds (its rest value never settles)."""
+    more frames than a recording holds (its rest value never settles); and a sensor that
+    reads one value over every training frame (a model learns nothing from it)."""
     lines: list[str] = []
+    pieces = [b.x for b in split.train if len(b)]
+    if pieces:
+        x = np.concatenate(pieces)
+        still = [name for name, lo, hi in zip(data.sensor_names, x.min(axis=0), x.max(axis=0),
+                                              strict=True) if lo == hi]
+        if still:
+            which = ("every sensor reads" if len(still) == len(data.sensor_names) else
+                     f"{', '.join(still)} read{'s' if len(still) == 1 else ''}")
+            lines.append(f"{which} one value over every training frame: the model learns "
+                         "nothing from it (a stuck or unplugged channel?)")
     span = ((cfg.window or 1) - 1) * (cfg.dilation or 1) + 1
     longest = max((len(b) for b in split.train), default=0)
     if not cfg.stateful and longest and span > longest:

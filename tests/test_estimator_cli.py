@@ -72,6 +72,25 @@ def test_a_file_that_is_not_a_recording(files):
                                               str(files["dir"] / "x.npz")]))
 
 
+def test_a_sensor_that_never_changes_is_warned_of(files):
+    """Training on a stuck channel (or on nothing but stuck channels) said nothing."""
+    from dataclasses import replace
+
+    from exohil.formats.recording_reader import read_recording
+
+    rec = read_recording(files["good"])
+    for stuck, said in (([1], "SF reads one value over every training frame"),
+                        ([0, 1, 2, 3], "every sensor reads one value over every training")):
+        values = rec.sensors.values.copy()
+        values[:, stuck] = 550.0
+        path = files["dir"] / "stuck.mcap"
+        write_recording(path, replace(rec, sensors=replace(rec.sensors, values=values)))
+        result = CliRunner().invoke(main, ["train", "--model", "classical", str(path), "--out",
+                                           str(files["dir"] / "stuck.npz")])
+        assert result.exit_code == 0, result.output
+        assert f"warning: {said}" in result.output
+
+
 def test_settings_the_data_cannot_fill_are_warned_of(files):
     out = files["dir"] / "wide.npz"
     plain = CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
