@@ -278,6 +278,8 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         click.echo(f"warning: {warning}", err=True)
     click.echo(_accuracy_line(result["accuracy"]))
     scope = "frames kept by --min" if limits else "all frames"
+    if test_fraction > 0:
+        scope += f" of the last {100 * test_fraction:g} % of each block"
     for stat in ("rmse", "mae", "max"):
         click.echo(f"{stat:>4} ({scope}): "
                    + ", ".join(f"{a} {v:.2f}°" for a, v in result[stat].items()))
