@@ -20,6 +20,7 @@ nothing). A wall-clock time budget can stop two runs at different epochs; pass `
 from __future__ import annotations
 
 import copy
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -205,6 +206,7 @@ def _fit_network(
         net.train()
         return total / (len(va) * va.table.y.shape[1])
 
+    name = f"{cfg.kind}-stateful" if est.config.stateful else cfg.kind  # as --model names it
     start = time.monotonic()
     best, best_state, best_epoch, epoch, last_print = float("inf"), None, 0, 0, 0.0
     train_loss = float("nan")
@@ -222,7 +224,7 @@ def _fit_network(
             elapsed = time.monotonic() - start
             if progress and elapsed - last_print > 0.5:
                 last_print = elapsed
-                progress(_status(cfg.kind, epoch, total / count, best, elapsed, cfg.time_budget_s))
+                progress(_status(name, epoch, total / count, best, elapsed, cfg.time_budget_s))
             if elapsed > cfg.time_budget_s:
                 break
         train_loss = total / max(count, 1)
@@ -239,7 +241,7 @@ def _fit_network(
         net.load_state_dict(best_state)
     net.eval()
     if progress:
-        progress(_status(cfg.kind, epoch, train_loss, best, time.monotonic() - start,
+        progress(_status(name, epoch, train_loss, best, time.monotonic() - start,
                          cfg.time_budget_s) + f" — stopped: {stop}")
     return {"epochs": epoch, "best_epoch": best_epoch, "best_val_mse": best,
             "stopped_by": stop, "final_train_mse": train_loss}
@@ -327,7 +329,8 @@ def _stream_batches(est: TrainedEstimator, tr: NormalisedFrames, cfg: TrainConfi
 def _status(kind: str, epoch: int, loss: float, best: float, elapsed: float,
             budget: float) -> str:
     left = max(0.0, budget - elapsed)
-    return (f"[{kind}] epoch {epoch} train mse {loss:.4f} best val {best:.4f} "
+    shown = f"{best:.4f}" if math.isfinite(best) else "—"  # no epoch validated yet
+    return (f"[{kind}] epoch {epoch} train mse {loss:.4f} best val {shown} "
             f"elapsed {elapsed:5.0f}s, ≤{left:4.0f}s left")
 
 
