@@ -334,9 +334,11 @@ def _status(kind: str, epoch: int, loss: float, best: float, elapsed: float,
             f"elapsed {elapsed:5.0f}s, ≤{left:4.0f}s left")
 
 
-def progress_printer(stream=sys.stderr, log_every_s: float = 10.0) -> Callable[[str], None]:
+def progress_printer(stream=None, log_every_s: float = 10.0) -> Callable[[str], None]:
     """A ``progress`` callback: redraws one status line on a terminal; on a pipe or log file
-    writes a line at most every ``log_every_s`` seconds (and every final "stopped" line)."""
+    writes a line at most every ``log_every_s`` seconds (and every final "stopped" line).
+    ``stream`` defaults to the ``sys.stderr`` of the call (not of the import)."""
+    stream = sys.stderr if stream is None else stream
     last = [-float("inf")]
 
     def show(line: str) -> None:
