@@ -84,7 +84,9 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
         if recorded.get(name) != digest:
             problems.append(f"{name}: rebuilt sha256 {digest[:12]}… != {SUMS_FILE} "
                             f"{(recorded.get(name) or 'missing')[:12]}")
-        elif not committed.is_file() or sha256_file(committed) != digest:
+        elif not committed.is_file():
+            problems.append(f"{name}: missing from {fixtures_dir}")
+        elif sha256_file(committed) != digest:
             problems.append(f"{name}: committed file differs from its rebuild")
     for line in problems:
         click.echo(f"MISMATCH {line}", err=True)

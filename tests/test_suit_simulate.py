@@ -296,7 +296,9 @@ def test_fixture_check_fails_on_a_wrong_hash(tmp_path):
         (tmp_path / name).write_bytes((fixtures / name).read_bytes())
     result = CliRunner().invoke(main, ["fixtures", "build", "--check", "--dir", str(tmp_path)])
     assert result.exit_code == 1
-    assert "MISMATCH" in result.output
+    assert "MISMATCH paper_protocol.mcap: rebuilt sha256" in result.output  # its "a" changed
+    # one not copied: was "committed file differs from its rebuild"
+    assert f"MISMATCH paper_protocol_heldout.mcap: missing from {tmp_path}" in result.output
 
 
 def test_a_build_that_fails_half_way_leaves_the_fixtures_folder_as_it_was(tmp_path):
