@@ -25,7 +25,7 @@ from exohil.estimator.dataset import (
     recording_blocks,
     resolve_target,
 )
-from exohil.estimator.defaults import DEFAULT_HIDDEN, MODEL_NAMES, default_window
+from exohil.estimator.defaults import DEFAULT_HIDDEN, DEFAULT_WINDOW, MODEL_NAMES, default_window
 from exohil.estimator.evaluation import evaluate
 from exohil.estimator.rates import same_rate
 from exohil.estimator.splits import Split, cut_at_segments, time_block_split, trial_split
@@ -45,10 +45,13 @@ def model_config(name: str, base: TrainConfig, rate_hz: float,
         raise ValueError(f"unknown model {name!r}; choose from {MODEL_NAMES}")
     window, dilation = default_window(name, rate_hz)
     stateful = name == "ennet-stateful"
+    # the stateful ENNet carries state, the ANN reads the newest frame, the classical model
+    # its operators' state: none of them reads a window, whatever base asks
+    unwindowed = stateful or name not in DEFAULT_WINDOW
     return replace(base, kind=name.removesuffix("-stateful"), stateful=stateful,
                    hidden=hidden or DEFAULT_HIDDEN[name],
-                   window=1 if stateful else base.window or window,
-                   dilation=1 if stateful else base.dilation or dilation)
+                   window=1 if unwindowed else base.window or window,
+                   dilation=1 if unwindowed else base.dilation or dilation)
 
 
 @dataclass

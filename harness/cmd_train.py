@@ -156,6 +156,15 @@ def _workflow():
     return workflow
 
 
+#: The training options a model kind does not read, and why.
+IGNORED_BY: dict[str, tuple[tuple[str, ...], str]] = {
+    "ann": (("hidden", "window", "dilation"),
+            "it reads the newest frame through its dense layers"),
+    "classical": (("hidden", "window", "dilation", "dense", "max_epochs", "patience"),
+                  "it is one ridge fit of hysteresis, creep and static terms, no network"),
+}
+
+
 def _base_config(seed, time_budget, max_epochs, patience, window, dilation, dense, output):
     from exohil.estimator.training import TrainConfig
 
@@ -202,6 +211,13 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
         raise click.UsageError("a stateful ENNet has no window: drop --window/--dilation")
     refuse_overwriting_inputs([("--out", out)], recordings)
     refuse_repeated_inputs(("RECORDING", r) for r in recordings)
+    unused_names, why = IGNORED_BY.get(kind, ((), ""))
+    source = click.get_current_context().get_parameter_source
+    unused = [f"--{name.replace('_', '-')}" for name in unused_names
+              if source(name) is click.core.ParameterSource.COMMANDLINE]
+    if unused:
+        click.echo(f"warning: {', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no "
+                   f"effect on the {kind} model: {why}", err=True)
     wf = _workflow()
     data = _load(recordings, joint, angles)
     split = wf.make_split(data, offset_frames, test_fraction=test_fraction,

@@ -91,12 +91,25 @@ def test_a_sensor_that_never_changes_is_warned_of(files):
         assert f"warning: {said}" in result.output
 
 
+@pytest.mark.parametrize(("kind", "args", "said"), [
+    ("classical", ["--window", "5", "--hidden", "3"], "--hidden, --window have no effect on "
+                                                      "the classical model"),
+    ("ann", ["--hidden", "3", "--max-epochs", "1"], "--hidden has no effect on the ann model"),
+])
+def test_options_a_model_does_not_read_are_warned_of(files, kind, args, said):
+    """`train --model classical --window 5 --hidden 3` was accepted without a word."""
+    result = CliRunner().invoke(main, ["train", "--model", kind, *args, str(files["good"]),
+                                       "--out", str(files["dir"] / "unread.npz")])
+    assert result.exit_code == 0, result.output
+    assert f"warning: {said}" in result.output
+
+
 def test_settings_the_data_cannot_fill_are_warned_of(files):
     out = files["dir"] / "wide.npz"
     plain = CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
                                       str(out), "--max-epochs", "1"])
     assert plain.exit_code == 0 and "warning" not in plain.output, plain.output
-    result = CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
+    result = CliRunner().invoke(main, ["train", "--model", "ennet", str(files["good"]), "--out",
                                        str(out), "--max-epochs", "1", "--window", "200",
                                        "--dilation", "10", "--offset-frames", "5000"])
     assert result.exit_code == 0, result.output
@@ -110,9 +123,12 @@ def test_settings_the_data_cannot_fill_are_warned_of(files):
                                       "--window", "200", "--dilation", "10"])
     assert table.exit_code == 0, table.output
     spans = [line for line in table.output.splitlines() if "window spans" in line]
-    assert len(spans) == 1 and spans[0].startswith("warning: classical, ann, ennet:"), table.output
-    ann = next(line for line in table.output.splitlines() if line.startswith("| ann |"))
-    assert "| 200×10 |" in ann  # the window it was trained with, not "—"
+    # the ANN reads the newest frame and the classical model no window: only the ENNet's
+    # window is longer than the data (both were named, and the ANN's row said 200×10)
+    assert len(spans) == 1 and spans[0].startswith("warning: ennet:"), table.output
+    rows = {line.split("|")[1].strip(): line for line in table.output.splitlines()
+            if line.startswith("| ")}
+    assert "| 200×10 |" in rows["ennet"] and "| 200×10 |" not in rows["ann"]
 
 
 def test_table_writes_a_markdown_section(files):
