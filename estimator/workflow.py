@@ -136,8 +136,9 @@ def setting_warnings(data: LoadedData, split: Split, cfg: TrainConfig,
         if still:
             which = ("every sensor reads" if len(still) == len(data.sensor_names) else
                      f"{', '.join(still)} read{'s' if len(still) == 1 else ''}")
+            them = "it" if len(still) == 1 else "them"
             lines.append(f"{which} one value over every training frame: the model learns "
-                         "nothing from it (a stuck or unplugged channel?)")
+                         f"nothing from {them} (a stuck or unplugged channel?)")
     span = ((cfg.window or 1) - 1) * (cfg.dilation or 1) + 1
     longest = max((len(b) for b in split.train), default=0)
     if not cfg.stateful and longest and span > longest:
