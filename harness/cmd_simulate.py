@@ -128,7 +128,9 @@ def _warn_beyond_the_wire(recording: Recording) -> None:
     from exohil.formats.wire import MAX_VALUE_MM
 
     values = recording.sensors.values
-    outside = ((values < 0) | (values > MAX_VALUE_MM)).mean(axis=0) if len(values) else []
+    if not len(values):
+        return
+    outside = ((values < 0) | (values > MAX_VALUE_MM)).mean(axis=0)
     shares = [f"{name} {100 * share:.1f} %" for name, share in
               zip(recording.sensor_names, outside, strict=True) if share > 0]
     if shares:
