@@ -89,7 +89,11 @@ class StreamingEstimator:
         self._runner.reset()
 
     def push(self, values: np.ndarray) -> np.ndarray:
-        """One sensor frame (S,) in recording units → (A,) angle estimates, degrees."""
+        """One sensor frame (S,) of finite values in recording units → (A,) angle estimates,
+        degrees. ValueError for another shape or a value that is not finite (the backends
+        would otherwise broadcast a scalar, or disagree on a NaN)."""
+        if getattr(values, "shape", None) != self._x.shape or not np.isfinite(values).all():
+            self._refuse(values)
         x = values
         if self._offset_frames:
             x = self._x
@@ -108,6 +112,19 @@ class StreamingEstimator:
         self._angles[th] = math.degrees(math.atan2(dx, dz))
         self._angles[ph] = math.degrees(math.atan2(math.hypot(dx, dz), -dy))
         return self._angles
+
+
+    def _refuse(self, values: object) -> None:
+        """Raise ValueError saying why :meth:`push` cannot take ``values``: its shape, a value
+        that is not finite, or not a NumPy array (the fast path reads arrays only)."""
+        x = np.asarray(values, dtype=float)
+        if x.shape != self._x.shape:
+            raise ValueError(f"a sensor frame of shape {self._x.shape} ({self._x.size} sensors: "
+                             f"{', '.join(self.est.sensor_names)}) is needed, got {x.shape}")
+        if not np.isfinite(x).all():
+            raise ValueError(f"a sensor frame holds a value that is not finite: {x.tolist()}")
+        raise ValueError(f"a sensor frame must be a NumPy array of shape {self._x.shape}, got "
+                         f"{type(values).__name__}")
 
 
 class _Normaliser:

@@ -157,3 +157,24 @@ def test_numpy_engine_matches_torch_on_the_committed_models(name):
     out = {b: np.array([e.push(v).copy() for v in raw]) for b, e in engines.items()}
     tolerance = FIXTURE_TOLERANCE[name]
     assert_same_estimates(est, out["numpy"], out["torch"], tolerance, tolerance, tolerance)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "onnxruntime"])
+def test_a_frame_the_model_cannot_read_is_refused_by_every_backend(backend):
+    """push(5.0) was broadcast to every sensor; a NaN frame gave NaN on numpy and finite
+    angles on onnxruntime; five values for four sensors failed inside NumPy."""
+    from exohil.estimator.checkpoint import load_checkpoint
+    from exohil.estimator.inference import onnxruntime_available
+    from exohil.harness.paths import MODELS_DIR
+
+    if backend == "onnxruntime" and not onnxruntime_available():
+        pytest.skip("onnxruntime is not installed")
+    engine = StreamingEstimator(load_checkpoint(MODELS_DIR / "ennet.npz"), backend=backend)
+    for bad, said in ((5.0, "shape (4,) (4 sensors: F, SF, SR, R) is needed, got ()"),
+                      (np.zeros(5), "is needed, got (5,)"),
+                      (np.array([np.nan, 560, 580, 490.0]), "a value that is not finite"),
+                      (np.array([np.inf, 560, 580, 490.0]), "a value that is not finite"),
+                      ([560.0, 560, 580, 490], "must be a NumPy array of shape (4,), got list")):
+        with pytest.raises(ValueError, match=said.replace("(", r"\(").replace(")", r"\)")):
+            engine.push(bad)
+    assert np.isfinite(engine.push(np.array([560.0, 560, 580, 490]))).all()
