@@ -78,6 +78,13 @@ class Limit:
         check_unit(self.unit)
         if self.low is None and self.high is None:
             raise ValueError("a limit needs a low or a high bound")
+        for bound in (self.low, self.high):
+            if bound is not None and math.isnan(bound):
+                raise ValueError("a limit's bound must be a number, not NaN (it would pass "
+                                 "every value)")
+        if self.low is not None and self.high is not None and self.low > self.high:
+            raise ValueError(f"a limit's low bound {self.low:g} is above its high bound "
+                             f"{self.high:g}: no value could pass")
 
     def holds(self, value: float, unit: str) -> bool:
         """Whether ``value`` (in ``unit``) is within the limit; NaN never is."""
@@ -179,16 +186,25 @@ DISTRIBUTION_STATS = ("p50", "p99", "max")
 def distribution(name: str, samples: Iterable[float] | np.ndarray, unit: str,
                  limits: Mapping[str, Limit] | None = None, note: str = "") -> list[Measurement]:
     """p50, p99 and max of ``samples`` (in ``unit``) as measurements ``name.p50`` etc.;
-    ``limits`` maps a statistic name to its limit. Empty samples give skipped measurements."""
+    ``limits`` maps a statistic name (p50, p99, max) to its limit. NaN samples are left out
+    (no sample); an infinite one counts, so a limit on the maximum fails on it. Empty samples
+    give skipped measurements."""
     a = np.asarray(list(samples) if not isinstance(samples, np.ndarray) else samples,
                    dtype=np.float64)
-    a = a[np.isfinite(a)]
+    a = a[~np.isnan(a)]
     limits = limits or {}
+    unknown = sorted(set(limits) - set(DISTRIBUTION_STATS))
+    if unknown:
+        raise ValueError(f"limits on {', '.join(unknown)}: a distribution has "
+                         f"{', '.join(DISTRIBUTION_STATS)}")
     if a.size == 0:
         return [Measurement.skipped(f"{name}.{stat}", unit, "no samples", limits.get(stat))
                 for stat in DISTRIBUTION_STATS]
-    values = {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)),
-              "max": float(a.max())}
+    if np.isfinite(a).all():
+        p50, p99 = np.percentile(a, 50), np.percentile(a, 99)
+    else:  # an infinite sample has no interpolation with its neighbour: take the one above
+        p50, p99 = np.percentile(a, 50, method="higher"), np.percentile(a, 99, method="higher")
+    values = {"p50": float(p50), "p99": float(p99), "max": float(a.max())}
     counted = f"{a.size} samples" + (f"; {note}" if note else "")
     return [Measurement.judge(f"{name}.{stat}", values[stat], unit, limits.get(stat), counted)
             for stat in DISTRIBUTION_STATS]

@@ -76,3 +76,31 @@ def test_distribution_reports_p50_p99_max_with_limits():
     empty = distribution("x", np.array([]), "ms")
     assert all(m.verdict is Verdict.SKIP for m in empty)
 
+
+
+def test_an_infinite_sample_fails_a_limit_on_the_maximum():
+    """distribution() left out inf samples, so a frame that never finished passed `max < 4 ms`
+    on the others' maximum."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no NaN from interpolating with inf
+        p50, p99, top = distribution("lat", [1.0, 2.0, math.inf, math.nan], "ms",
+                                     {"max": Limit(high=4, unit="ms")})
+    assert top.value == math.inf and top.verdict is Verdict.FAIL
+    assert p50.value == 2.0 and p99.value == math.inf and "3 samples" in top.note
+    finite = distribution("lat", [1.0, 2.0, 3.0], "ms")  # figures of finite samples unchanged
+    assert [m.value for m in finite] == [2.0, pytest.approx(2.98), 3.0]
+
+
+@pytest.mark.parametrize(("low", "high", "said"), [
+    (math.nan, None, "not NaN"), (None, math.nan, "not NaN"), (5.0, 1.0, "no value could pass"),
+])
+def test_a_limit_no_value_can_meet_or_every_value_meets_is_refused(low, high, said):
+    with pytest.raises(ValueError, match=said):
+        Limit(low, high, "ms")
+
+
+def test_a_limit_on_a_statistic_a_distribution_lacks_is_refused():
+    with pytest.raises(ValueError, match="limits on p95: a distribution has p50, p99, max"):
+        distribution("lat", [1.0], "ms", {"p95": Limit(high=1, unit="ms")})
