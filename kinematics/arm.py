@@ -25,9 +25,17 @@ def humerus_angles(direction) -> tuple[np.ndarray, np.ndarray]:
     in the thorax frame (any non-zero length; they are not normalised first).
 
     φ ∈ [0, π] is the angle from straight down; θ = atan2(x, z) ∈ (−π, π]. With the arm
-    hanging or straight up (x = z = 0) θ is undefined and 0 is returned.
+    hanging or straight up (x = z = 0) θ is undefined and 0 is returned. A zero vector points
+    nowhere: both angles are NaN. ValueError unless the last axis holds 3 components.
     """
     d = np.asarray(direction, dtype=float)
+    if d.ndim == 0 or d.shape[-1] != 3:
+        raise ValueError(f"humerus directions need 3 components (x, y, z) on the last axis, "
+                         f"got shape {d.shape}")
     x, y, z = d[..., 0], d[..., 1], d[..., 2]
     horizontal = np.hypot(x, z)
-    return np.arctan2(x, z), np.arctan2(horizontal, -y)
+    theta = np.where(horizontal == 0, 0.0, np.arctan2(x, z))  # signed zeros chose ±π
+    theta = np.where(theta == -np.pi, np.pi, theta)
+    phi = np.where((horizontal == 0) & (y == 0), np.nan, np.arctan2(horizontal, -y))
+    theta = np.where(np.isnan(phi), np.nan, theta)
+    return theta[()], phi[()]  # numpy scalars for one vector, as arctan2 gives

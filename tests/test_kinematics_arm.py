@@ -1,6 +1,7 @@
 """humerus_direction and its inverse humerus_angles (property tests, singular poses included)."""
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -29,3 +30,16 @@ def test_hanging_and_raised_arm_have_plane_zero():
     th, ph = humerus_angles(np.array([[0.0, -1.0, 0.0], [0.0, 2.0, 0.0]]))
     assert th.tolist() == [0.0, 0.0]
     assert np.allclose(ph, [0.0, np.pi])
+
+
+def test_humerus_angles_at_the_poles_and_for_no_direction_keep_their_docstring():
+    """With the arm hanging θ came back as ±π (the signed zeros of x and z chose), −π lay
+    outside (−π, π], a zero vector read as 'straight up' and a 4-vector was accepted."""
+    for theta in (2.5, -2.5, 0.0):
+        assert tuple(map(float, humerus_angles(humerus_direction(theta, 0.0)))) == (0.0, 0.0)
+    th, ph = humerus_angles([[-0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+    np.testing.assert_array_equal(th, [np.pi, np.pi])  # behind: +π, never −π
+    assert np.isnan(humerus_angles([0.0, 0.0, 0.0])).all()
+    for bad in ([0.0, 1.0, 0.0, 0.0], [0.0, 1.0], 3.0):
+        with pytest.raises(ValueError, match="need 3 components"):
+            humerus_angles(bad)
