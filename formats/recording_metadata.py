@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -48,6 +49,10 @@ def metadata_record(
 ) -> dict[str, str]:
     """The record a writer stores: ``extra`` (str → str, reserved keys dropped) plus the
     reserved keys computed from the arguments (segments are added at close)."""
+    for what, rate in (("sensor_rate_hz", sensor_rate_hz), ("mocap_rate_hz", mocap_rate_hz)):
+        if isinstance(rate, bool) or not isinstance(rate, numbers.Real) \
+                or not math.isfinite(rate) or not rate > 0:
+            raise RecordingError(f"{path}: {what} must be a positive number of Hz, got {rate!r}")
     if not sensor_units or "," in sensor_units or sensor_units != sensor_units.strip():
         raise RecordingError(f"{path}: invalid sensor unit {sensor_units!r} (empty, comma, "
                              "spaces): `units` is '<sensor unit>,deg'")

@@ -15,6 +15,7 @@ at most that last second; the reader then reads the file and notes that it was c
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Mapping, Sequence
@@ -122,6 +123,7 @@ class RecordingWriter:
         )
         self._segments: list[Segment] = []
         self._last_seq: int | None = None
+        self._last_t = 0.0
         self._counts: dict[int, int] = {}
         self._file: BinaryIO = open(self.path, "wb")  # closed in close()
         self._writer = Writer(
@@ -178,7 +180,12 @@ class RecordingWriter:
         self._check_open()
         if not self.sensor_names:
             raise RecordingError(f"{self.name}: this recording was opened without sensors")
-        seq = np.asarray(seq, dtype=np.int64).reshape(-1)
+        given = np.asarray(seq)
+        if given.ndim != 1 or (given.size and not np.issubdtype(given.dtype, np.integer)
+                               and not np.all(np.mod(given, 1) == 0)):
+            raise RecordingError(f"{self.name}: sensor seq must be a 1-D array of whole "
+                                 f"numbers, got shape {given.shape} {given.dtype}")
+        seq = given.astype(np.int64)
         values = np.asarray(values, dtype=np.float64)
         if values.ndim != 2 or values.shape != (seq.size, len(self.sensor_names)):
             raise RecordingError(
@@ -189,12 +196,16 @@ class RecordingWriter:
         if np.any(np.diff(previous) <= 0):
             raise RecordingError(f"{self.name}: sensor seq must increase strictly")
         times = rounded_times(self.name, t, seq.size)
+        if times and (times[0] < self._last_t or np.any(np.diff(times) < 0)):
+            raise RecordingError(f"{self.name}: sensor times must not go back (the reader "
+                                 "refuses such a file)")
         rows = rounded_values(self.name, values, self.sensor_decimals, "sensor values")
         for frame_seq, frame_t, frame_values in zip(seq.tolist(), times, rows, strict=True):
             payload = {"seq": frame_seq, "t": frame_t, "values": frame_values}
             self._emit(self._sensor_channel, frame_t, payload)
         if seq.size:
             self._last_seq = int(seq[-1])
+            self._last_t = times[-1]
 
     def add_mocap_sample(self, joint: str, t: float, angles: Sequence[float]) -> None:
         """Append one mocap sample of ``joint`` at ``t`` (s); ``angles`` in degrees."""
@@ -235,12 +246,24 @@ class RecordingWriter:
         if channel not in self._counts or channel == self._sensor_channel \
                 or channel in self._mocap_channels.values():
             raise RecordingError(f"{self.name}: channel {channel} was not added by add_channel")
-        self._emit(channel, t, dict(payload))
+        self._emit(channel, rounded_times(self.name, np.asarray([t]), 1)[0], dict(payload))
 
     def add_segment(self, segment: Segment) -> None:
-        """Label a time span (seconds on the sensor clock); stored in the metadata at close."""
+        """Label a time span (seconds on the sensor clock); stored in the metadata at close.
+        RecordingError now, not at close, for a span the reader would refuse."""
         self._check_open()
-        self._segments.append(segment)
+        if not isinstance(segment, Segment) or not isinstance(segment.name, str):
+            raise RecordingError(f"{self.name}: a segment is a Segment(name, t0, t1), got "
+                                 f"{segment!r}")
+        try:
+            t0, t1 = float(segment.t0), float(segment.t1)
+        except (TypeError, ValueError):
+            raise RecordingError(f"{self.name}: segment {segment.name!r} needs numbers for "
+                                 f"t0 and t1, got {segment.t0!r}, {segment.t1!r}") from None
+        if not (math.isfinite(t0) and math.isfinite(t1) and t0 <= t1):
+            raise RecordingError(f"{self.name}: segment {segment.name!r} spans {t0} .. {t1} s: "
+                                 "finite times, t0 <= t1")
+        self._segments.append(Segment(segment.name, t0, t1))
 
     def _emit(self, channel: int, t: float, payload: dict[str, Any]) -> None:
         data = encode_message(payload)

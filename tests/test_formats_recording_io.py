@@ -4,6 +4,7 @@ foreign writers, bad files."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import jsonschema
@@ -350,3 +351,39 @@ def test_a_file_cut_short_after_its_metadata_reads_what_is_complete(tmp_path: Pa
     kept = len(cut.recording.sensors)
     assert 0 < kept < len(full.recording.sensors)
     np.testing.assert_array_equal(cut.recording.sensors.seq, full.recording.sensors.seq[:kept])
+
+
+_FOUR = ["F", "SF", "SR", "R"]
+
+
+@pytest.mark.parametrize(("act", "said"), [
+    (lambda w: w.add_sensor_frames([1, 2, 3], [0.3, 0.2, 0.1], np.zeros((3, 4))),
+     "sensor times must not go back"),
+    (lambda w: (w.add_sensor_frames([1], [0.3], np.zeros((1, 4))),
+                w.add_sensor_frames([2], [0.2], np.zeros((1, 4)))),
+     "sensor times must not go back"),
+    (lambda w: w.add_sensor_frames([1.5, 2.7], [0.1, 0.2], np.zeros((2, 4))),
+     "sensor seq must be a 1-D array of whole numbers"),
+    (lambda w: w.add_segment(Segment("a", float("nan"), 1.0)), "finite times, t0 <= t1"),
+    (lambda w: w.add_segment(("a", 0.0, 1.0)), "a segment is a Segment(name, t0, t1)"),
+    (lambda w: w.add_message(w.add_channel("/est", "x", {}), -1.0, {"a": 1}),
+     "times must be finite and >= 0 s"),
+])
+def test_the_writer_refuses_at_the_call_what_its_reader_would_refuse(tmp_path, act, said):
+    """Times going back and a NaN segment were written into files read_recording refuses; a
+    tuple for a segment failed at close, leaving the whole recording unreadable; 1.5 was
+    stored as seq 1."""
+    path = tmp_path / "r.mcap"
+    writer = RecordingWriter(path, _FOUR)
+    with pytest.raises(RecordingError, match=re.escape(said)):
+        act(writer)
+    writer.add_sensor_frames([10], [1.0], np.zeros((1, 4)))  # the writer is still usable
+    writer.close()
+    assert len(read_recording(path).sensors) >= 1
+
+
+@pytest.mark.parametrize("rate", [0.0, -1.0, float("nan"), float("inf")])
+def test_the_writer_refuses_a_rate_its_reader_would_refuse(tmp_path, rate):
+    with pytest.raises(RecordingError, match="sensor_rate_hz must be a positive number"):
+        RecordingWriter(tmp_path / "r.mcap", _FOUR, sensor_rate_hz=rate)
+    assert not (tmp_path / "r.mcap").exists()
