@@ -161,8 +161,8 @@ def load_bench(path: Path) -> BenchConfig:
         if unknown:
             raise BenchError(f"{path}: unknown key(s) {', '.join(unknown)} in [{name}]")
 
-    def rel(p: str | None) -> Path | None:
-        return None if p is None else where / p
+    def rel(table: dict[str, Any], key: str) -> Path | None:
+        return None if key not in table else where / _text(path, table, key)
 
     dev = data.get("device", {})
     device: Device | None = None
@@ -173,19 +173,38 @@ def load_bench(path: Path) -> BenchConfig:
                                 _faults(path, dev),
                                 _seed(path, dev), _flag(path, dev, "loop"))
     elif "url" in dev:
-        device = SerialDevice(str(dev["url"]), rel(dev.get("reference")))
+        device = SerialDevice(_text(path, dev, "url"), rel(dev, "reference"))
     sensors = data.get("sensors", {})
-    names = sensors.get("names")
     model = data.get("model", {})
+    backend = _text(path, model, "backend") if "backend" in model else "auto"
+    from exohil.estimator.inference import BACKENDS
+
+    if backend != "auto" and backend not in BACKENDS:
+        raise BenchError(f"{path}: [model] backend {backend!r}; choose from auto, "
+                         f"{', '.join(BACKENDS)}")
+    names = _names(path, sensors, "names", "sensors")
+    robots = _names(path, data.get("teleop", {}), "robots", "teleop")
     return BenchConfig(
         device=device,
-        model=rel(model.get("checkpoint")),
-        backend=str(model.get("backend", "auto")),
-        sensor_names=None if names is None else tuple(str(n) for n in names),
+        model=rel(model, "checkpoint"),
+        backend=backend,
+        sensor_names=names,
         rate_hz=_rate(path, sensors),
-        robots=tuple(data.get("teleop", {}).get("robots", ("simulated",))),
-        record=rel(data.get("record", {}).get("path")),
+        robots=("simulated",) if robots is None else robots,
+        record=rel(data.get("record", {}), "path"),
     )
+
+
+def _names(path: Path, table: dict[str, Any], key: str, section: str) -> tuple[str, ...] | None:
+    """A list of names (``names = ["F", "SF"]``), not one string (which reads letter by
+    letter), or None when the key is absent."""
+    value = table.get(key)
+    if value is None:
+        return None
+    if not isinstance(value, list) or not all(isinstance(v, str) and v.strip() for v in value):
+        raise BenchError(f"{path}: [{section}] {key} must be a list of names, e.g. "
+                         f"{key} = [\"...\", \"...\"], got {value!r}")
+    return tuple(value)
 
 
 def _text(path: Path, table: dict[str, Any], key: str) -> str:

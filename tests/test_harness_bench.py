@@ -54,6 +54,8 @@ def test_a_bench_file_names_device_model_sensors_robots(tmp_path):
     assert bench.model == tmp_path / "m.npz" and bench.record == tmp_path / "out.mcap"
     assert bench.sensor_names == ("F", "SF", "SR", "R") and bench.robots == ("simulated",)
     assert bench.with_overrides(model=None, backend="numpy").model == tmp_path / "m.npz"
+    path.write_text('[model]\nbackend = "auto"\n', encoding="utf-8")  # as the docs show
+    assert load_bench(path).backend == "auto"
 
 
 @pytest.mark.parametrize("text, message", [
@@ -69,6 +71,13 @@ def test_a_bench_file_names_device_model_sensors_robots(tmp_path):
     ("[device]\nemulator = 3\n", "emulator must be a non-empty string"),
     ("[sensors]\nrate_hz = nan\n", "rate_hz must be a number"),
     ("[sensors]\nrate_hz = -250\n", "rate_hz must be a number"),
+    # these were read letter by letter, or failed with a TypeError, or only at run time
+    ("[teleop]\nrobots = 'mujoco'\n", r"\[teleop\] robots must be a list of names"),
+    ("[sensors]\nnames = 'F,SF,SR,R'\n", r"\[sensors\] names must be a list of names"),
+    ("[model]\ncheckpoint = 5\n", "checkpoint must be a non-empty string"),
+    ("[device]\nurl = '/dev/x'\nreference = 5\n", "reference must be a non-empty string"),
+    ("[record]\npath = 5\n", "path must be a non-empty string"),
+    ("[model]\nbackend = 'tensorflow'\n", "backend 'tensorflow'; choose from auto, numpy"),
 ])
 def test_bad_bench_files_are_one_clear_error(tmp_path, text, message):
     path = tmp_path / "bench.toml"
