@@ -27,6 +27,7 @@ any pyserial URL (``serial.serial_for_url``: a pty path such as the emulator's, 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import stat
 import threading
@@ -147,8 +148,16 @@ class SerialFrameSource:
         realtime: bool = False,
         device_timeout_s: float | None = None,
     ) -> None:
+        if not isinstance(url, str) or not url:
+            raise ValueError(f"url must be a device path or a pyserial URL, got {url!r}")
         if device_timeout_s is not None and not device_timeout_s > 0:
             raise ValueError("device_timeout_s must be > 0 s")
+        for what, seconds in (("read_timeout_s", read_timeout_s),
+                              ("backoff_initial_s", backoff_initial_s),
+                              ("backoff_max_s", backoff_max_s)):
+            # a read without timeout would block stop(); a zero backoff would spin
+            if seconds is None or not 0 < seconds < math.inf:
+                raise ValueError(f"{what} must be a finite number of seconds > 0, got {seconds!r}")
         self.url = url
         self.device_timeout_s = device_timeout_s
         self._read_timeout_s = read_timeout_s
@@ -170,8 +179,9 @@ class SerialFrameSource:
 
     # ---- FrameSource -----------------------------------------------------------------
     def start(self) -> None:
-        if self._thread is not None:
-            raise RuntimeError("already started")
+        if self._thread is not None or self._stop.is_set():
+            raise RuntimeError(f"the source of {self.url} was started before: a source runs "
+                               "once; make a new one")
         self._last_frame_ns = time.perf_counter_ns()
         self._thread = threading.Thread(target=self._run, name=f"acquire {self.url}", daemon=True)
         self._thread.start()
@@ -261,7 +271,10 @@ class SerialFrameSource:
                 continue
             try:
                 port = self._opener(self.url, self._read_timeout_s)
-            except (serial.SerialException, OSError, ValueError) as exc:
+            except ValueError as exc:  # pyserial: a URL it cannot open, ever ('bogus://x')
+                self.last_error = str(exc)
+                return
+            except (serial.SerialException, OSError) as exc:
                 self.last_error = str(exc)
                 self._wait(backoff)
                 backoff = min(2.0 * backoff, self._backoff_max_s)

@@ -4,6 +4,7 @@ same code for every link, bounded buffer, clean shutdown in every state."""
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -196,3 +197,34 @@ def test_emulator_takes_a_recording_and_stops_between_slow_frames() -> None:
     assert emulator.finished and emulator.error is None
     assert emulator.frames_generated <= 1  # frame 0 is due at once, frame 1 never came
     np.testing.assert_allclose(emulator.wire_values_mm, 123.45)
+
+
+@pytest.mark.parametrize(("kwargs", "said"), [
+    ({"url": None}, "url must be a device path or a pyserial URL"),
+    ({"url": "loop://", "read_timeout_s": None}, "read_timeout_s must be a finite number"),
+    ({"url": "loop://", "read_timeout_s": -1.0}, "read_timeout_s must be a finite number"),
+    ({"url": "loop://", "backoff_initial_s": 0.0}, "backoff_initial_s must be a finite number"),
+])
+def test_a_source_refuses_settings_it_cannot_run_with(kwargs, said):
+    """read_timeout_s=None left the reader thread running after stop(); url=None crashed the
+    thread with a TypeError."""
+    url = kwargs.pop("url")
+    with pytest.raises(ValueError, match=said):
+        SerialFrameSource(url, **kwargs)
+
+
+def test_a_url_pyserial_can_never_open_ends_the_reader_and_a_source_runs_once():
+    """'bogus://x' was retried for ever with alive True; start() after stop() did nothing."""
+    source = SerialFrameSource("bogus://x")
+    source.start()
+    deadline = time.monotonic() + 5.0
+    while source.alive and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not source.alive and "bogus" in (source.last_error or "")
+    source.stop()
+    with pytest.raises(RuntimeError, match="a source runs once"):
+        source.start()
+    unstarted = SerialFrameSource("loop://")
+    unstarted.stop()
+    with pytest.raises(RuntimeError, match="a source runs once"):
+        unstarted.start()
