@@ -106,8 +106,14 @@ class ArduinoEmulator:
             raise ValueError(f"values must be (N>0, 1..16) mm, got shape {values.shape}")
         if not math.isfinite(rate_hz) or rate_hz <= 0:
             raise ValueError("rate_hz must be a positive number")
-        if duration_s is not None and duration_s <= 0:
-            raise ValueError("duration_s must be > 0")
+        if duration_s is not None and not 0 < duration_s < math.inf:
+            raise ValueError(f"duration_s must be a finite number of seconds > 0, got "
+                             f"{duration_s!r}")
+        bad = ~np.isfinite(values)
+        if bad.any():  # the wire has no NaN: it would go out as 0 mm
+            row, col = (int(i) for i in np.argwhere(bad)[0])
+            raise ValueError(f"values must be finite: frame {row}, sensor {col} is "
+                             f"{values[row, col]}")
         self.rate_hz = float(rate_hz)
         self.plan = faults if isinstance(faults, FaultPlan) else fault_plan(faults)
         self.seed = int(seed)
@@ -159,7 +165,11 @@ class ArduinoEmulator:
         self.stop()
 
     def start(self) -> None:
-        """Create the port and start the emulator thread; returns once ``port`` exists."""
+        """Create the port and start the emulator thread; returns once ``port`` exists.
+        RuntimeError for an emulator started or stopped before: one runs once."""
+        if self._thread.ident is not None or self._stop.is_set():
+            raise RuntimeError("this emulator was started or stopped before: an emulator "
+                               "runs once; make a new one")
         self._thread.start()
         self._ready.wait()
         if self.error is not None:

@@ -29,6 +29,7 @@ import tempfile
 import termios
 import time
 import tty
+import weakref
 from pathlib import Path
 
 LINK_NAME = "ttyEXOHIL0"
@@ -40,6 +41,8 @@ class VirtualSerialPort:
     def __init__(self, link_dir: Path | None = None) -> None:
         self._dir = Path(link_dir) if link_dir else Path(tempfile.mkdtemp(prefix="exohil-emu-"))
         self._own_dir = link_dir is None
+        if self._own_dir:  # a port never closed (never started, say) leaves no folder behind
+            weakref.finalize(self, _remove_link_dir, self._dir)
         self.path = str(self._dir / LINK_NAME)
         self._master: int | None = None
         self._slave_name = ""
@@ -168,11 +171,7 @@ class VirtualSerialPort:
         """Disconnect and remove the link directory if this port created it."""
         self.disconnect()
         if self._own_dir:
-            (self._dir / f".{LINK_NAME}.tmp").unlink(missing_ok=True)
-            try:
-                self._dir.rmdir()
-            except OSError:
-                pass
+            _remove_link_dir(self._dir)
 
     def _write_some(self, data: bytes) -> int:
         assert self._master is not None
@@ -184,3 +183,16 @@ class VirtualSerialPort:
             if exc.errno in (errno.EIO, errno.EAGAIN):
                 return 0
             raise
+
+
+def _remove_link_dir(folder: Path) -> None:
+    """Remove a link folder this module made: its links, then the folder (kept if anything
+    else is in it)."""
+    for name in (LINK_NAME, f".{LINK_NAME}.tmp"):
+        path = folder / name
+        if path.is_symlink():
+            path.unlink(missing_ok=True)
+    try:
+        folder.rmdir()
+    except OSError:
+        pass

@@ -228,3 +228,29 @@ def test_a_url_pyserial_can_never_open_ends_the_reader_and_a_source_runs_once():
     unstarted.stop()
     with pytest.raises(RuntimeError, match="a source runs once"):
         unstarted.start()
+
+
+def test_an_emulator_refuses_what_the_wire_cannot_carry_and_runs_once(tmp_path, monkeypatch):
+    """NaN went out as 0 mm (only a counter said so); duration_s=nan failed inside int();
+    an emulator never started left its /tmp folder; a second start() failed on a missing
+    pty link."""
+    import gc
+    import tempfile
+
+    with pytest.raises(ValueError, match="frame 0, sensor 0 is nan"):
+        ArduinoEmulator(np.array([[np.nan, 1.0, 2.0, 3.0]] * 10))
+    for bad in (float("nan"), float("inf"), 0.0):
+        with pytest.raises(ValueError, match="duration_s must be a finite number"):
+            ArduinoEmulator(np.ones((10, 4)), duration_s=bad, loop=True)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    never = ArduinoEmulator(np.ones((10, 4)))
+    assert list(tmp_path.iterdir())  # its link folder
+    del never
+    gc.collect()
+    assert list(tmp_path.iterdir()) == []
+    used = ArduinoEmulator(np.ones((10, 4)))
+    used.start()
+    used.stop()
+    with pytest.raises(RuntimeError, match="an emulator runs once"):
+        used.start()
+    assert list(tmp_path.iterdir()) == []
