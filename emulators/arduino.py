@@ -189,7 +189,11 @@ class ArduinoEmulator:
 
     def wait_finished(self, timeout_s: float | None = None) -> bool:
         """Block until every frame has been sent and an attached host has read them (or
-        ``drain_timeout_s`` passed); the port stays up until :meth:`stop`."""
+        ``drain_timeout_s`` passed); the port stays up until :meth:`stop`. RuntimeError for
+        an emulator never started (it would wait for ever)."""
+        if self._thread.ident is None:
+            raise RuntimeError("the emulator was never started: call start() (or use it as "
+                               "a context manager) first")
         return self._finished.wait(timeout_s)
 
     @property

@@ -352,6 +352,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     every frame regardless. ``reference``: the bench's reference recording when the caller
     has already read it (else it is read here).
     """
+    if seconds is not None and not 0 < seconds < math.inf:
+        raise SessionError(f"seconds must be a finite number > 0 (or None: until stopped), "
+                           f"got {seconds!r}")
     if config.device is None:
         raise SessionError("no device: give a target (emulator:RECORDING or a serial URL)")
     if config.model is None:

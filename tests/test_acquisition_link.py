@@ -254,3 +254,10 @@ def test_an_emulator_refuses_what_the_wire_cannot_carry_and_runs_once(tmp_path, 
     with pytest.raises(RuntimeError, match="an emulator runs once"):
         used.start()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_waiting_on_an_emulator_never_started_is_an_error_not_a_hang():
+    emulator = ArduinoEmulator(np.ones((10, 4)), autostart=False)
+    with pytest.raises(RuntimeError, match="never started"):
+        emulator.wait_finished(None)
+    emulator.stop()

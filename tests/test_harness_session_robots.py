@@ -107,3 +107,13 @@ def test_trace_rejects_bad_settings():
         RobotTraceSink(_Arm(), rate_hz=0.0)
     with pytest.raises(ValueError, match="max_samples"):
         RobotTraceSink(_Arm(), max_samples=0)
+
+
+@pytest.mark.parametrize("seconds", [float("nan"), float("inf"), 0.0, -1.0])
+def test_a_session_refuses_seconds_it_cannot_run(seconds):
+    """run_session(cfg, nan) failed with 'cannot convert float NaN to integer'."""
+    from exohil.harness.bench import BenchConfig
+    from exohil.harness.session import SessionError, run_session
+
+    with pytest.raises(SessionError, match="seconds must be a finite number > 0"):
+        run_session(BenchConfig(), seconds)
