@@ -103,8 +103,16 @@ def quat_to_matrix(q) -> np.ndarray:
 
 
 def matrix_to_quat(m) -> np.ndarray:
-    """Quaternion ``(..., 4)``, ``w >= 0``, of a rotation matrix (Shepperd's stable method)."""
+    """Quaternion ``(..., 4)``, ``w >= 0``, of a rotation matrix ``(..., 3, 3)`` (Shepperd's
+    stable method). ValueError for another shape, or a matrix that is not a rotation
+    (orthonormal with determinant +1, to 1e-6)."""
     m = np.asarray(m, dtype=float)
+    if m.ndim < 2 or m.shape[-2:] != (3, 3):
+        raise ValueError(f"rotation matrices are (..., 3, 3), got shape {m.shape}")
+    gram = np.einsum("...ji,...jk->...ik", m, m)
+    if not (np.allclose(gram, np.eye(3), atol=1e-6) and np.allclose(np.linalg.det(m), 1.0,
+                                                                     atol=1e-6)):
+        raise ValueError("not a rotation matrix: it must be orthonormal with determinant +1")
     m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
     trace = m00 + m11 + m22
     # Four candidate formulas; use the one with the largest pivot for accuracy.

@@ -75,6 +75,8 @@ def ms_to_isb(theta, phi=None, psi=None, convention: Convention = "coupled") -> 
     Accepts three broadcastable arrays or one ``(..., 3)`` array.
     """
     ms = as_angles(theta, phi, psi)
+    if not np.isfinite(ms).all():  # as ms_to_quat refuses them
+        raise ValueError("MoBL-ARMS angles must be finite")
     t, p, s = ms[..., 0], ms[..., 1], ms[..., 2]
     if convention == "coupled":
         gamma = wrap_angle(s - t)
@@ -122,7 +124,14 @@ def quat_to_isb(q, plane_hint=0.0) -> np.ndarray:
     sin_b = -np.hypot(m[..., 0, 1], m[..., 2, 1])
     beta = np.arctan2(sin_b, m[..., 1, 1])
     alpha_regular = np.arctan2(-m[..., 0, 1], -m[..., 2, 1])
-    hint = np.broadcast_to(np.asarray(plane_hint, dtype=float), beta.shape)
+    hint = np.asarray(plane_hint, dtype=float)
+    if not np.isfinite(hint).all():
+        raise ValueError(f"plane_hint must be finite radians, got {plane_hint!r}")
+    try:
+        hint = np.broadcast_to(hint, beta.shape)
+    except ValueError:
+        raise ValueError(f"plane_hint of shape {hint.shape} does not fit quaternions of "
+                         f"shape {beta.shape + (4,)}") from None
     alpha = np.where(-sin_b < SINGULAR_EPS, hint, alpha_regular)
     out = intrinsic_euler_from_first_two(m, (Y, X, Y), alpha, beta)
     return np.stack([out[..., 0], out[..., 1], wrap_angle(out[..., 2])], axis=-1)

@@ -43,3 +43,23 @@ def test_humerus_angles_at_the_poles_and_for_no_direction_keep_their_docstring()
     for bad in ([0.0, 1.0, 0.0, 0.0], [0.0, 1.0], 3.0):
         with pytest.raises(ValueError, match="need 3 components"):
             humerus_angles(bad)
+
+
+def test_conversions_refuse_what_they_cannot_convert():
+    """matrix_to_quat read a 4x4 or a matrix of ones as the identity; ms_to_isb let NaN
+    through where ms_to_quat refused it; a NaN plane_hint gave NaN ('never NaN')."""
+    from exohil.kinematics import ms_to_isb, quat_to_ms
+    from exohil.kinematics.rotations import matrix_to_quat
+
+    for bad, said in ((np.eye(4), r"\(\.\.\., 3, 3\)"), (np.ones(3), r"\(\.\.\., 3, 3\)"),
+                      (np.ones((3, 3)), "not a rotation matrix"),
+                      (np.diag([1.0, 1.0, -1.0]), "not a rotation matrix")):
+        with pytest.raises(ValueError, match=said):
+            matrix_to_quat(bad)
+    np.testing.assert_allclose(matrix_to_quat(np.eye(3)), [0, 0, 0, 1])
+    with pytest.raises(ValueError, match="must be finite"):
+        ms_to_isb(np.nan, 0.2, 0.3)
+    with pytest.raises(ValueError, match="plane_hint must be finite"):
+        quat_to_ms([0.0, 0.0, 0.0, 1.0], plane_hint=np.nan)
+    with pytest.raises(ValueError, match="does not fit"):
+        quat_to_ms(np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)), plane_hint=[0.0, 0.0])
