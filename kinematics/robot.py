@@ -80,6 +80,20 @@ class NaoArm:
         return np.any(self.clamped, axis=-1)
 
 
+def _pitch_of(hint, shape: tuple[int, ...]) -> np.ndarray:
+    """The pitch of ``hint`` (``(..., 3)`` joint angles, radians) for commands of ``shape``;
+    ValueError for another shape or a value that is not finite."""
+    h = np.asarray(hint, dtype=float)
+    if h.ndim == 0 or h.shape[-1] != 3 or not np.isfinite(h).all():
+        raise ValueError(f"hint must be finite joint angles (..., 3), radians (the previous "
+                         f"unclamped), got shape {h.shape}")
+    try:
+        return np.broadcast_to(h[..., 0], shape)
+    except ValueError:
+        raise ValueError(f"hint of shape {h.shape} does not fit commands of shape "
+                         f"{shape + (3,)}") from None
+
+
 def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
     """Thorax ← humerus quaternion ``(..., 4)`` → NAO (ShoulderPitch, ShoulderRoll, ElbowYaw).
 
@@ -111,8 +125,8 @@ def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
     direction = m[..., :, 0]
     cos_r = np.hypot(direction[..., 0], direction[..., 2])
     roll = np.arctan2(direction[..., 1], cos_r)
-    pitch_hint = np.broadcast_to(
-        0.0 if hint is None else np.asarray(hint, dtype=float)[..., 0], roll.shape)
+    pitch_hint = np.broadcast_to(0.0 if hint is None else _pitch_of(hint, roll.shape),
+                                 roll.shape)
     pitch = np.where(cos_r < SINGULAR_EPS, pitch_hint,
                      np.arctan2(-direction[..., 2], direction[..., 0]))
     exact = intrinsic_euler_from_first_two(m, (Y, Z, X), pitch, roll)

@@ -63,3 +63,10 @@ def test_conversions_refuse_what_they_cannot_convert():
         quat_to_ms([0.0, 0.0, 0.0, 1.0], plane_hint=np.nan)
     with pytest.raises(ValueError, match="does not fit"):
         quat_to_ms(np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)), plane_hint=[0.0, 0.0])
+    from exohil.kinematics import humerus_to_nao
+
+    for hint in ([0.0, 0.0], 0.5, [np.nan, 0.0, 0.0]):  # hint=0.5 was an IndexError
+        with pytest.raises(ValueError, match="hint must be finite joint angles"):
+            humerus_to_nao(np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)), hint=hint)
+    with pytest.raises(ValueError, match="does not fit"):
+        humerus_to_nao(np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)), hint=np.zeros((2, 3)))
