@@ -63,6 +63,10 @@ class MujocoNao:
                  rest: tuple[float, float, float] = (math.pi / 2, 0.0, 0.0)) -> None:
         if side not in ("right", "left"):
             raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+        if np.shape(rest) != (3,) or not np.isfinite(rest).all() \
+                or not math.isfinite(elbow_roll):
+            raise ValueError(f"rest must be 3 finite joint angles and elbow_roll finite, "
+                             f"radians; got {rest!r}, {elbow_roll!r}")
         if not (math.isfinite(rate_hz) and rate_hz >= 500.0):
             raise ValueError(f"rate_hz must be a finite number >= 500, got {rate_hz!r}")
         self.side = side
@@ -157,7 +161,8 @@ class MujocoNao:
         (s, the estimate's time) is not used for timing: the delay is measured on this
         process's clock.
 
-        Raises ValueError for a wrong shape or non-finite angles, RuntimeError after close.
+        Raises ValueError for a wrong shape (of either) or non-finite angles, RuntimeError
+        after close.
         Never blocks beyond a lock swap.
         """
         if self._closed:
@@ -168,6 +173,9 @@ class MujocoNao:
             raise ValueError(f"joints must have shape (3,) {NAO_JOINTS}, got {angles.shape}")
         if not np.all(np.isfinite(angles)):
             raise ValueError(f"joints must be finite, got {angles.tolist()}")
+        if np.shape(clamped) != (3,):
+            raise ValueError(f"clamped must have shape (3,), one flag per joint, got "
+                             f"{np.shape(clamped)}")
         target = np.clip(angles, self._limits[:, 0], self._limits[:, 1])
         with self._lock:
             if self._pending is not None:

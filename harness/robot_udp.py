@@ -80,8 +80,10 @@ class UdpJointTarget:
     def __init__(self, host: str, port: int, side: str = "right") -> None:
         if side not in ("right", "left"):
             raise ValueError(f"side must be 'right' or 'left', got {side!r}")
-        if not isinstance(port, int) or not 1 <= port <= 65535:
+        if isinstance(port, bool) or not isinstance(port, int | np.integer) \
+                or not 1 <= port <= 65535:
             raise ValueError(f"port must be an integer 1..65535, got {port!r}")
+        port = int(port)
         try:
             family, _, _, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
         except (socket.gaierror, UnicodeError) as err:

@@ -111,6 +111,10 @@ def test_bad_commands_and_arguments_raise():
         MujocoNao(rate_hz=100.0)
     with pytest.raises(ValueError, match="line"):
         nao.upper_arm_axis("wrist")
+    with pytest.raises(ValueError, match="clamped must have shape"):  # was any shape
+        nao.command(0.0, np.zeros(3), np.array([True]))
+    with pytest.raises(ValueError, match="rest must be 3 finite joint angles"):  # was NaN pose
+        MujocoNao(rest=(math.nan, 0.0, 0.0))
     nao.close()
 
 

@@ -51,6 +51,9 @@ def test_each_command_is_one_datagram_matching_the_schema(receiver, side):
 def test_bad_arguments_and_commands_are_clear_errors(receiver, monkeypatch):
     with pytest.raises(ValueError, match="port"):
         UdpJointTarget("127.0.0.1", 0)
+    with pytest.raises(ValueError, match="port must be an integer"):  # was an OSError
+        UdpJointTarget("127.0.0.1", True)
+    UdpJointTarget("127.0.0.1", np.int64(receiver.getsockname()[1])).close()  # was refused
     with monkeypatch.context() as m:  # no DNS query from a test
 
         def unresolvable(*args, **kwargs):
