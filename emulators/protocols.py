@@ -16,6 +16,7 @@ trajectory's clock, which is the motion-capture clock).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -72,10 +73,19 @@ class Trajectory:
     def __post_init__(self) -> None:
         if self.interpolation not in ("minimum_jerk", "pchip"):
             raise ValueError(f"unknown interpolation {self.interpolation!r}")
-        if self.knot_deg.shape != (self.knot_t.shape[0], 3) or self.knot_t.shape[0] < 2:
-            raise ValueError("a trajectory needs at least two knots of (θ, φ, ψ)")
+        self.knot_t = np.asarray(self.knot_t, dtype=np.float64)
+        self.knot_deg = np.asarray(self.knot_deg, dtype=np.float64)
+        if self.knot_t.ndim != 1 or self.knot_deg.shape != (self.knot_t.shape[0], 3) \
+                or self.knot_t.shape[0] < 2:
+            raise ValueError("a trajectory needs at least two knots of (θ, φ, ψ): knot_t (K,), "
+                             f"knot_deg (K, 3); got {self.knot_t.shape}, {self.knot_deg.shape}")
+        if not (np.isfinite(self.knot_t).all() and np.isfinite(self.knot_deg).all()):
+            raise ValueError("knot times and angles must be finite")
         if np.any(np.diff(self.knot_t) <= 0):
             raise ValueError("knot times must increase")
+        if not 0 < self.duration_s < math.inf:
+            raise ValueError(f"duration_s must be a finite number of seconds > 0, got "
+                             f"{self.duration_s!r}")
 
     def sample(self, t: np.ndarray) -> np.ndarray:
         """(N, 3) θ, φ, ψ in degrees at times ``t`` (s); clamps outside the knots."""

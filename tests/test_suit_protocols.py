@@ -272,3 +272,22 @@ def test_mot_trajectory_follows_the_trials():
 def test_mot_trajectory_needs_a_file():
     with pytest.raises(ValueError, match="at least one"):
         mot_trajectory([])
+
+
+@pytest.mark.parametrize(("knot_t", "knot_deg", "duration", "said"), [
+    ([0.0, 1.0], [[0.0, 10.0, 0.0], [0.0, 20.0, 0.0]], 1.0, None),  # lists are taken
+    ([0.0, np.nan], [[0.0, 10.0, 0.0], [0.0, 20.0, 0.0]], 1.0, "must be finite"),
+    ([0.0, 1.0], [[0.0, np.nan, 0.0], [0.0, 20.0, 0.0]], 1.0, "must be finite"),
+    ([0.0, 1.0], [[0.0, 10.0, 0.0], [0.0, 20.0, 0.0]], np.nan, "duration_s must be"),
+    ([[0.0, 1.0]], [[0.0, 10.0, 0.0], [0.0, 20.0, 0.0]], 1.0, "knot_t \\(K,\\)"),
+])
+def test_a_trajectory_checks_its_knots_where_it_is_made(knot_t, knot_deg, duration, said):
+    """A list for knot_t failed with an AttributeError, NaN knot times were taken, NaN angles
+    and a NaN duration failed deep inside the simulation."""
+    from exohil.emulators.protocols import Trajectory
+
+    if said is None:
+        assert Trajectory(knot_t, knot_deg, "pchip", duration).sample([0.5]).shape == (1, 3)
+        return
+    with pytest.raises(ValueError, match=said):
+        Trajectory(knot_t, knot_deg, "pchip", duration)
