@@ -30,6 +30,7 @@ from exohil.emulators.fault_spec import FaultPlan, fault_plan
 from exohil.emulators.faults import FaultRecord, FrameFaultInjector
 from exohil.emulators.pty_port import VirtualSerialPort
 from exohil.formats.recording import Recording
+from exohil.formats.recording_messages import first_non_finite
 from exohil.formats.wire import MM_PER_LSB, SEQ_MODULUS, TIME_MODULUS_US, WireFrame, encode_frame
 from exohil.realtime import SPIN_S, request_realtime, sleep_until
 
@@ -109,11 +110,10 @@ class ArduinoEmulator:
         if duration_s is not None and not 0 < duration_s < math.inf:
             raise ValueError(f"duration_s must be a finite number of seconds > 0, got "
                              f"{duration_s!r}")
-        bad = ~np.isfinite(values)
-        if bad.any():  # the wire has no NaN: it would go out as 0 mm
-            row, col = (int(i) for i in np.argwhere(bad)[0])
-            raise ValueError(f"values must be finite: frame {row}, sensor {col} is "
-                             f"{values[row, col]}")
+        bad = first_non_finite(values)
+        if bad is not None:  # the wire has no NaN: it would go out as 0 mm
+            raise ValueError(f"values must be finite: frame {bad[0]}, sensor {bad[1]} is "
+                             f"{values[bad]}")
         self.rate_hz = float(rate_hz)
         self.plan = faults if isinstance(faults, FaultPlan) else fault_plan(faults)
         self.seed = int(seed)

@@ -13,6 +13,7 @@ import numpy as np
 from exohil.formats.errors import RecordingError
 from exohil.formats.opensim_mot import MotData
 from exohil.formats.recording import AngleStream, Recording, SensorStream
+from exohil.formats.recording_messages import first_non_finite
 
 MOT_TO_SHOULDER = {
     "plane_elv": "elv_angle",
@@ -33,9 +34,9 @@ def shoulder_recording_from_mot(mot: MotData, metadata: dict[str, str]) -> Recor
     if missing:
         raise RecordingError(f".mot data lacks shoulder coordinate(s) {missing}")
     angles = np.column_stack([mot.columns[name] for name in MOT_TO_SHOULDER])
-    bad = ~np.isfinite(angles)
-    if bad.any():
-        row, col = (int(i) for i in np.argwhere(bad)[0])
+    bad = first_non_finite(angles)
+    if bad is not None:
+        row, col = bad
         raise RecordingError(f"data row {row + 1}, column {list(MOT_TO_SHOULDER)[col]}: "
                              f"{angles[row, col]} is not a finite number")
     if len(mot.time) and mot.time[0] < 0:

@@ -164,12 +164,17 @@ def _check_times(path: Path, topic: str, t: np.ndarray) -> None:
                              f"{t[k]:.6f} s after {t[k - 1]:.6f} s")
 
 
-def _check_finite(path: Path, topic: str, values: np.ndarray, what: str) -> None:
+def first_non_finite(values: np.ndarray) -> tuple[int, int] | None:
+    """(row, column) of the first value of 2-D ``values`` that is not finite, or None."""
     bad = np.argwhere(~np.isfinite(values))
-    if bad.size:
-        k, column = (int(i) for i in bad[0])
-        raise RecordingError(f"{path}: {topic} message {k} has a non-finite {what} "
-                             f"(column {column})")
+    return (int(bad[0][0]), int(bad[0][1])) if bad.size else None
+
+
+def _check_finite(path: Path, topic: str, values: np.ndarray, what: str) -> None:
+    bad = first_non_finite(values)
+    if bad is not None:
+        raise RecordingError(f"{path}: {topic} message {bad[0]} has a non-finite {what} "
+                             f"(column {bad[1]})")
 
 
 def _schema_angle_names(schema: Schema | None) -> tuple[str, ...]:
