@@ -39,6 +39,12 @@ def format_number(value: float) -> str:
 # ----------------------------------------------------------------------------- writing
 
 
+def plain_field(text: str) -> bool:
+    """Whether ``text`` can stand in a comma-separated metadata field (``sensors``,
+    ``units``): not empty, no comma, no outer spaces."""
+    return bool(text) and "," not in text and text == text.strip()
+
+
 def metadata_record(
     path: Path,
     sensor_names: tuple[str, ...],
@@ -53,7 +59,7 @@ def metadata_record(
         if isinstance(rate, bool) or not isinstance(rate, numbers.Real) \
                 or not math.isfinite(rate) or not rate > 0:
             raise RecordingError(f"{path}: {what} must be a positive number of Hz, got {rate!r}")
-    if not sensor_units or "," in sensor_units or sensor_units != sensor_units.strip():
+    if not plain_field(sensor_units):
         raise RecordingError(f"{path}: invalid sensor unit {sensor_units!r} (empty, comma, "
                              "spaces): `units` is '<sensor unit>,deg'")
     record: dict[str, str] = {}

@@ -42,6 +42,7 @@ from exohil.formats.recording_metadata import (
     DEFAULT_SENSOR_RATE_HZ,
     METADATA_NAME,
     metadata_record,
+    plain_field,
     segments_text,
 )
 from exohil.formats.schemas import (
@@ -309,7 +310,7 @@ def check_names(
     names came from) names the format cannot hold: empty, with a comma or outer spaces, or
     twice; a joint with a slash; an angle named ``t``."""
     for name in sensor_names:
-        if not name or "," in name or name != name.strip():
+        if not plain_field(name):
             raise RecordingError(f"{where}: invalid sensor name {name!r} (empty, comma, spaces)")
     if len(set(sensor_names)) != len(sensor_names):
         raise RecordingError(f"{where}: duplicate sensor names {sensor_names}")

@@ -180,6 +180,7 @@ def import_csv(
         recording_from_table,
     )
     from exohil.formats.errors import RecordingError
+    from exohil.formats.recording_metadata import plain_field
     from exohil.formats.recording_writer import check_names, write_recording
 
     refuse_overwriting_inputs([("--out", out)], [input_file])
@@ -192,9 +193,10 @@ def import_csv(
         raise click.BadParameter("give a positive --rate (Hz) or a --preset", param_hint="--rate")
     if not sensor_cols:
         raise click.BadParameter("give --sensor-cols or a --preset", param_hint="--sensor-cols")
-    if sensor_units is not None and "," in sensor_units:
-        raise click.BadParameter(f"{sensor_units!r}: a unit without commas (the format's "
-                                 "`units` is '<sensor unit>,deg')", param_hint="--sensor-units")
+    if sensor_units is not None and not plain_field(sensor_units):
+        raise click.BadParameter(f"{sensor_units!r}: a unit without commas or outer spaces "
+                                 "(the format's `units` is '<sensor unit>,deg')",
+                                 param_hint="--sensor-units")
     try:
         sensor_idx = parse_columns(sensor_cols)
         angle_idx = parse_columns(angle_cols) if angle_cols else []
