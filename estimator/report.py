@@ -92,13 +92,15 @@ def _markers(name: str) -> tuple[str, str]:
 def check_section(path: Path, name: str) -> None:
     """Refuse (:class:`InputError`) a ``path`` whose markers of section ``name`` do not make
     one section: :func:`write_section` would replace text outside it. Absent file: fine."""
-    if not path.exists():
-        return
+    if path.exists():
+        _check_markers(path, path.read_text(encoding="utf-8"), name)
+
+
+def _check_markers(path: Path, text: str, name: str) -> None:
     start, end = _markers(name)
-    old = path.read_text(encoding="utf-8")
-    opened, closed = old.count(start), old.count(end)
-    if (opened, closed) in ((0, 0), (1, 1)) and (opened == 0 or old.index(start) <
-                                                 old.index(end)):
+    opened, closed = text.count(start), text.count(end)
+    if (opened, closed) in ((0, 0), (1, 1)) and (opened == 0 or text.index(start) <
+                                                 text.index(end)):
         return
     raise InputError(f"{path}: the markers of section {name!r} do not make one section "
                      f"({opened} × '{start}', {closed} × '{end}', in that order or not); "
@@ -110,10 +112,10 @@ def write_section(path: Path, name: str, text: str) -> None:
     """Put ``text`` between the section markers of ``name`` in ``path`` (created if absent);
     every other byte of the file stays. Markers that do not pair up are refused
     (:func:`check_section`)."""
-    check_section(path, name)
+    old = path.read_text(encoding="utf-8") if path.exists() else ""
+    _check_markers(path, old, name)
     start, end = _markers(name)
     block = f"{start}\n{text}{end}"
-    old = path.read_text(encoding="utf-8") if path.exists() else ""
     if start in old:
         head, _, rest = old.partition(start)
         new = head + block + rest.partition(end)[2]
