@@ -236,9 +236,12 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
     """Read a calibrated suit profile; one :class:`ProfileError` line on any problem."""
     path = Path(path)
     data = read_toml(path, "calibrated suit profile")
-    if data.get("schema") != CALIBRATED_SCHEMA or data.get("version") != CALIBRATED_VERSION:
+    if data.get("schema") != CALIBRATED_SCHEMA:
         raise ProfileError(f"{path}: not a calibrated suit profile (schema "
                            f"{CALIBRATED_SCHEMA!r} version {CALIBRATED_VERSION})")
+    if data.get("version") != CALIBRATED_VERSION:
+        raise ProfileError(f"{path}: calibrated suit profile version {data.get('version')!r}; "
+                           f"this exohil reads version {CALIBRATED_VERSION}")
     try:
         sm, terms, sensors = data["static_map"], data["terms"], data["sensor"]
         spec = Spec(degree=int(sm["degree"]), local=bool(sm.get("local", False)),
@@ -296,8 +299,11 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
             noise=np.asarray([s["noise_sigma"] for s in sensors], dtype=np.float64))
         _check_coef_counts(suit)
         return suit
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
-        raise ProfileError(f"{path}: malformed calibrated suit profile ({exc!r})") from exc
+    except KeyError as exc:
+        raise ProfileError(f"{path}: malformed calibrated suit profile: no {exc} "
+                           "(docs/discrepancy.md, Calibrated suit profile)") from exc
+    except (TypeError, ValueError, IndexError) as exc:
+        raise ProfileError(f"{path}: malformed calibrated suit profile: {exc}") from exc
 
 
 def load_any_profile(path: str | Path) -> SuitProfile | CalibratedSuit:
