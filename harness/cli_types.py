@@ -255,7 +255,7 @@ def _cannot_write_in(folder: Path) -> str | None:
         with tempfile.TemporaryFile(dir=folder):
             pass
     except OSError as err:
-        return err.strerror or str(err)
+        return f"no new file can be created there ({err.strerror or err})"
     return None
 
 

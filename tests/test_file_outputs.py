@@ -189,4 +189,4 @@ def test_an_output_folder_that_takes_no_files_is_refused_before_any_work(args):
     # /proc exists but no new file can be created in it, even by root
     result = CliRunner().invoke(main, [a.format(bad="/proc") for a in args])
     assert result.exit_code == 2, result.output
-    assert "cannot write in folder /proc" in result.output
+    assert "cannot write in folder /proc: no new file can be created there" in result.output
