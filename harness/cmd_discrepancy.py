@@ -73,6 +73,14 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     """Find what the simulated suit gets wrong on MEASURED (sensors + motion capture), name
     the missing effect, add it, and show the held-out gap shrink, step by step.
 
+    MEASURED needs sensor frames and a /mocap/<joint> stream of the joint's angles over at
+    least 8 x 2.5 s of them. One progress line per step goes to stderr; the last line, to
+    stdout, names the effects added and the held-out gap (cross-validated RMS of simulation
+    minus measurement, in the recording's units) before and after. Where it says "what
+    remains ... none of the five effects explains", the written profile is the best fit
+    found, not a faithful model of the suit. Exit status: 0 done (whatever was named), 1
+    unusable recording or profile, 2 wrong command line (docs/discrepancy.md: every output).
+
     Time and memory grow with the recording: a four-minute trial with seven tendons takes
     30-65 s on two cores (the machine's hour moves it), a thirty-minute one ten minutes and
     10 GB. Analyse a longer

@@ -2370,3 +2370,95 @@ def test_designs_and_fold_products_are_their_plain_definitions():
             np.testing.assert_allclose(held, np.einsum("np,np->n", dense, coefs[trial.blocks]),
                                        rtol=1e-12, atol=tol)
             np.testing.assert_allclose(full, dense @ coefs[-1], rtol=1e-12, atol=tol)
+
+
+def test_the_report_says_which_rule_a_candidate_left_unnamed_fails(hysteresis_outcome):
+    """The "Not added" lines gave a count of blocks beside the number rule 2 needs, so a drift
+    that improved 7 blocks of the 7 needed read as a pass although it removed less than the
+    noise. Each line now names the rules it fails, and the section says what they ask."""
+    summary = hysteresis_outcome[1].summary
+    floor = summary["noise_floor"]
+    evidence = {"removed_rms": floor / 3, "delta_mse": (floor / 3) ** 2, "noise_floor": floor,
+                "blocks_improved": 7, "blocks_needed": 7, "delta_mse_without_best_block": 1e-4}
+    few = {**evidence, "removed_rms": 2 * floor, "delta_mse": 4 * floor**2,
+           "blocks_improved": 5, "delta_mse_without_best_block": -1e-4}
+    stops = {**evidence, "removed_rms": 2 * floor, "delta_mse": 4 * floor**2,
+             "against_smooth_curve": {"curve_gap": 0.2, "removed_rms": floor / 2,
+                                      "curve_over_stops": {"removed_rms": floor / 4}}}
+    left = [{"effect": "drift", "gap": 0.25, "evidence": evidence},
+            {"effect": "lag", "gap": 0.25, "evidence": few},
+            {"effect": "saturation", "gap": 0.25, "evidence": stops}]
+    text = markdown({**summary, "not_added": left})
+    section = text[text.index("## Not added"):].split("\n## ")[0]
+    assert "removes more than the noise (rule 1" in section  # the legend
+    drift, lag, sat = (next(line for line in section.splitlines()
+                            if line.startswith(f"- {name}:"))
+                       for name in ("drift", "lag", "saturation"))
+    assert drift.endswith("(rule 2 needs 7): it removes less than the noise (rule 1)"), drift
+    assert "it rests on its best block (rule 2); improves too few blocks (rule 2)" in lag, lag
+    assert "rule 1" not in lag
+    assert "it bends no more than a smooth curve (rule 3)" in sat, sat
+
+
+def test_a_drift_counted_on_its_refined_form_is_judged_on_that_count_in_the_report(
+        hysteresis_outcome):
+    summary = hysteresis_outcome[1].summary
+    floor = summary["noise_floor"]
+    evidence = {"removed_rms": 2 * floor, "delta_mse": 4 * floor**2, "noise_floor": floor,
+                "blocks_improved": 5, "blocks_needed": 7, "delta_mse_without_best_block": 1e-4,
+                "refined": {"heldout_gap": 0.2345, "delta_mse": 2 * floor**2,
+                            "blocks_improved": 6, "blocks_needed": 7}}
+    text = markdown({**summary, "not_added": [{"effect": "drift", "gap": 0.25,
+                                               "evidence": evidence}]})
+    line = next(line for line in text.splitlines() if line.startswith("- drift:"))
+    assert ("counted on the drift it would become (held-out gap 0.2345), it improves too few "
+            "blocks (rule 2: 6 of 7 needed)") in line, line
+
+
+def test_the_report_runs_the_profile_in_simulate_only_for_a_shoulder(hysteresis_outcome):
+    """A knee sleeve's report told the user to run its profile with ``exohil simulate``,
+    which refuses it; and a profile that leaves many noise floors was offered as the model
+    of the suit without a word."""
+    summary = hysteresis_outcome[1].summary
+    assert not summary["remainder"]["beyond_noise"]
+    shoulder = markdown(summary)
+    assert "`exohil simulate --profile suit_profile.toml --out sim.mcap` runs it" in shoulder
+    assert "not a faithful model" not in shoulder
+    knee = markdown({**summary, "joint": "knee", "angles": ["knee_flexion"],
+                     "remainder": {**summary["remainder"], "beyond_noise": True,
+                                   "gap_over_floor": 14.2}})
+    assert "exohil simulate --profile" not in knee
+    assert ("it is driven by knee_flexion (knee), not by shoulder angles, so `exohil simulate` "
+            "cannot run it; in Python, `simulate_calibrated(suit, t, angles_deg)`") in knee
+    assert ("It leaves 14.2× the noise floor (\"What remains\"): it is the best fit found, not "
+            "a faithful model of the suit.") in knee
+
+
+@pytest.mark.parametrize("applied", [True, False])
+def test_the_mocap_filter_line_claims_nothing_when_the_gaps_agree_to_the_digits_shown(applied):
+    from exohil.emulators.discrepancy.timing import filter_words
+
+    tie = filter_words({"low_pass_hz": 12.0, "applied": applied, "gap_as_sampled": 3.953715,
+                        "gap_low_passed": 3.953714}, "mm")
+    assert "held-out gap is 3.954 mm either way" in tie, tie
+    assert tie.endswith("so the readings cannot tell what it holds above 12 Hz"), tie
+    assert "do not follow" not in tie and "follow what" not in tie
+    apart = filter_words({"low_pass_hz": 12.0, "applied": applied, "gap_as_sampled": 3.95,
+                          "gap_low_passed": 3.90 if applied else 3.99}, "mm")
+    assert "either way" not in apart
+
+
+@pytest.mark.parametrize(("corrupt", "error"), [
+    (("version = 1", "version = 2"), "calibrated suit profile version 2; this exohil reads "
+                                     "version 1"),
+    (("[[sensor]]", "[[sensors]]"), "malformed calibrated suit profile: no 'sensor' "),
+])
+def test_a_profile_of_another_version_or_without_a_table_is_refused_in_words(
+        hysteresis_outcome, tmp_path, corrupt, error):
+    path = tmp_path / "p.toml"
+    write_calibrated_profile(path, calibrated_suit(hysteresis_outcome[1], "test"))
+    text = path.read_text()
+    assert corrupt[0] in text
+    path.write_text(text.replace(*corrupt))
+    with pytest.raises(ProfileError, match=re.escape(error)):
+        load_calibrated_profile(path)

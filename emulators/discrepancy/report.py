@@ -30,6 +30,7 @@ from exohil.emulators.discrepancy.timing import (
 )
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import Outcome, map_words, resampled_words
+from exohil.emulators.protocols import ANGLE_NAMES
 from exohil.formats.atomic import write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
@@ -510,14 +511,15 @@ def markdown(summary: dict) -> str:
     lines += _parameter_lines(summary)
     lines += _signature_lines(summary["steps"])
     if summary["not_added"]:
-        lines += ["", "## Not added (not beyond the noise, or not on enough blocks)", ""]
+        lines += ["", "## Not added (not beyond the noise, or not on enough blocks)", "",
+                  RULES_LEGEND, ""]
         for item in summary["not_added"]:
             ev = item["evidence"]
             curve = ev.get("against_smooth_curve")
             lines.append(f"- {item['effect']}: held-out gap {item['gap']:.4g}, removed RMS "
                          f"{ev['removed_rms']:.4g} vs noise floor {ev['noise_floor']:.4g}, "
                          f"{_blocks(ev['blocks_improved'])} improved (rule 2 needs "
-                         f"{ev['blocks_needed']})"
+                         f"{ev['blocks_needed']}): {_rules_failed(ev)}"
                          + ("" if curve is None else
                             f"; over a smooth transfer curve of each sensor (held-out gap "
                             f"{curve['curve_gap']:.4g}, the stops' {item['gap']:.4g}) the "
@@ -526,12 +528,65 @@ def markdown(summary: dict) -> str:
                             f"bend, not a stop"))
     lines += _localisation_lines(summary)
     lines += ["", "![residual against time](residual_time.png)", "",
-              "![residual against angle](residual_angle.png)", "",
-              "The updated model is `suit_profile.toml` (schema exohil-calibrated-suit-profile): "
-              "`exohil simulate --profile suit_profile.toml --out sim.mcap` runs it on any "
-              "shoulder movement; in Python, "
-              "`exohil.emulators.discrepancy.load_calibrated_profile` reads it.", ""]
+              "![residual against angle](residual_angle.png)", "", _profile_line(summary), ""]
     return "\n".join(lines)
+
+
+#: What the rules of the "Not added" lines ask (rules.py; docs/discrepancy.md).
+RULES_LEGEND = (
+    "A candidate is named when, on held-out blocks, it removes more than the noise (rule 1: "
+    "removed RMS above the noise floor), not on its best block alone and on enough blocks "
+    "that chance would rarely do it (rule 2), and, for stops, bends more than a smooth curve "
+    "of each sensor would (rule 3); judged over all sensors together and on each sensor "
+    "alone (stops: on the frames they hold).")
+
+
+def _rules_failed(evidence: dict) -> str:
+    """Which rules a candidate left unnamed fails over all sensors together
+    (:func:`~.rules.rules_on_blocks`): a drift counted on the drift it would become is judged
+    on that count, a saturation that passes both on its curve (rule 3)."""
+    counted = evidence.get("refined")
+    if counted is not None:
+        failed = [] if counted["delta_mse"] > evidence["noise_floor"] ** 2 else [
+            "removes less than the noise (rule 1)"]
+        if counted["blocks_improved"] < counted["blocks_needed"]:
+            failed.append(f"improves too few blocks (rule 2: {counted['blocks_improved']} of "
+                          f"{counted['blocks_needed']} needed)")
+        head = (f"counted on the drift it would become (held-out gap "
+                f"{counted['heldout_gap']:.4g}), it ")
+    else:
+        failed = []
+        if evidence["delta_mse"] <= evidence["noise_floor"] ** 2:
+            failed.append("removes less than the noise (rule 1)")
+        if evidence["delta_mse_without_best_block"] <= 0:
+            failed.append("rests on its best block (rule 2)")
+        if evidence["blocks_improved"] < evidence["blocks_needed"]:
+            failed.append("improves too few blocks (rule 2)")
+        if not failed and evidence.get("against_smooth_curve") is not None:
+            failed.append("bends no more than a smooth curve (rule 3)")
+        head = "it "
+    return head + ("; ".join(failed) if failed else
+                   "falls short of rule 1 or 2 by less than the figures' precision")
+
+
+def _profile_line(summary: dict) -> str:
+    """How to use ``suit_profile.toml``: in ``exohil simulate`` where the suit is driven by
+    shoulder angles, in Python for any joint; a model that leaves more than the noise is the
+    best fit found, and the line says so."""
+    line = "The updated model is `suit_profile.toml` (schema exohil-calibrated-suit-profile): "
+    if all(name in ANGLE_NAMES for name in summary["angles"]):
+        line += ("`exohil simulate --profile suit_profile.toml --out sim.mcap` runs it on any "
+                 "shoulder movement; in Python, ")
+    else:
+        line += (f"it is driven by {', '.join(summary['angles'])} ({summary['joint']}), not "
+                 "by shoulder angles, so `exohil simulate` cannot run it; in Python, "
+                 "`simulate_calibrated(suit, t, angles_deg)` simulates it and ")
+    line += "`exohil.emulators.discrepancy.load_calibrated_profile` reads it."
+    left = summary["remainder"]
+    if left["beyond_noise"]:
+        line += (f" It leaves {left['gap_over_floor']:.3g}× the noise floor (\"What remains\"): "
+                 "it is the best fit found, not a faithful model of the suit.")
+    return line
 
 
 def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str,

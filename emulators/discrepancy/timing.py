@@ -175,8 +175,15 @@ def filter_words(evidence: dict | None, units: str) -> str:
     if evidence is None:
         return "motion capture read as sampled (too slow to low-pass)"
     model = "final model" if "after_effects" in evidence else "static map"
-    gaps = (f"the {model}'s held-out gap {evidence['gap_low_passed']:.4g} against "
-            f"{evidence['gap_as_sampled']:.4g} {units} as sampled")
+    low, raw = f"{evidence['gap_low_passed']:.4g}", f"{evidence['gap_as_sampled']:.4g}"
+    if low == raw:  # no difference the figures show: no claim of what lies above the cutoff
+        hz = f"{evidence['low_pass_hz']:g} Hz"
+        how, which = ((f"low-passed at {hz}, zero phase", "smaller low-passed, beyond the "
+                       "digits shown") if evidence["applied"]
+                      else ("read as sampled", f"low-passed at {hz}, no smaller"))
+        return (f"motion capture {how}: the {model}'s held-out gap is {low} {units} either way "
+                f"({which}), so the readings cannot tell what it holds above {hz}")
+    gaps = f"the {model}'s held-out gap {low} against {raw} {units} as sampled"
     if evidence["applied"]:
         return (f"motion capture low-passed at {evidence['low_pass_hz']:g} Hz, zero phase: "
                 f"{gaps}; what it held above that the readings do not follow")
