@@ -6,10 +6,10 @@ gap shrinks by ≥ 50 % whenever an effect is named, and clean recordings get no
 ≥ 90 % of cases. The larger sweep and the confusion matrix: benchmarks/bench_discrepancy.py.
 """
 
-from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import SHARED_DIR
 
 from exohil.emulators.discrepancy.hidden import (
     MOCAP_RATE_HZ,
@@ -23,7 +23,7 @@ from exohil.emulators.discrepancy.hidden import (
 from exohil.emulators.protocols import mot_trajectory
 
 SEEDS = range(100, 102)  # disjoint from the benchmark's seeds (1000 …)
-REAL_MOT = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "shoulder-ik"
+REAL_MOT = SHARED_DIR / "realdata" / "shoulder-ik"
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ import pytest
 from click.testing import CliRunner
 from scipy.ndimage import uniform_filter1d
 from scipy.signal import lfilter, lfilter_zi
+from shared_data import SHARED_DIR
 
 from exohil.emulators.discrepancy import DiscrepancyError, model, noise_floor, prepare_trial, run
 from exohil.emulators.discrepancy.candidates import (
@@ -131,7 +132,7 @@ from exohil.harness.cmd_discrepancy import BYTES_PER_FRAME, memory_warning
 from exohil.harness.machine import available_memory_bytes
 from exohil.kinematics import ms_to_matrix
 
-FOREIGN = Path(__file__).resolve().parents[2] / "shared" / "samples" / "foreign-recording-v1.mcap"
+FOREIGN = SHARED_DIR / "samples" / "foreign-recording-v1.mcap"
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from shared_data import SHARED_DIR
 
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
@@ -21,7 +22,7 @@ from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
-FOREIGN = REPO.parent / "shared" / "samples" / "foreign-recording-v1.mcap"
+FOREIGN = SHARED_DIR / "samples" / "foreign-recording-v1.mcap"
 
 
 # ---- the independent reader (from the documentation only) ----------------------------------

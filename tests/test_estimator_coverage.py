@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from shared_data import SHARED_DIR
 
 from exohil.estimator.checkpoint import load_checkpoint
 from exohil.estimator.coverage import (
@@ -18,7 +19,7 @@ from exohil.estimator.coverage import (
 )
 from exohil.estimator.dataset import Block, initial_baseline
 from exohil.harness.cli import main
-from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR, SHARED_DIR
+from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
 
 ENNET = MODELS_DIR / "ennet.npz"
 HELDOUT = FIXTURES_DIR / "paper_protocol_heldout.mcap"

@@ -6,10 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import SHARED_DIR
 
 from exohil.formats.opensim_mot import MotError, read_mot
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+SHARED = SHARED_DIR
 REAL_MOT = SHARED / "realdata" / "shoulder-ik" / "ABD01.mot"
 
 HEADER = (

@@ -21,6 +21,7 @@ from recording_raw_mcap import (
     write_raw_recording,
     write_sensor_messages,
 )
+from shared_data import SHARED_DIR
 
 from exohil.formats.errors import RecordingError
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
@@ -30,7 +31,7 @@ from exohil.formats.recording_writer import RecordingWriter, write_recording
 from exohil.formats.schemas import joint_angles_schema, sensor_frame_schema
 from exohil.formats.sequence import sequence_gaps
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+SHARED = SHARED_DIR
 SHOULDER_ANGLES = ("elv_angle", "shoulder_elv", "shoulder_rot")
 FOREIGN = SHARED / "samples" / "foreign-recording-v1.mcap"
 

@@ -11,13 +11,14 @@ import pytest
 from click.testing import CliRunner, Result
 from mcap.writer import CompressionType
 from recording_raw_mcap import BAD_FILE_CASES, write_bad_file, write_raw_recording
+from shared_data import SHARED_DIR
 
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+SHARED = SHARED_DIR
 GRAPHENE = SHARED / "realdata" / "graphene-knee" / "S1_2_HC45.csv"
 SHOULDER_MOT = SHARED / "realdata" / "shoulder-ik" / "FLX01.mot"
 FOREIGN = SHARED / "samples" / "foreign-recording-v1.mcap"

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from shared_data import SHARED_DIR
 from urdf_fk import link_pose, load_joints
 
-from exohil.harness.paths import SHARED_DIR
 from exohil.harness.robot_model import (
     ARM_JOINTS,
     NAO_ARMS_MJCF,

@@ -1,9 +1,9 @@
 """Movement protocols: Table III frame counts, ranges, smoothness, seeding; real motion."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import SHARED_DIR
 
 from exohil.emulators.protocols import (
     CALIBRATION_DURATION_S,
@@ -20,7 +20,7 @@ from exohil.emulators.protocols import (
 )
 from exohil.kinematics import humerus_direction
 
-SHOULDER_IK = Path(__file__).resolve().parents[1].parent / "shared" / "realdata" / "shoulder-ik"
+SHOULDER_IK = SHARED_DIR / "realdata" / "shoulder-ik"
 
 
 @pytest.fixture(scope="module")

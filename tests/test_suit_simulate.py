@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from shared_data import SHARED_DIR
 
 from exohil.emulators.effects import EffectChain, Gain, Quantization, Saturation
 from exohil.emulators.protocols import (
@@ -26,7 +27,7 @@ from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
 
-SHOULDER_IK = Path(__file__).resolve().parents[1].parent / "shared" / "realdata" / "shoulder-ik"
+SHOULDER_IK = SHARED_DIR / "realdata" / "shoulder-ik"
 needs_shoulder_ik = pytest.mark.skipif(not SHOULDER_IK.is_dir(),
                                        reason="shoulder-ik real data not present")
 
@@ -280,7 +281,8 @@ def test_simulate_command_bad_input_is_one_clear_error(tmp_path, args, message):
 @needs_shoulder_ik
 @pytest.mark.slow
 def test_committed_fixtures_rebuild_bit_identically():
-    result = CliRunner().invoke(main, ["fixtures", "build", "--check"])
+    result = CliRunner().invoke(main, ["fixtures", "build", "--check",
+                                       "--shoulder-ik", str(SHOULDER_IK)])
     assert result.exit_code == 0, result.output
     from exohil.harness.fixture_specs import FIXTURES
 
