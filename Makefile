@@ -9,7 +9,12 @@ STAMP   = $(VENV)/.installed
 
 install: $(STAMP)
 
+# constraints.txt's pins (torch 2.13.0 CPU among them) are wheels for Python 3.11: another
+# Python would resolve other packages (CUDA torch on 3.12), so it is refused here.
 $(STAMP): pyproject.toml constraints.txt
+	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' || { \
+		echo "make: $(PYTHON) is not Python 3.11, which constraints.txt's pins are for;" \
+		"install python3.11 or run make PYTHON=/path/to/python3.11" >&2; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -c constraints.txt -e '.[test,fast,lint]'
@@ -21,7 +26,7 @@ demo: $(STAMP)
 # The test files run in parallel, one process per core (at most four); a file's tests stay
 # together, so its module fixtures are built once.
 test: $(STAMP)
-	$(BIN)/python -m pytest -n auto --maxprocesses 4 --dist loadfile
+	$(BIN)/python -m pytest -n auto --maxprocesses 4 --dist loadfile -rs
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -36,4 +41,5 @@ bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 
 clean:
-	rm -rf $(VENV) build *.egg-info conformance-report demo-report
+	rm -rf $(VENV) build *.egg-info conformance-report demo-report .tox .hypothesis \
+		.mypy_cache .ruff_cache .pytest_cache
