@@ -168,12 +168,19 @@ def test_the_outcome_does_not_depend_on_how_many_processes_computed_it(hysteresi
 
 
 def test_the_docs_outputs_table_names_every_field_of_the_json(hysteresis_outcome):
-    """A user looks a field up in docs/discrepancy.md's Outputs table: every top-level key
-    of discrepancy.json is named there (in backquotes) and every step key too."""
+    """A user looks a field up in docs/discrepancy.md's table of the JSON's keys: every
+    top-level key of discrepancy.json is named there (in backquotes) and every step key too."""
     docs = Path(__file__).resolve().parents[1] / "docs" / "discrepancy.md"
-    row = next(line for line in docs.read_text().splitlines()
-               if line.startswith("| `discrepancy.json` |"))
-    named = set(re.findall(r"[a-z_]+", " ".join(re.findall(r"`[^`]*`", row))))
+    lines = docs.read_text().splitlines()
+    start = lines.index("### The JSON's keys")
+    table = []
+    for line in lines[start + 1:]:
+        if line.startswith("#"):
+            break
+        if line.startswith("|"):
+            table.append(line)
+    assert len(table) > 10, "the JSON's key table is missing"
+    named = set(re.findall(r"[a-z_]+", " ".join(re.findall(r"`[^`]*`", " ".join(table)))))
     summary = hysteresis_outcome[1].summary
     assert set(summary) - named == set()
     assert set(summary["steps"][0]) - named == set()
