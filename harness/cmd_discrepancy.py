@@ -14,7 +14,7 @@ from exohil.harness.cli_types import Count, InputFile, OutputDir, refuse_overwri
 MAX_WORKERS = 64
 #: Memory a run has taken per sensor frame, at most as measured: 12.5 GB in use on the
 #: machine, forked candidates included, for the 450,000 frames of a 30-minute recording
-#: with seven tendons at 250 Hz (docs/discrepancy.md, Speed); 17–23 kB in the largest
+#: with seven tendons at 250 Hz (docs/discrepancy-results.md, Speed); 17–23 kB in the largest
 #: process for four to seven sensors.
 BYTES_PER_FRAME = 28_000
 

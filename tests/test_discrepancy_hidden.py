@@ -46,7 +46,7 @@ def test_first_named_effect_is_right_in_90_percent(results):
     "gap before under twice what the same suit and movement give without the effect: "
     "saturation/lib/m1/s101 0.315 -> 0.161 (its clean control is at 0.161 mm) and the soft "
     "stop saturation/alt/m2/s100 0.260 -> 0.167 (clean control 0.153 mm); see "
-    "docs/discrepancy.md"))
+    "docs/discrepancy-results.md, Hidden effects"))
 def test_gap_shrinks_by_half_whenever_an_effect_is_named(results):
     short = [f"{case.label}: {before:.3f} -> {after:.3f}" for case, named, before, after
              in results if named != "clean" and after > 0.5 * before]

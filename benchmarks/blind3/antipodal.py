@@ -11,7 +11,7 @@ prints, per sensor, what the calibrated static map left of it (the summary's hel
 between the tendon's two anchors seen from the cap's centre (in the cap's unit-sphere space,
 where the generator wraps the path), the share of frames where that angle exceeds 175°, and
 the sudden steps of the reading the workflow's localisation found after its effects (method
-step 5 of docs/discrepancy.md: their count, and in brackets how many came back at one pose).
+step 5 of docs/discrepancy-method.md: their count, and in brackets how many came back at one pose).
 
 At 180° the plane of the wrapped path (the great circle through both anchors) is undefined:
 the generator's path goes over whichever side the anchors' small misalignment points to, and

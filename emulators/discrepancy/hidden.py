@@ -9,7 +9,7 @@ uses :mod:`exohil.emulators.effects`; ``alt`` is written here independently with
 model family (backlash play or Bouc–Wen hysteresis, two-time-constant creep, tanh saturation,
 pure delay or second-order lag, exponential warm-up or sinusoidal drift), so the tests do not
 only check the workflow against its own equations. A third family, ``other``, is kept out of
-the suite's default and used to probe generality (docs/discrepancy.md): a Preisach ensemble
+the suite's default and used to probe generality (docs/discrepancy-results.md): a Preisach ensemble
 of relays, creep with a power-law memory, a stop at the *upper* end that approaches its
 asymptote exponentially, a low-pass behind a transport delay, and a random-walk offset.
 """

@@ -485,12 +485,12 @@ def fit_segments(trial: Trial, u: np.ndarray, input_kind: str,
     would be flat there: a ready-made stop that would take a saturation into the static
     map. Fitted once, on every valid frame (the static map itself is refitted per fold:
     what Q sees of a held-out block lowers the held-out gap by under 1 % where measured,
-    docs/discrepancy.md).
+    docs/discrepancy-method.md, step 2, Straight runs).
 
     Only with the axial rotation recorded (``arm_axes``): without it a point off the
     humerus axis moves with a rotation the inputs do not hold, so its run's square is no
     quadratic of the humerus axis alone, and a curve bent to a soft stop instead took the
-    stop's place (docs/discrepancy.md); other joints' angles give no such quadratic.
+    stop's place (docs/discrepancy-method.md, step 2); other joints' angles give no such quadratic.
     """
     p2 = legendre_products(u[:1], 2)[0].shape[1]
     if input_kind != "arm_axes":
