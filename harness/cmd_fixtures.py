@@ -9,12 +9,13 @@ import click
 
 from exohil.formats.atomic import write_bytes, write_text
 from exohil.harness.cli_types import InputDir, OutputDir
-from exohil.harness.paths import FIXTURES_DIR, SHOULDER_IK_DIR
+from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR, SHOULDER_IK_DIR
 
 
 @click.group("fixtures")
 def fixtures_group() -> None:
-    """Simulated recordings committed under fixtures/ (see fixtures/README.md)."""
+    """Bundled recordings and reference models: where they are, how they are rebuilt
+    (fixtures/README.md)."""
 
 
 @fixtures_group.command("build")
@@ -94,6 +95,30 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
         raise click.ClickException(f"{len(problems)} fixture(s) do not match; "
                                    f"run `exohil fixtures build` and commit the result")
     click.echo(f"all {len(hashes)} fixtures match {SUMS_FILE}", err=True)
+
+
+@fixtures_group.command("list")
+def list_command() -> None:
+    """Print the bundled recordings and reference models, one absolute path per line with
+    what it is, for the commands that take a file (an installed exohil keeps them inside the
+    package; $EXOHIL_FIXTURES names another folder). Example:
+
+    \b
+        exohil evaluate "$(exohil fixtures list | grep ennet.npz | cut -f1)" my_trial.mcap
+    """
+    from exohil.harness.fixture_specs import FIXTURES
+
+    described = {spec.filename: spec.description for spec in FIXTURES}
+    recordings = sorted(FIXTURES_DIR.glob("*.mcap"))
+    models = sorted(MODELS_DIR.glob("*.npz"))
+    if not recordings and not models:
+        raise click.ClickException(f"no recording or model in {FIXTURES_DIR} "
+                                   "(check $EXOHIL_FIXTURES)")
+    for path in recordings:
+        click.echo(f"{path.absolute()}\trecording: {described.get(path.name, 'not built here')}")
+    for path in models:
+        click.echo(f"{path.absolute()}\treference model {path.stem} "
+                   f"(provenance: {MODELS_DIR.absolute() / 'README.md'})")
 
 
 COMMANDS: list[click.Command] = [fixtures_group]

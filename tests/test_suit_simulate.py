@@ -1,5 +1,8 @@
 """simulate(), suit profile loading, and the `exohil simulate` / `exohil fixtures` commands."""
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -316,3 +319,30 @@ def test_a_build_that_fails_half_way_leaves_the_fixtures_folder_as_it_was(tmp_pa
     assert "Traceback" not in result.output and "see --shoulder-ik" in result.output
     assert sorted(p.name for p in fixtures.iterdir()) == ["SHA256SUMS"]
     assert (fixtures / "SHA256SUMS").read_text(encoding="utf-8") == "kept\n"
+
+
+def test_fixtures_list_gives_the_path_of_every_bundled_recording_and_model():
+    """An installed exohil keeps its fixtures inside the package, where the README's
+    repository paths do not reach: `fixtures list` prints where each one is."""
+    from exohil.harness.fixture_specs import FIXTURES
+    from exohil.harness.paths import FIXTURES_DIR, MODELS_DIR
+
+    result = CliRunner().invoke(main, ["fixtures", "list"])
+    assert result.exit_code == 0, result.output
+    rows = dict(line.split("\t", 1) for line in result.output.splitlines())
+    for spec in FIXTURES:
+        assert rows[str((FIXTURES_DIR / spec.filename).absolute())] == \
+            f"recording: {spec.description}"
+    for name in ("ennet", "ann"):
+        assert rows[str((MODELS_DIR / f"{name}.npz").absolute())].startswith(
+            f"reference model {name} ")
+    assert all(Path(path).is_file() for path in rows)
+
+
+def test_fixtures_list_with_an_empty_folder_says_where_it_looked(tmp_path):
+    env = {**os.environ, "EXOHIL_FIXTURES": str(tmp_path)}
+    exohil = Path(sys.executable).parent / "exohil"  # a new process reads $EXOHIL_FIXTURES
+    done = subprocess.run([str(exohil), "fixtures", "list"], env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert f"no recording or model in {tmp_path}" in done.stderr
