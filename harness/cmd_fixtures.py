@@ -26,7 +26,8 @@ def fixtures_group() -> None:
               default=FIXTURES_DIR, show_default=True, help="Fixtures folder.")
 @click.option("--shoulder-ik", "shoulder_ik_dir", type=InputDir(),
               default=SHOULDER_IK_DIR, show_default=True,
-              help="Folder of the shoulder-ik .mot trials (real motion, CC BY 4.0).")
+              help="Folder of the shoulder-ik .mot trials (real motion, CC BY 4.0); by default "
+                   "in $EXOHIL_SHARED, else in ../shared beside a checkout.")
 def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> None:
     """Regenerate every fixture (bit-identical on rebuild) and fixtures/SHA256SUMS.
 
