@@ -30,7 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.report import load_average, parser, positive_float, positive_int, report
+from benchmarks.report import (
+    load_average,
+    parser,
+    positive_float,
+    positive_int,
+    report,
+    run_main,
+)
 from exohil.formats.measurement import Limit, Measurement
 
 #: issue 11: the default ENNet's combined RMSE at most 0.8 of the default ANN's
@@ -151,4 +158,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)
