@@ -146,6 +146,14 @@ def positive_int(value: str) -> int:
     return number
 
 
+def non_negative_int(value: str) -> int:
+    """argparse type: an integer ≥ 0."""
+    number = int(value)
+    if number < 0:
+        raise argparse.ArgumentTypeError(f"must be at least 0, got {value}")
+    return number
+
+
 def positive_float(value: str) -> float:
     """argparse type: a finite number > 0."""
     number = float(value)

@@ -209,3 +209,77 @@ def test_ctrl_c_stops_the_workers_at_once_without_tracebacks(tmp_path):
     os.killpg(proc.pid, signal.SIGINT)  # what the terminal sends on Ctrl-C
     _, err = proc.communicate(timeout=20)  # far less than the workers' 30 s naps
     assert proc.returncode == 130 and err == "interrupted; nothing written\n", err
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--seeds", "0"), "--seeds: must be at least 1"),
+    (("--seeds", "-3"), "--seeds: must be at least 1"),
+    (("--duration", "0"), "--duration: must be a positive number"),
+    (("--duration", "-5"), "--duration: must be a positive number"),
+    (("--duration", "nan"), "--duration: must be a positive number"),
+    (("--workers", "0"), "--workers: must be at least 1"),
+    (("--time-workers", "0"), "--time-workers: must be at least 1"),
+    (("--repeats", "-1"), "--repeats: must be at least 0"),
+    (("--no-sweep", "--repeats", "0"), "does nothing"),
+    (("--time-on", "README.md"), "--time-on: README.md: not an MCAP file"),
+])
+def test_the_discrepancy_sweep_refuses_meaningless_values_before_it_starts(args, message):
+    out = run_module("benchmarks.bench_discrepancy", *args)
+    refused(out, message)
+    assert out.stdout == ""
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--seeds", "0"), "--seeds: must be at least 1"),
+    (("--duration", "0"), "--duration: must be a positive number"),
+    (("--workers", "0"), "--workers: must be at least 1"),
+    (("--out", "README.md"), "README.md exists and is not a folder"),
+])
+def test_the_sphere_refuses_meaningless_values_before_it_starts(args, message):
+    refused(run_module("benchmarks.bench_discrepancy_sphere", *args), message)
+
+
+def test_the_sphere_answer_key_is_the_list_the_blind_scorer_reads(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks.bench_discrepancy_blind import load_truth
+    from benchmarks.bench_discrepancy_sphere import SphereCase, write_cases
+
+    write_cases(tmp_path, [SphereCase("lag", 2, 1, 3.0), SphereCase("clean", 1, 0, 3.0)])
+    truth = load_truth(tmp_path)  # exits on a key it cannot score
+    assert [(e["file"], e["effect"]) for e in truth] == [("lag_m2_s1.mcap", "lag"),
+                                                         ("clean_m1_s0.mcap", "clean")]
+    assert truth[0]["rms_mm"] == pytest.approx(0.6) and truth[1]["rms_mm"] == 0.0
+
+
+def _blind_folder(tmp_path: Path, entries: list[dict]) -> Path:
+    import json
+
+    folder = tmp_path / "blind"
+    folder.mkdir()
+    for entry in entries:
+        (folder / entry["file"]).write_bytes(b"not a recording")
+    (folder / "truth.json").write_text(json.dumps(entries))
+    return folder
+
+
+def test_blind_out_never_overwrites_the_twin_summaries_it_reads(tmp_path):
+    folder = _blind_folder(tmp_path, [{"file": "rec_00.mcap", "effect": "lag"}])
+    twins = tmp_path / "runs"
+    twins.mkdir()
+    summary = twins / "rec_00.json"
+    summary.write_text('{"gap_before": 1.0}')
+    for out in (twins, tmp_path / "runs" / "."):
+        result = run_module("benchmarks.bench_discrepancy_blind", str(folder), "--twins",
+                            str(twins), "--out", str(out))
+        refused(result, "would overwrite the input")
+    assert summary.read_text() == '{"gap_before": 1.0}'
+
+
+def test_blind_reports_an_unreadable_recording_and_refuses_an_empty_key(tmp_path):
+    folder = _blind_folder(tmp_path, [{"file": "rec_00.mcap", "effect": "lag"}])
+    out = run_module("benchmarks.bench_discrepancy_blind", str(folder), "--workers", "1")
+    refused(out, "none of the 1 recordings could be run")
+    assert "rec_00   lag         not scored: " in out.stdout and "MCAP" in out.stdout
+    (folder / "truth.json").write_text("[]")
+    out = run_module("benchmarks.bench_discrepancy_blind", str(folder))
+    assert out.returncode != 0 and "lists no recording" in out.stderr, out.stderr
