@@ -283,3 +283,20 @@ def test_blind_reports_an_unreadable_recording_and_refuses_an_empty_key(tmp_path
     (folder / "truth.json").write_text("[]")
     out = run_module("benchmarks.bench_discrepancy_blind", str(folder))
     assert out.returncode != 0 and "lists no recording" in out.stderr, out.stderr
+
+
+@pytest.mark.parametrize("module, words", [
+    ("benchmarks.blind4.generate", ["independent test-data generator", "clean twin"]),
+    ("benchmarks.blind3.antipodal", ["anchors pass", "opposite sides of the cap."]),
+    ("benchmarks.blind4.verify", ["by the magnitude its truth gives."]),
+])
+def test_help_gives_the_whole_first_paragraph_and_every_option(module, words):
+    out = run_module(module, "--help")
+    assert out.returncode == 0, out.stderr
+    text = " ".join(out.stdout.split())
+    assert all(word in text for word in words), text
+
+
+def test_blind4_verify_without_an_answer_key_is_one_line(tmp_path):
+    refused(run_module("benchmarks.blind4.verify", str(tmp_path), str(tmp_path)),
+            "truth.json not found")
