@@ -300,3 +300,15 @@ def test_help_gives_the_whole_first_paragraph_and_every_option(module, words):
 def test_blind4_verify_without_an_answer_key_is_one_line(tmp_path):
     refused(run_module("benchmarks.blind4.verify", str(tmp_path), str(tmp_path)),
             "truth.json not found")
+
+
+def test_unseen_suits_checks_model_names_and_shows_a_failed_commands_stderr(monkeypatch):
+    out = run_module("benchmarks.bench_unseen_suits", "--model", "bogus")
+    refused(out, "unknown model 'bogus'; choose from ennet")
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks.bench_unseen_suits import _exohil
+    from benchmarks.report import BenchmarkError
+
+    with pytest.raises(BenchmarkError, match=r"-c 'import sys; sys.exit\(\"boom\"\)' exited 1: "
+                                             r"boom"):
+        _exohil([sys.executable, "-c", 'import sys; sys.exit("boom")'])
