@@ -1,7 +1,8 @@
 """Run every benchmark in turn with its defaults: ``python -m benchmarks`` (or ``make bench``).
 
 Each prints its measurements and the machine (:mod:`benchmarks.report`); the emulator
-benchmark streams for 60 s. At the end, every measurement that missed its goal is listed again.
+benchmark streams for 60 s and the pipeline benchmark for 600 s, so the whole run takes about
+15 minutes. At the end, every measurement that missed its goal is listed again.
 ``--json FILE`` writes ``{"benchmarks": [<each benchmark's --json document>, ...]}``. The exit
 status is 1 only when a benchmark broke (a missed goal is not a failure).
 """
@@ -16,7 +17,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from benchmarks.report import json_file, write_json
+from benchmarks.report import description, json_file, write_json
 from exohil.formats.measurement import Limit
 
 BENCHMARKS = ("bench_sim", "bench_recording_io", "bench_inference", "bench_emulator",
@@ -32,7 +33,7 @@ def missed(documents: list[dict[str, Any]]) -> list[str]:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=description(__doc__))
     ap.add_argument("--json", type=json_file, metavar="FILE",
                     help="write every benchmark's measurements and machine to FILE (JSON)")
     args = ap.parse_args()

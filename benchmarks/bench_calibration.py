@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.report import parser, positive_int, report
+from benchmarks.report import parser, positive_int, refuse_overwrite, report, run_main
 from exohil.formats.measurement import Limit, Measurement
 
 RATIO_LIMIT = Limit(high=0.5, unit="ratio", inclusive=True)
@@ -46,10 +46,7 @@ LOCAL = ("input-affine", "head")
 
 
 def _files(spec: str) -> list[Path]:
-    paths = [Path(p) for part in spec.split(",") for p in sorted(glob.glob(part))]
-    if not paths:
-        raise SystemExit(f"no files match {spec!r}")
-    return paths
+    return [Path(p) for part in spec.split(",") for p in sorted(glob.glob(part))]
 
 
 def _blocks(est, paths: list[Path]):
@@ -123,10 +120,20 @@ def main() -> None:
     unknown = sorted(set(methods) - set(VARIANTS) - set(LOCAL))
     if unknown:
         ap.error(f"unknown methods {unknown}; choose from {[*VARIANTS, *LOCAL]}")
-    measurements: list[Measurement] = []
+    cases = []
     for name, base_path, cal_spec, test_spec in args.case:
+        cal_paths, test_paths = _files(cal_spec), _files(test_spec)
+        for spec, paths in ((cal_spec, cal_paths), (test_spec, test_paths)):
+            if not paths:
+                ap.error(f"--case {name}: no files match {spec!r}")
+        refuse_overwrite(ap, "--json", args.json, [base_path, *cal_paths, *test_paths])
+        cases.append((name, base_path, cal_paths, test_paths))
+    loaded = []  # every case's inputs, read before the first case runs
+    for name, base_path, cal_paths, test_paths in cases:
         base = load_checkpoint(base_path)
-        cal, test = _blocks(base, _files(cal_spec)), _blocks(base, _files(test_spec))
+        loaded.append((name, base, _blocks(base, cal_paths), _blocks(base, test_paths)))
+    measurements: list[Measurement] = []
+    for name, base, cal, test in loaded:
         seconds = sum(len(b) for b in cal) / base.sensor_rate_hz
         before = combined_rmse(base, test)
         measurements.append(Measurement(f"{name}.uncalibrated.rmse", before, "deg",
@@ -158,4 +165,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -12,7 +12,7 @@
    effect on; ``--time-on FILE`` times another recording instead), p50/p99/max over
    ``--repeats`` runs, with the machine. Target: ≤ 60 s.
 
-Run from the repository root: ``python -m benchmarks.bench_discrepancy [--seeds 10]
+Run from the repository root: ``python -m benchmarks.bench_discrepancy [--seeds 5]
 [--duration 90] [--repeats 3] [--families lib,alt] [--first-seed 1000]``. ``--families other``
 runs the third family (hidden.py), which probes effects written yet another way;
 ``--repeats 0`` skips the timing; ``--workers`` sets how many processes run the sweep's
@@ -20,7 +20,8 @@ cases (default one per CPU), ``--time-workers`` how many try each step's candida
 timed runs (default one per CPU, as ``exohil discrepancy`` does). ``--motion DIR`` drives
 the suits with the real shoulder motion of every ``.mot`` file in DIR, joined in name order
 (e.g. ``../shared/realdata/shoulder-ik``), instead of the seeded random movement;
-``--duration`` is then the motion's own length.
+``--duration`` is then the motion's own length. With the defaults (5 seeds: 120 cases) the
+sweep takes about 5½ minutes on two cores (docs/discrepancy.md), then the timing runs.
 """
 
 from __future__ import annotations
@@ -33,6 +34,13 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.report import (
+    description,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    run_main,
+)
 from exohil.emulators.discrepancy import run
 from exohil.emulators.discrepancy.hidden import (
     FAMILIES,
@@ -45,6 +53,8 @@ from exohil.emulators.discrepancy.hidden import (
 )
 from exohil.emulators.discrepancy.workers import default_workers, workers_for
 from exohil.emulators.protocols import mot_trajectory
+from exohil.formats.errors import RecordingError
+from exohil.formats.recording import Recording
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.machine import machine
 
@@ -117,8 +127,10 @@ def print_rates(rows: list[tuple[str, str, float]]) -> None:
           f"({quiet / max(len(clean_rows), 1):.1%}; required ≥ 90 %)")
 
 
-def timing(repeats: int, path: Path = FIXTURE, workers: int | None = None) -> None:
-    rec = read_recording(path)
+def timing(repeats: int, path: Path = FIXTURE, workers: int | None = None,
+           rec: Recording | None = None) -> None:
+    """Time the workflow on ``rec`` (read from ``path`` when not given)."""
+    rec = read_recording(path) if rec is None else rec
     span = rec.sensors.t[-1] - rec.sensors.t[0]
     processes = workers_for(workers)
     print(f"\ntiming: {path.name}, {len(rec.sensors)} sensor frames ({span:.1f} s) x "
@@ -137,30 +149,40 @@ def timing(repeats: int, path: Path = FIXTURE, workers: int | None = None) -> No
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=10, help="seeds per (effect, family, "
-                        "magnitude)")
-    parser.add_argument("--duration", type=float, default=90.0, help="recording length, s")
+    parser = argparse.ArgumentParser(description=description(__doc__))
+    parser.add_argument("--seeds", type=positive_int, default=5, help="seeds per (effect, "
+                        "family, magnitude)")
+    parser.add_argument("--duration", type=positive_float, default=90.0,
+                        help="recording length, s")
     parser.add_argument("--first-seed", type=int, default=1000, help="first seed")
     parser.add_argument("--families", default="lib,alt",
                         help=f"comma-separated, of {', '.join(FAMILIES)}")
-    parser.add_argument("--repeats", type=int, default=3, help="timing repeats (0: none)")
+    parser.add_argument("--repeats", type=non_negative_int, default=3,
+                        help="timing repeats (0: none)")
     parser.add_argument("--no-sweep", action="store_true", help="timing only")
     parser.add_argument("--time-on", type=Path, default=FIXTURE, metavar="FILE",
                         help="the recording to time (default: the paper protocol fixture)")
     parser.add_argument("--motion", type=Path, metavar="DIR",
                         help="drive the suits with the real motion of DIR/*.mot (OpenSim "
                              "inverse kinematics), joined in name order")
-    parser.add_argument("--workers", type=int, default=default_workers(),
+    parser.add_argument("--workers", type=positive_int, default=default_workers(),
                         help="processes for the sweep (default: one per CPU; the timing "
                              "always runs alone, after it)")
-    parser.add_argument("--time-workers", type=int, default=None, metavar="N",
+    parser.add_argument("--time-workers", type=positive_int, default=None, metavar="N",
                         help="processes trying each step's candidates in the timed runs "
                              "(default: one per CPU, as `exohil discrepancy`)")
     args = parser.parse_args()
     families = tuple(args.families.split(","))
-    if args.repeats > 0 and not args.time_on.is_file():  # before the sweep, not after it
-        parser.error(f"--time-on: no such file: {args.time_on}")
+    if args.no_sweep and args.repeats == 0:
+        parser.error("--no-sweep with --repeats 0 does nothing")
+    timed = None
+    if args.repeats > 0:  # before the sweep, not after it
+        if not args.time_on.is_file():
+            parser.error(f"--time-on: no such file: {args.time_on}")
+        try:
+            timed = read_recording(args.time_on)
+        except RecordingError as exc:
+            parser.error(f"--time-on: {exc}")
     if not set(families) <= set(FAMILIES):
         parser.error(f"--families: choose from {', '.join(FAMILIES)}")
     motion: tuple[str, ...] = ()
@@ -177,8 +199,8 @@ def main() -> None:
         sweep(range(args.first_seed, args.first_seed + args.seeds), args.duration, families,
               args.workers, motion)
     if args.repeats > 0:
-        timing(args.repeats, args.time_on, args.time_workers)
+        timing(args.repeats, args.time_on, args.time_workers, timed)
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

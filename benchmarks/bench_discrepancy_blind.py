@@ -9,11 +9,15 @@ issue's three rates. ``--out RUNS`` also keeps each recording's ``discrepancy.js
 
 ``--twins TWIN_RUNS`` scores by what the data can show: TWIN_RUNS holds the summaries of each
 recording's clean twin (the same recording written without its effect, e.g. by
-``benchmarks/blind3/generate.py --without-effect``, run through this benchmark with
-``--out``). Each effect's line then says what it adds to the gap before any effect is
-fitted, in noise variances, (gap² − twin gap²) / floor², and the rate of right first names
-is printed apart for the effects that add at least one: what the static map takes in of an
-effect, or what is left under the noise, no model can name.
+``benchmarks/blind3/generate.py --without-effect``, run through this benchmark with ``--out``;
+--out never names TWIN_RUNS, whose summaries it would overwrite). Each effect's line then says
+what it adds to the gap before any effect is fitted, in noise variances, (gap² − twin gap²) /
+floor², and the rate of right first names is printed apart for the effects that add at least
+one: what the static map takes in of an effect, or what is left under the noise, no model can
+name.
+
+A recording that cannot be read is reported on its line and left out of the scores; the
+others still run.
 
 Run from the repository root::
 
@@ -33,18 +37,24 @@ import time
 from pathlib import Path
 
 from benchmarks.bench_discrepancy import print_confusion, print_rates
+from benchmarks.report import BenchmarkError, description, out_folder, positive_int, run_main
 from exohil.emulators.discrepancy import run
 from exohil.emulators.discrepancy.hidden import KINDS, first_effect
 from exohil.emulators.discrepancy.workers import default_workers, parallel_map
-from exohil.formats.atomic import write_text
+from exohil.formats.atomic import same_file, write_text
+from exohil.formats.errors import InputError
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.machine import machine
 
 
 def run_file(path: Path) -> dict:
-    """The workflow's summary on one recording, with the seconds it took."""
+    """The workflow's summary on one recording, with the seconds it took; ``{"error": why}``
+    for a recording that cannot be read or run (bad input, not a bug)."""
     start = time.perf_counter()
-    summary = run(read_recording(path), path.stem).summary
+    try:
+        summary = run(read_recording(path), path.stem).summary
+    except InputError as exc:
+        return {"error": str(exc)}
     return {**summary, "seconds": round(time.perf_counter() - start, 1)}
 
 
@@ -59,6 +69,8 @@ def load_truth(folder: Path) -> list[dict]:
         raise SystemExit(f"error: {key}: not JSON ({exc})") from None
     if not isinstance(truth, list) or not all(isinstance(e, dict) for e in truth):
         raise SystemExit(f"error: {key}: must be a list of objects, one per recording")
+    if not truth:
+        raise SystemExit(f"error: {key}: lists no recording")
     for entry in truth:
         if entry.get("effect") not in KINDS or not (folder / str(entry.get("file"))).is_file():
             raise SystemExit(f"error: {key}: bad entry {entry.get('file')!r} "
@@ -109,24 +121,38 @@ def print_shown_rates(rows: list[tuple[str, str, float]]) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description(__doc__))
     parser.add_argument("folder", type=Path, help="recordings and their truth.json")
-    parser.add_argument("--workers", type=int, default=default_workers(),
+    parser.add_argument("--workers", type=positive_int, default=default_workers(),
                         help="processes running recordings side by side (default: one per CPU)")
-    parser.add_argument("--out", type=Path, help="folder for each recording's summary JSON")
+    parser.add_argument("--out", type=out_folder,
+                        help="folder for each recording's summary JSON")
     parser.add_argument("--twins", type=Path, metavar="TWIN_RUNS",
                         help="the clean twins' summary JSON (an earlier --out): also score "
                              "by what each effect adds to its twin's gap")
     args = parser.parse_args()
     truth = load_truth(args.folder)
     twins = load_twins(args.twins, truth) if args.twins else {}
+    if args.out:
+        inputs = [args.folder / "truth.json", *(args.folder / e["file"] for e in truth)]
+        inputs += [args.twins / f"{Path(e['file']).stem}.json" for e in truth] if args.twins \
+            else []
+        for entry in truth:
+            hit = same_file(args.out / f"{Path(entry['file']).stem}.json", inputs)
+            if hit is not None:
+                parser.error(f"--out {args.out} would overwrite the input {hit}")
     print(f"machine: {machine()}")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
-    rows, shown = [], []
+    rows, shown, unreadable = [], [], 0
     paths = [args.folder / entry["file"] for entry in truth]
     for (path, summary), entry in zip(parallel_map(run_file, paths, args.workers), truth,
                                       strict=True):
+        if "error" in summary:
+            unreadable += 1
+            print(f"  {path.stem:<8} {entry['effect']:<11} not scored: {summary['error']}",
+                  flush=True)
+            continue
         named = first_effect(summary)
         shrink = 1.0 - summary["gap_after"] / summary["gap_before"]
         rows.append((entry["effect"], named, shrink))
@@ -142,6 +168,10 @@ def main() -> None:
               f"{summary['noise_floor']:.4g}) {summary['seconds']} s{added}", flush=True)
         if args.out:
             write_text(args.out / f"{path.stem}.json", json.dumps(summary, indent=1))
+    if not rows:
+        raise BenchmarkError(f"none of the {len(truth)} recordings could be run")
+    if unreadable:
+        print(f"\n{unreadable} of {len(truth)} recordings could not be run: left out")
     print_confusion("", rows)
     print_rates(rows)
     if args.twins:
@@ -149,4 +179,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main, interrupted="summaries already written to --out are kept")

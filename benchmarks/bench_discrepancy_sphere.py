@@ -25,7 +25,8 @@ effect halves the gap. ``--controls`` adds, per effect recording, the gap before
 suit, movement and noise without the effect (what the calibrated static map alone leaves)
 and what was named in it: 40 more clean recordings, a check that nothing is named in them.
 ``--out DIR`` also writes each recording there (``exohil discrepancy`` reads them;
-``truth.json`` lists what each hides).
+``truth.json`` lists what each hides, in the list form ``bench_discrepancy_blind DIR``
+scores: ``{"file", "effect", "family", "rms_mm"}`` per recording).
 """
 
 from __future__ import annotations
@@ -41,9 +42,11 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import butter, fftconvolve, lfilter
 
+from benchmarks.report import description, out_folder, positive_float, positive_int, run_main
 from exohil.emulators.discrepancy import run
 from exohil.emulators.discrepancy.hidden import first_effect
 from exohil.emulators.discrepancy.workers import parallel_map
+from exohil.formats.atomic import write_text
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.machine import machine
@@ -228,26 +231,30 @@ def run_sphere_case(case: SphereCase) -> dict:
 def write_cases(out: Path, selected: list[SphereCase]) -> None:
     """Each case's recording as ``out/LABEL.mcap`` and ``out/truth.json``."""
     out.mkdir(parents=True, exist_ok=True)
-    truth = {}
+    truth = []
     for case in selected:
         tmp = out / f".{case.label}.mcap.tmp"
         write_recording(tmp, make_recording(case))
         os.replace(tmp, out / f"{case.label}.mcap")
-        truth[case.label] = {"kind": case.kind, "family": case.family,
-                             "rms_mm": RMS_PER_MAGNITUDE_MM * case.magnitude
-                             if case.kind != "clean" else 0.0}
-    (out / ".truth.json.tmp").write_text(json.dumps(truth, indent=1) + "\n")
-    os.replace(out / ".truth.json.tmp", out / "truth.json")
+        truth.append({"file": f"{case.label}.mcap", "effect": case.kind,
+                      "family": case.family,
+                      "rms_mm": RMS_PER_MAGNITUDE_MM * case.magnitude
+                      if case.kind != "clean" else 0.0})
+    write_text(out / "truth.json", json.dumps(truth, indent=1) + "\n")
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=4, help="seeds 0 … N−1 (default 4)")
-    parser.add_argument("--duration", type=float, default=60.0, help="s per recording")
-    parser.add_argument("--workers", type=int, default=None, help="processes (default: CPUs)")
+    parser = argparse.ArgumentParser(description=description(__doc__))
+    parser.add_argument("--seeds", type=positive_int, default=4,
+                        help="seeds 0 … N−1 (default 4)")
+    parser.add_argument("--duration", type=positive_float, default=60.0,
+                        help="s per recording")
+    parser.add_argument("--workers", type=positive_int, default=None,
+                        help="processes (default: CPUs)")
     parser.add_argument("--controls", action="store_true",
                         help="also run each effect recording's suit and movement without it")
-    parser.add_argument("--out", type=Path, default=None, help="also write the recordings here")
+    parser.add_argument("--out", type=out_folder, default=None,
+                        help="also write the recordings here")
     args = parser.parse_args(argv)
     selected = [SphereCase(kind, m, seed, args.duration) for kind in FAMILIES
                 for m in ((1,) if kind == "clean" else (1, 2)) for seed in range(args.seeds)]
@@ -295,4 +302,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -28,7 +28,15 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
-from benchmarks.report import load_average, parser, positive_float, report
+from benchmarks.report import (
+    BenchmarkError,
+    load_average,
+    non_negative_float,
+    parser,
+    positive_float,
+    report,
+    run_main,
+)
 from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.harness.acquisition import SerialFrameSource
 
@@ -81,43 +89,56 @@ def main() -> None:
     ap = parser(__doc__)
     ap.add_argument("--seconds", type=positive_float, default=60.0, help="streaming time (s)")
     ap.add_argument("--rate", type=positive_float, default=250.0, help="frame rate (Hz)")
-    ap.add_argument("--spin-ms", type=float, default=0.3,
-                    help="emulator's spin before each deadline (ms)")
-    ap.add_argument("--read-timeout-ms", type=float, default=1.0,
+    ap.add_argument("--spin-ms", type=non_negative_float, default=0.3,
+                    help="emulator's spin before each deadline (ms; at most one period)")
+    ap.add_argument("--read-timeout-ms", type=positive_float, default=1.0,
                     help="reader's longest blocking read (ms); each return re-polls the tty")
     ap.add_argument("--realtime", action="store_true",
                     help="emulator and reader threads under SCHED_FIFO (CAP_SYS_NICE)")
     args = ap.parse_args()
+    if args.spin_ms > 1000.0 / args.rate:
+        ap.error(f"--spin-ms {args.spin_ms:g}: longer than the {1000.0 / args.rate:g} ms "
+                 f"period of --rate {args.rate:g}")
     print(f"options: {args.seconds:g} s at {args.rate:g} Hz, spin {args.spin_ms:g} ms, read "
           f"timeout {args.read_timeout_ms:g} ms, SCHED_FIFO "
           f"{'requested' if args.realtime else 'no'}")
     print(f"load average before: {load_average()}")
 
     parent, child = mp.get_context("spawn").Pipe()
+    # a daemon, and terminated on any error here: the child must never outlive this process
+    # (it would wait for "go" forever and multiprocessing would wait for it)
     process = mp.get_context("spawn").Process(target=run_emulator,
                                               args=(args.rate, args.seconds, args.realtime,
-                                                    args.spin_ms / 1000.0, child))
+                                                    args.spin_ms / 1000.0, child), daemon=True)
     process.start()
-    port = parent.recv()
-    received: list[tuple[int, int]] = []
-    with SerialFrameSource(port, buffer_frames=1 << 16, realtime=args.realtime,
-                           read_timeout_s=args.read_timeout_ms / 1000.0) as source:
-        if not source.wait_connected(30):
-            raise SystemExit(f"could not open {port}: {source.last_error}")
-        parent.send("go")
-        # Block (no GIL held) until the emulator is done: the buffer holds every frame, so no
-        # consumer thread competes with the reader thread while it is being measured.
-        send_times, faults, generated, emulator_rt_error = parent.recv()
-        while (frame := source.get(timeout=0.5)) is not None:
-            received.append((frame.seq, frame.host_ns))
-        link = source.stats()
-        reader_rt_error = source.realtime_error
-    process.join(10)
+    try:
+        port = parent.recv()
+        received: list[tuple[int, int]] = []
+        with SerialFrameSource(port, buffer_frames=1 << 16, realtime=args.realtime,
+                               read_timeout_s=args.read_timeout_ms / 1000.0) as source:
+            if not source.wait_connected(30):
+                raise BenchmarkError(f"could not open {port}: {source.last_error}")
+            parent.send("go")
+            # Block (no GIL held) until the emulator is done: the buffer holds every frame, so
+            # no consumer thread competes with the reader thread while it is being measured.
+            send_times, faults, generated, emulator_rt_error = parent.recv()
+            while (frame := source.get(timeout=0.5)) is not None:
+                received.append((frame.seq, frame.host_ns))
+            link = source.stats()
+            reader_rt_error = source.realtime_error
+        process.join(10)
+    finally:
+        if process.is_alive():
+            process.terminate()
+            process.join(5)
     if args.realtime:
         print(f"SCHED_FIFO: emulator {emulator_rt_error or 'yes'}, "
               f"reader {reader_rt_error or 'yes'}")
     print(f"load average after: {load_average()}")
 
+    if min(len(send_times), len(received)) < 2:
+        raise BenchmarkError(f"{len(send_times)} frames written, {len(received)} delivered: "
+                             "too few frames to measure a rate (stream longer: --seconds)")
     sent = np.array(send_times, dtype=np.int64)
     got = np.array(received, dtype=np.int64)
     measurements = [
@@ -143,4 +164,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -20,7 +20,15 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from benchmarks.report import load_average, parser, positive_int, report
+from benchmarks.report import (
+    load_average,
+    non_negative_float,
+    parser,
+    positive_int,
+    refuse_overwrite,
+    report,
+    run_main,
+)
 from exohil.formats.measurement import (
     DISTRIBUTION_STATS,
     Limit,
@@ -36,6 +44,8 @@ if TYPE_CHECKING:
 
 #: docs/estimator.md, "Benchmark": goal p99 ≤ 100 µs per pushed frame, for every backend
 PUSH_LIMITS = {"p99": Limit(high=100.0, unit="us", inclusive=True)}
+#: fewest timed frames whose p99 is judged (a p99 of fewer is not a tail)
+MIN_FRAMES = 100
 #: issue 11: the default engine's p99 at most 1.5 × the fixed-work baseline's p99 of the same run
 BASELINE_RATIO_LIMIT = Limit(high=1.5, unit="ratio", inclusive=True)
 
@@ -122,17 +132,21 @@ def main() -> None:
 
     ap = parser(__doc__)
     ap.add_argument("--frames", type=positive_int, default=20_000,
-                    help="timed frames per backend")
+                    help=f"timed frames per backend (at least {MIN_FRAMES})")
     ap.add_argument("--checkpoint", default=str(REFERENCE_ENNET),
                     help="checkpoint to time (default: the reference ENNet, "
                          "fixtures/models/ennet.npz); 'random' times a random-weight ENNet "
                          "of hidden 64, window 10 and the paper's dense stack")
-    ap.add_argument("--pace-hz", type=float, default=0.0,
+    ap.add_argument("--pace-hz", type=non_negative_float, default=0.0,
                     help="one push every 1/HZ s like a live stream (e.g. 250); default: back "
                          "to back")
     ap.add_argument("--backend", dest="backends", action="append", choices=BACKENDS,
                     help="time only this backend (repeatable; default: every backend)")
     args = ap.parse_args()
+    if args.frames < MIN_FRAMES:
+        ap.error(f"--frames: at least {MIN_FRAMES} for a p99 to judge, got {args.frames}")
+    if args.checkpoint != "random":
+        refuse_overwrite(ap, "--json", args.json, [args.checkpoint])
     est = random_estimator() if args.checkpoint == "random" else load_checkpoint(args.checkpoint)
     rng = np.random.default_rng(0)
     frames = est.norm.x_mean + est.norm.x_std * rng.standard_normal((args.frames + 200,
@@ -172,4 +186,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

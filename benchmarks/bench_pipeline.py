@@ -11,7 +11,14 @@ robot command) p99 ≤ 2 ms and max ≤ 12 ms, and zero frames lost on the host 
 
 from __future__ import annotations
 
-from benchmarks.report import load_average, parser, positive_float, report
+from benchmarks.report import (
+    load_average,
+    parser,
+    positive_float,
+    refuse_overwrite,
+    report,
+    run_main,
+)
 from exohil.formats.measurement import Limit
 from exohil.harness.bench import BenchConfig, EmulatorDevice
 from exohil.harness.cmd_demo import DEFAULT_FAULTS, DEFAULT_MODEL, DEFAULT_RECORDING
@@ -38,6 +45,7 @@ def main() -> None:
     ap.add_argument("--robot", default="simulated", help="robot target (simulated, mujoco)")
     ap.add_argument("--faults", default=DEFAULT_FAULTS, help="emulator fault spec")
     args = ap.parse_args()
+    refuse_overwrite(ap, "--json", args.json, [DEFAULT_RECORDING, DEFAULT_MODEL])
     print(f"load average before: {load_average()}")
     config = BenchConfig(device=EmulatorDevice(DEFAULT_RECORDING, args.faults or None, 0,
                                                loop=True),
@@ -52,4 +60,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

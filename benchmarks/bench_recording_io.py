@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.report import parser, positive_int, report
+from benchmarks.report import parser, positive_int, report, run_main
 from exohil.formats.measurement import Measurement, distribution
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
@@ -65,7 +65,7 @@ def main() -> None:
                 read_recording(path)
                 reads.append(time.perf_counter() - start)
             measurements.append(Measurement.judge(f"{compression}.size", path.stat().st_size,
-                                                  "count", note="bytes"))
+                                                  "B"))
             measurements += distribution(f"{compression}.write", writes, "s")
             measurements += distribution(f"{compression}.read", reads, "s")
         per_frame = []
@@ -81,4 +81,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

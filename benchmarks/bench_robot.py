@@ -9,7 +9,8 @@ where reachable), and the simulated arm's axis against the human direction (mapp
 servo lag).
 
 Run from the repository root: ``python -m benchmarks.bench_robot [--seconds 30]
-[--start 25] [--gif out/arm.gif] [--json FILE]``; figures are reported through
+[--start 25] [--gif out/arm.gif] [--json FILE]``, the replay within the fixture's
+0–246 s; figures are reported through
 :mod:`benchmarks.report` (no goal is documented, so none is judged).
 """
 
@@ -20,7 +21,14 @@ import time
 
 import numpy as np
 
-from benchmarks.report import parser, positive_float, report
+from benchmarks.report import (
+    gif_file,
+    parser,
+    positive_float,
+    refuse_overwrite,
+    report,
+    run_main,
+)
 from exohil.formats.measurement import Measurement
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.paths import FIXTURES_DIR
@@ -35,6 +43,7 @@ from exohil.harness.teleop import SHOULDER_ANGLES, TeleopSink
 from exohil.realtime import sleep_until
 
 RATE_HZ = 250.0
+FIXTURE = FIXTURES_DIR / "paper_protocol.mcap"
 
 
 def commanded_axis(joints: np.ndarray) -> np.ndarray:
@@ -60,9 +69,17 @@ def main() -> None:
     ap.add_argument("--seconds", type=positive_float, default=30.0, help="replay length, s")
     ap.add_argument("--start", type=float, default=25.0,
                     help="offset into the fixture, s (25: abduction, then the rest)")
-    ap.add_argument("--gif", default=None, help="also write an animation (5 frames/s)")
+    ap.add_argument("--gif", type=gif_file, default=None, metavar="FILE.gif",
+                    help="also write an animation (5 frames/s)")
     args = ap.parse_args()
-    stream = read_recording(FIXTURES_DIR / "paper_protocol.mcap").mocap["shoulder"]
+    refuse_overwrite(ap, "--json", args.json, [FIXTURE])
+    refuse_overwrite(ap, "--gif", args.gif, [FIXTURE])
+    stream = read_recording(FIXTURE).mocap["shoulder"]
+    first, last = float(stream.t[0]), float(stream.t[-1])
+    if not (math.isfinite(args.start) and first <= args.start
+            and args.start + args.seconds <= last):
+        ap.error(f"--start {args.start:g} --seconds {args.seconds:g}: the replay must lie "
+                 f"within the fixture's {first:g}..{last:g} s")
     t = np.arange(args.start, args.start + args.seconds, 1.0 / RATE_HZ)
     theta = np.interp(t, stream.t, stream.column("elv_angle"))
     phi = np.interp(t, stream.t, stream.column("shoulder_elv"))
@@ -101,4 +118,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

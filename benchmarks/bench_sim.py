@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from benchmarks.report import parser, positive_int, report
+from benchmarks.report import parser, positive_int, report, run_main
 from exohil.emulators.effects import Effect, Signal
 from exohil.emulators.protocols import paper_protocol
 from exohil.emulators.simulate import geometric_signal, simulate
@@ -64,4 +64,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

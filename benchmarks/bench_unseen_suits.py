@@ -19,6 +19,7 @@ baseline's (``--baseline``, default ``ann``). Issue 11's goal: default ENNet ≤
 
 from __future__ import annotations
 
+import argparse
 import json
 import shlex
 import subprocess
@@ -30,7 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.report import load_average, parser, positive_float, positive_int, report
+from benchmarks.report import (
+    BenchmarkError,
+    load_average,
+    parser,
+    positive_float,
+    positive_int,
+    report,
+    run_main,
+)
 from exohil.formats.measurement import Limit, Measurement
 
 #: issue 11: the default ENNet's combined RMSE at most 0.8 of the default ANN's
@@ -67,8 +76,21 @@ def session(suit: int, part: str, duration_s: float):
 def parse_model(text: str) -> tuple[str, list[str]]:
     """``NAME`` (``exohil train --model NAME``, defaults) or ``NAME=ARGS`` (ARGS are the
     ``exohil train`` options, e.g. ``ennet-w20=--model ennet --window 20``)."""
+    from exohil.estimator.defaults import MODEL_NAMES
+
     name, sep, args = text.partition("=")
+    if not sep and name not in MODEL_NAMES:
+        raise argparse.ArgumentTypeError(f"unknown model {name!r}; choose from "
+                                         f"{', '.join(MODEL_NAMES)} or NAME=EXOHIL_TRAIN_ARGS")
     return name, shlex.split(args) if sep else ["--model", name]
+
+
+def _exohil(command: list[str]) -> None:
+    """Run an ``exohil`` command; BenchmarkError with the command and its stderr if it fails."""
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise BenchmarkError(f"{shlex.join(command)} exited {done.returncode}: "
+                             f"{done.stderr.strip() or '(no stderr)'}")
 
 
 def train_and_score(name: str, args: list[str], folder: Path) -> dict:
@@ -77,11 +99,10 @@ def train_and_score(name: str, args: list[str], folder: Path) -> dict:
     exohil = [str(Path(sys.executable).parent / "exohil")]
     ckpt, metrics = folder / f"{name}.npz", folder / f"{name}.json"
     start = time.monotonic()
-    subprocess.run([*exohil, "train", *args, str(folder / "train.mcap"), "--out", str(ckpt)],
-                   check=True, capture_output=True, text=True)
+    _exohil([*exohil, "train", *args, str(folder / "train.mcap"), "--out", str(ckpt)])
     seconds = time.monotonic() - start
-    subprocess.run([*exohil, "evaluate", str(ckpt), str(folder / "test.mcap"),
-                    "--json", str(metrics)], check=True, capture_output=True, text=True)
+    _exohil([*exohil, "evaluate", str(ckpt), str(folder / "test.mcap"), "--json",
+             str(metrics)])
     accuracy = json.loads(metrics.read_text())["accuracy"]
     theta, phi = accuracy["accuracy.rmse.elv_angle"], accuracy["accuracy.rmse.shoulder_elv"]
     return {"theta": theta, "phi": phi, "combined": float(np.sqrt((theta**2 + phi**2) / 2)),
@@ -151,4 +172,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -15,12 +15,17 @@ import argparse
 import json
 import math
 import os
+import signal
+import sys
+import threading
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from types import FrameType
+from typing import Any, NoReturn
 
-from exohil.formats.atomic import write_text
+from exohil.formats.atomic import same_file, write_text
+from exohil.formats.errors import InputError
 from exohil.formats.measurement import Measurement
 from exohil.harness.machine import machine
 
@@ -31,13 +36,106 @@ EPILOG = ("Every figure is a measurement (name, value, unit, limit, verdict): a 
           "(written to a temporary name, then renamed).")
 
 
-def json_file(value: str) -> Path:
-    """argparse type for ``--json FILE``: refused at once when FILE's folder does not exist
-    (rather than after the benchmark ran)."""
+class BenchmarkError(InputError):
+    """Bad input a benchmark finds only once it runs (too short a run to measure, ...); its
+    message is printed as one ``error:`` line by :func:`run_main`."""
+
+
+#: this process's id: a process forked from it (a pool worker) has another
+_MAIN_PID = os.getpid()
+
+
+def file_name(value: str) -> Path:
+    """argparse type for an output file whose folder may not exist yet: refused at once when
+    the name is empty or names an existing folder."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError("empty file name")
     path = Path(value)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{path} is a folder, not a file")
+    return path
+
+
+def json_file(value: str) -> Path:
+    """argparse type for ``--json FILE`` (and other output files): refused at once, rather
+    than after the benchmark ran, when the name is empty or an existing folder, or when its
+    folder does not exist or takes no files."""
+    path = file_name(value)
     if not path.parent.is_dir():
         raise argparse.ArgumentTypeError(f"no such folder: {path.parent}")
+    if not os.access(path.parent, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"cannot write in folder {path.parent}")
     return path
+
+
+def gif_file(value: str) -> Path:
+    """argparse type for ``--gif FILE``: a :func:`json_file` whose name ends in ``.gif``
+    (the animation is GIF data whatever the name says)."""
+    path = json_file(value)
+    if path.suffix.lower() != ".gif":
+        raise argparse.ArgumentTypeError(f"{path}: the animation is a GIF, name it *.gif")
+    return path
+
+
+def out_folder(value: str) -> Path:
+    """argparse type for an output folder (created later): refused at once when the name is
+    empty or names an existing file."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError("empty folder name")
+    path = Path(value)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{path} exists and is not a folder")
+    return path
+
+
+def refuse_overwrite(ap: argparse.ArgumentParser, option: str, output: Path | None,
+                     inputs: Iterable[str | Path]) -> None:
+    """Refuse (``ap.error``: one line, exit 2, before anything runs) an ``output`` that names
+    one of the ``inputs`` the benchmark reads."""
+    if output is None:
+        return
+    hit = same_file(output, inputs)
+    if hit is not None:
+        ap.error(f"{option} {output} would overwrite the input {hit}")
+
+
+def _exit_quietly(_signum: int, _frame: FrameType | None) -> None:
+    """SIGINT in a worker (forked or spawned): end at once without a traceback; the main
+    process reports the interruption."""
+    os._exit(130)
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    if os.getpid() != _MAIN_PID:  # inherited by a forked worker
+        _exit_quietly(signum, frame)
+    raise KeyboardInterrupt
+
+
+def run_main(main: Callable[[], object], interrupted: str = "nothing written") -> NoReturn:
+    """Run a benchmark's ``main`` and exit: 0 when it returns, 2 with one line ``error: ...``
+    for bad input it found (the project's :class:`~exohil.formats.errors.InputError`:
+    a checkpoint, a recording, a session; an operating-system error), 130 with
+    ``interrupted; <interrupted>`` on Ctrl-C. Other exceptions are bugs and keep their
+    traceback. Worker processes end silently on Ctrl-C, so that pools stop at once."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, _interrupt)
+    try:
+        main()
+    except KeyboardInterrupt:
+        print(f"interrupted; {interrupted}", file=sys.stderr)
+        sys.exit(130)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
+        sys.exit(2)
+    sys.exit(0)
+
+
+if "--multiprocessing-fork" in sys.orig_argv:  # imported in a spawned worker
+    signal.signal(signal.SIGINT, _exit_quietly)
 
 
 def positive_int(value: str) -> int:
@@ -45,6 +143,14 @@ def positive_int(value: str) -> int:
     number = int(value)
     if number < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return number
+
+
+def non_negative_int(value: str) -> int:
+    """argparse type: an integer ≥ 0."""
+    number = int(value)
+    if number < 0:
+        raise argparse.ArgumentTypeError(f"must be at least 0, got {value}")
     return number
 
 
@@ -56,12 +162,26 @@ def positive_float(value: str) -> float:
     return number
 
 
-def parser(doc: str) -> argparse.ArgumentParser:
+def description(doc: str) -> str:
+    """The first paragraph of ``doc`` (a module docstring) on one line, for ``--help``."""
+    return " ".join(doc.strip().split("\n\n")[0].split())
+
+
+def non_negative_float(value: str) -> float:
+    """argparse type: a finite number ≥ 0."""
+    number = float(value)
+    if not (math.isfinite(number) and number >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {value}")
+    return number
+
+
+def parser(doc: str, json_type: Callable[[str], Path] = json_file
+           ) -> argparse.ArgumentParser:
     """An argument parser described by the first paragraph of ``doc`` (a benchmark's module
-    docstring), with ``--json FILE`` and the epilog on measurements and exit status."""
-    ap = argparse.ArgumentParser(description=" ".join(doc.split("\n\n")[0].split()),
-                                 epilog=EPILOG)
-    ap.add_argument("--json", type=json_file, metavar="FILE",
+    docstring), with ``--json FILE`` (checked by ``json_type``) and the epilog on
+    measurements and exit status."""
+    ap = argparse.ArgumentParser(description=description(doc), epilog=EPILOG)
+    ap.add_argument("--json", type=json_type, metavar="FILE",
                     help="also write the measurements and the machine to FILE (JSON)")
     return ap
 
@@ -75,7 +195,7 @@ def _value(m: Measurement) -> str:
     """Whole counts (frames, bytes) in full, other values to 6 significant digits."""
     if math.isnan(m.value):
         return "—"
-    if m.unit == "count" and m.value.is_integer():
+    if m.unit in ("count", "B") and m.value.is_integer():
         return f"{m.value:.0f}"
     return f"{m.value:.6g}"
 

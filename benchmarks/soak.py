@@ -28,17 +28,21 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from pathlib import Path
 
 from benchmarks.bench_pipeline import HOST_LOSS_LIMITS
 from benchmarks.report import (
     document,
+    file_name,
     load_average,
+    out_folder,
     parser,
     positive_float,
+    refuse_overwrite,
     report,
+    run_main,
     write_json,
 )
+from exohil.formats.atomic import write_text
 from exohil.formats.measurement import Limit, Measurement
 from exohil.harness.bench import BenchConfig, EmulatorDevice
 from exohil.harness.cmd_demo import DEFAULT_FAULTS, DEFAULT_MODEL, DEFAULT_RECORDING
@@ -181,16 +185,20 @@ def soak_measurements(monitor: Monitor, run_s: float) -> list[Measurement]:
 
 
 def main() -> None:
-    ap = parser(__doc__)
+    ap = parser(__doc__, json_type=file_name)  # its folder may be --out, created below
     ap.add_argument("--minutes", type=positive_float, default=30.0,
                     help="device time to stream, minutes (default: 30; 2 for a quick check)")
-    ap.add_argument("--out", type=Path, required=True,
+    ap.add_argument("--out", type=out_folder, required=True,
                     help="folder for soak.mcap, rss.csv and soak.json (created)")
     ap.add_argument("--robot", default="simulated", help="robot target (simulated, mujoco)")
     ap.add_argument("--faults", default=DEFAULT_FAULTS, help="emulator fault spec")
     ap.add_argument("--rss-every", type=positive_float, default=5.0, metavar="S",
                     help="seconds between RSS samples (default: 5)")
     args = ap.parse_args()
+    if args.json is not None and not (args.json.parent.is_dir()
+                                      or args.json.parent.resolve() == args.out.resolve()):
+        ap.error(f"argument --json: no such folder: {args.json.parent}")
+    refuse_overwrite(ap, "--json", args.json, [DEFAULT_RECORDING, DEFAULT_MODEL])
     args.out.mkdir(parents=True, exist_ok=True)
     seconds = 60.0 * args.minutes
     window_s = min(WINDOW_S, seconds / 2)
@@ -207,8 +215,8 @@ def main() -> None:
     print(f"load average after: {load_average()}")
     print(f"device log: {result.fault_counts}")
     rss_csv = args.out / "rss.csv"
-    rss_csv.write_text("seconds,rss_mib\n" + "".join(f"{t:.1f},{v:.2f}\n"
-                                                     for t, v in monitor.rss), encoding="utf-8")
+    write_text(rss_csv, "seconds,rss_mib\n" + "".join(f"{t:.1f},{v:.2f}\n"
+                                                      for t, v in monitor.rss))
     measurements = (link_measurements(result, LIMITS) + soak_measurements(monitor, run_s)
                     + latency_measurements(result.run) + session_accuracy(result))
     report("soak", measurements, args.json)
@@ -216,4 +224,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.blind3 import generate as blind3
+from benchmarks.report import description
 
 NEARLY_OPPOSITE_DEG = 175.0
 
@@ -94,7 +95,7 @@ def twin_angles(index: int) -> tuple[list[str], np.ndarray]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description(__doc__))
     parser.add_argument("runs", type=Path, help="the clean twins' summaries (rec_XX.json)")
     parser.add_argument("--only", type=int, nargs="*", default=[], help="only these twins")
     args = parser.parse_args()

@@ -28,6 +28,7 @@ import numpy as np
 from scipy import signal
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
+from exohil.formats.atomic import write_text
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 from exohil.formats.recording_writer import write_recording
 
@@ -1251,10 +1252,14 @@ def apply_effect(cls, fam, target, rng, t, q, eps, tr, y_clean, sd, fs, qgrid):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--without-effect", action="store_true")
-    ap.add_argument("--only", type=int, nargs="*")
+    from benchmarks.report import description
+
+    ap = argparse.ArgumentParser(description=description(__doc__))
+    ap.add_argument("--out", required=True, help="folder for the recordings and truth.json")
+    ap.add_argument("--without-effect", action="store_true",
+                    help="write each recording's clean twin (the effect computed, not applied)")
+    ap.add_argument("--only", type=int, nargs="*", metavar="N",
+                    help="only these recordings (then no truth.json is written)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     plan = make_plan()
@@ -1276,8 +1281,7 @@ def main():
               f"rp={truth['magnitude_resid_pose_poly4_x_noise']:.2f} gen={t1 - t0:.1f}s "
               f"(eff {edt:.1f}) write={t2 - t1:.1f}s", flush=True)
     if args.only is None:
-        with open(os.path.join(args.out, "truth.json"), "w") as f:
-            json.dump(truths, f, indent=1)
+        write_text(os.path.join(args.out, "truth.json"), json.dumps(truths, indent=1))
     print(f"total {time.time() - t_all:.1f}s")
 
 

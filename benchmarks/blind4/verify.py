@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.report import description
 from exohil.formats.recording_reader import read_recording
 
 ALLOWED_METADATA = {"format", "version", "sensors", "units", "sensor_rate_hz", "mocap_rate_hz",
@@ -51,12 +52,15 @@ def check_pair(folder: Path, twins: Path, entry: dict, twin: dict) -> bool:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description(__doc__))
     parser.add_argument("folder", type=Path, help="the recordings and truth.json")
     parser.add_argument("twins", type=Path, help="their twins (--without-effect)")
     args = parser.parse_args()
-    truth = json.loads((args.folder / "truth.json").read_text())
-    twins = json.loads((args.twins / "truth.json").read_text())
+    keys = [folder / "truth.json" for folder in (args.folder, args.twins)]
+    missing = [str(key) for key in keys if not key.is_file()]
+    if missing:
+        parser.error(f"{missing[0]} not found (the answer key written with the recordings)")
+    truth, twins = (json.loads(key.read_text()) for key in keys)
     assert len(truth) == len(twins)
     print(Counter(e["effect"] for e in truth), Counter(e["effect"] for e in twins))
     bad = sum(not check_pair(args.folder, args.twins, e, t)
