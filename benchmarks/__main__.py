@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from benchmarks.report import description, json_file, write_json
+from benchmarks.report import description, json_file, run_main, write_json
 from exohil.formats.measurement import Limit
 
 BENCHMARKS = ("bench_sim", "bench_recording_io", "bench_inference", "bench_emulator",
@@ -60,4 +60,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_main(main, interrupted="the benchmarks run so far are not reported")

@@ -112,15 +112,16 @@ def _interrupt(signum: int, frame: FrameType | None) -> None:
 
 
 def run_main(main: Callable[[], object], interrupted: str = "nothing written") -> NoReturn:
-    """Run a benchmark's ``main`` and exit: 0 when it returns, 2 with one line ``error: ...``
-    for bad input it found (the project's :class:`~exohil.formats.errors.InputError`:
-    a checkpoint, a recording, a session; an operating-system error), 130 with
+    """Run a benchmark's ``main`` and exit: with the status it returns (0 for None), 2 with
+    one line ``error: ...`` for bad input it found (the project's
+    :class:`~exohil.formats.errors.InputError`: a checkpoint, a recording, a session; an
+    operating-system error), 130 with
     ``interrupted; <interrupted>`` on Ctrl-C. Other exceptions are bugs and keep their
     traceback. Worker processes end silently on Ctrl-C, so that pools stop at once."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, _interrupt)
     try:
-        main()
+        status = main()
     except KeyboardInterrupt:
         print(f"interrupted; {interrupted}", file=sys.stderr)
         sys.exit(130)
@@ -131,7 +132,7 @@ def run_main(main: Callable[[], object], interrupted: str = "nothing written") -
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
         sys.exit(2)
-    sys.exit(0)
+    sys.exit(status if isinstance(status, int) else 0)
 
 
 if "--multiprocessing-fork" in sys.orig_argv:  # imported in a spawned worker

@@ -177,6 +177,10 @@ def test_run_main_turns_input_errors_into_one_line_and_ctrl_c_into_130(report_mo
         assert capsys.readouterr().err == line + "\n"
     with pytest.raises(RuntimeError):  # a bug keeps its traceback
         report_module.run_main(raising(RuntimeError("bug")))
+    for returned, status in [(None, 0), (1, 1)]:  # `python -m benchmarks`: 1 when one broke
+        with pytest.raises(SystemExit) as exit_:
+            report_module.run_main(lambda returned=returned: returned)
+        assert exit_.value.code == status
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
