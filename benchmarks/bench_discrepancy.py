@@ -21,7 +21,7 @@ timed runs (default one per CPU, as ``exohil discrepancy`` does). ``--motion DIR
 the suits with the real shoulder motion of every ``.mot`` file in DIR, joined in name order
 (e.g. ``../shared/realdata/shoulder-ik``), instead of the seeded random movement;
 ``--duration`` is then the motion's own length. With the defaults (5 seeds: 120 cases) the
-sweep takes about 5½ minutes on two cores (docs/discrepancy.md), then the timing runs.
+sweep takes about 5½ minutes on two cores (docs/discrepancy-results.md), then the timing runs.
 """
 
 from __future__ import annotations
