@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 STAMP   = $(VENV)/.installed
 
-.PHONY: demo test lint conform bench install clean
+.PHONY: demo test lint conform conform-baseline bench install clean
 
 install: $(STAMP)
 
@@ -32,14 +32,24 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 
-# The conformance gate CI runs: reference ENNet, held-out fixture on the emulator, ci profile.
+# The conformance gate CI runs: reference ENNet, held-out fixture on the emulator, ci profile;
+# its accuracy must not regress from the figures stored in conformance/baselines/ci.json.
+GATE = --target emulator:fixtures/paper_protocol_heldout.mcap \
+	--model fixtures/models/ennet.npz --profile ci
 conform: $(STAMP)
-	$(BIN)/exohil conform --target emulator:fixtures/paper_protocol_heldout.mcap \
-		--model fixtures/models/ennet.npz --profile ci --out conformance-report
+	$(BIN)/exohil conform $(GATE) --baseline conformance/baselines/ci.json \
+		--out conformance-report
+
+# Store the gate's figures as the new baseline (only after a change meant to move them;
+# conformance/baselines/README.md). A failing gate stores nothing.
+conform-baseline: $(STAMP)
+	$(BIN)/exohil conform $(GATE) --out conformance-baseline
+	cp conformance-baseline/conformance.json conformance/baselines/ci.json.partial
+	mv conformance/baselines/ci.json.partial conformance/baselines/ci.json
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 
 clean:
-	rm -rf $(VENV) build *.egg-info conformance-report demo-report .tox .hypothesis \
+	rm -rf $(VENV) build *.egg-info conformance-report conformance-baseline demo-report .tox .hypothesis \
 		.mypy_cache .ruff_cache .pytest_cache

@@ -14,6 +14,7 @@ limits; the pytest check (``test_checks.py``) records and judges them.
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Callable
@@ -336,21 +337,31 @@ class ConformanceRun:
         return out
 
     def regression_measurements(self) -> list[Measurement]:
+        """Accuracy against the baseline's, and the estimator's p99 against the baseline
+        model's. The baseline is a checkpoint (both models replayed and timed here) or the
+        ``conformance.json`` of an earlier run (its accuracy figures, measured on the same
+        reference recording: :func:`figures_baseline`; a run elsewhere has no model to
+        time beside this one, so latency is then not compared)."""
         if self.baseline_path is None:
             raise CheckBlocked("no --baseline given")
         limits = dict(self.profile.limits("regression"))
         margin = self.profile.setting("regression_accuracy_margin_deg")
         factor = self.profile.setting("regression_latency_factor")
-        baseline = load_model(self.baseline_path, self.backend)
         rec = self.reference
         if rec is None:
             raise CheckBlocked("no reference recording to compare accuracy on")
         mine = accuracy_measurements(self.replay.estimates, self.replay.truth,
                                      self.model.estimator.target.angles)
-        base_replay = self._replay(baseline, rec)
-        theirs = accuracy_measurements(base_replay.estimates, base_replay.truth,
-                                       baseline.estimator.target.angles)
-        base_values = {m.name: m.value for m in theirs}
+        figures = self.baseline_path.suffix.lower() == ".json"
+        if figures:
+            base_values, whose = figures_baseline(self.baseline_path, self.reference_sha256)
+            baseline = None
+        else:
+            baseline = load_model(self.baseline_path, self.backend)
+            base_replay = self._replay(baseline, rec)
+            base_values = {m.name: m.value for m in accuracy_measurements(
+                base_replay.estimates, base_replay.truth, baseline.estimator.target.angles)}
+            whose = "baseline"
         out = []
         for m in mine:
             if m.unit != "deg" or m.name not in base_values:
@@ -358,15 +369,57 @@ class ConformanceRun:
             name = "regression." + m.name
             limit = limits.get(name, Limit(high=margin, unit="deg", inclusive=True))
             out.append(Measurement.judge(name, m.value - base_values[m.name], "deg", limit,
-                                         f"{m.value:.3f} vs baseline {base_values[m.name]:.3f}"))
-        mine_p99, base_p99 = _paced_p99_ms(self.model, baseline, rec.sensors.values)
+                                         f"{m.value:.3f} vs {whose} {base_values[m.name]:.3f}"))
+        if not out:
+            raise SessionError(f"{self.baseline_path}: no accuracy figure to compare with "
+                               f"this model's ({', '.join(m.name for m in mine)})")
         limit = limits.get("regression.latency_p99_ratio", Limit(high=factor, unit="x",
                                                                  inclusive=True))
+        if baseline is None:
+            out.append(Measurement.skipped(
+                "regression.latency_p99_ratio", "x", "the baseline is figures of an earlier "
+                "run, with no model to time beside this one (give a checkpoint to compare "
+                "latency)", limit))
+            return out
+        mine_p99, base_p99 = _paced_p99_ms(self.model, baseline, rec.sensors.values)
         out.append(Measurement.judge("regression.latency_p99_ratio", mine_p99 / base_p99, "x",
                                      limit, f"estimator p99 {mine_p99:.3f} ms vs baseline "
                                             f"{base_p99:.3f} ms, interleaved on one machine, each "
                                             "frame the least of its passes"))
         return out
+
+    @cached_property
+    def reference_sha256(self) -> str | None:
+        """The reference recording's sha256 (None without one)."""
+        path = self.reference_file
+        return None if path is None else sha256_file(path)
+
+
+def figures_baseline(path: Path, reference_sha256: str | None) -> tuple[dict[str, float], str]:
+    """The accuracy figures (measurement name → degrees) of an earlier run's
+    ``conformance.json`` at ``path``, and how the notes name them ("baseline <model
+    sha256[:12]>"). SessionError where the file is no such report, holds no accuracy
+    figure, or was measured on another reference recording than ``reference_sha256``."""
+    from exohil.conformance.report import SCHEMA
+
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SessionError(f"{path}: not a conformance report to compare with ({exc})") from None
+    if not isinstance(data, dict) or data.get("schema") != SCHEMA:
+        raise SessionError(f"{path}: not a conformance report (schema {SCHEMA}) to compare with")
+    theirs = data.get("reference_sha256")
+    if theirs is None or theirs != reference_sha256:
+        raise SessionError(
+            f"{path}: its figures were measured on another reference recording "
+            f"({data.get('reference')}, sha256 {str(theirs)[:12]}) than this run's; "
+            "measure the baseline on the same recording")
+    values = {m["name"]: float(m["value"])
+              for check in data.get("checks", []) if check.get("name") == "accuracy"
+              for m in check.get("measurements", [])
+              if m.get("unit") == "deg" and isinstance(m.get("value"), (int, float))}
+    model = (data.get("model") or {}).get("sha256") or "?"
+    return values, f"baseline figures (model {model[:12]})"
 
 
 def _paced_p99_ms(a: LoadedModel, b: LoadedModel, values: np.ndarray, frames: int = 2000,

@@ -3,8 +3,9 @@
 ``conformance.json`` (schema ``exohil-conformance/1``, docs/conformance.md)::
 
     {"schema": "exohil-conformance/1", "verdict": "pass" | "fail",
-     "target": str, "reference": str | null, "model": {"path", "sha256", "kind"},
-     "baseline": str | null, "profile": {"name", "path"},
+     "target": str, "reference": str | null, "reference_sha256": str | null,
+     "model": {"path", "sha256", "kind"}, "baseline": str | null,
+     "profile": {"name", "path", "sha256"},
      "versions": {"exohil", "python", "numpy", "torch", "onnxruntime"}, "machine": str,
      "started": ISO time, "duration_s": s,
      "checks": [{"name", "verdict", "required", "message", "duration_s",
@@ -24,6 +25,7 @@ from typing import Any
 
 from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
+from exohil.formats.digest import sha256_file
 from exohil.formats.measurement import Verdict
 from exohil.harness.machine import machine
 
@@ -59,9 +61,12 @@ def report_dict(run: Any, results: list[Any]) -> dict[str, Any]:
         "verdict": overall(results).value,
         "target": run.target,
         "reference": None if run.reference_file is None else str(run.reference_file),
+        "reference_sha256": run.reference_sha256,
         "model": model,
         "baseline": None if run.baseline_path is None else str(run.baseline_path),
-        "profile": {"name": run.profile.name, "path": str(run.profile.path)},
+        "profile": {"name": run.profile.name, "path": str(run.profile.path),
+                    "sha256": None if run.profile.path is None
+                    else sha256_file(run.profile.path)},
         "versions": {"exohil": _version("exohil"), "python": platform.python_version(),
                      **{p: _version(p) for p in ("numpy", "torch", "onnxruntime", "pytest",
                                                  "hypothesis")}},
@@ -85,7 +90,11 @@ def summary_markdown(run: Any, results: list[Any]) -> str:
     verdict = overall(results)
     lines = [f"# exohil conformance: {verdict.value.upper()}", "",
              f"- target: `{run.target}`", f"- model: `{run.model_path}`",
-             f"- profile: `{run.profile.name}`", f"- machine: {machine()}", "",
+             f"- profile: `{run.profile.name}`"
+             + ("" if run.profile.path is None else
+                f" (sha256 {sha256_file(run.profile.path)[:12]})"),
+             *([] if run.baseline_path is None else [f"- baseline: `{run.baseline_path}`"]),
+             f"- machine: {machine()}", "",
              "| check | verdict | measurement | value | unit | limit |",
              "|---|---|---|---:|---|---|"]
     for r in results:
@@ -116,11 +125,17 @@ def summary_lines(run: Any, results: list[Any]) -> list[str]:
 
 
 def final_line(report: dict[str, Any]) -> str:
-    """From a conformance.json dict: ``PASS: 8 checks passed`` or ``FAIL: <check>: <figure>``
-    naming the first failing (or skipped required) check."""
+    """From a conformance.json dict: ``PASS: 8 checks passed`` (naming those among them that
+    judged nothing: no measurement with a limit, so their figures are reported only) or
+    ``FAIL: <check>: <figure>`` naming the first failing (or skipped required) check."""
     checks = report["checks"]
     if report["verdict"] == Verdict.PASS.value:
-        return f"PASS: {sum(c['verdict'] == 'pass' for c in checks)} checks passed"
+        passed = [c for c in checks if c["verdict"] == "pass"]
+        unjudged = [c["name"] for c in passed
+                    if all(m["limit"] is None for m in c["measurements"])]
+        return (f"PASS: {len(passed)} checks passed"
+                + (f"; {', '.join(unjudged)} with no limit (figures reported only)"
+                   if unjudged else ""))
     unmet = [c for c in checks if c["required"] and c["verdict"] != "pass"]
     bad = next((c for c in checks if c["verdict"] == "fail"), None) or next(
         (c for c in unmet if c["message"] != NOT_RUN), None)

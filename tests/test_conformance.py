@@ -22,6 +22,7 @@ from click.testing import CliRunner
 
 from exohil.conformance.profile import ProfileError, load_profile, parse_limit
 from exohil.estimator.checkpoint import load_checkpoint, save_checkpoint
+from exohil.formats.digest import sha256_file
 from exohil.formats.measurement import Measurement
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
@@ -98,6 +99,21 @@ def test_bundled_profiles_load():
         assert "accuracy" in profile.checks and "latency" in profile.checks
     bench = load_profile("bench").limits("latency")
     assert bench["latency.end_to_end.p99"].high == 4.0
+
+
+def test_the_ci_gate_limits_change_only_with_this_test():
+    """The gate CI runs: loosening a limit in ci.toml (or emptying a table, which reports
+    figures and judges nothing) must be a visible change here too, not one file's edit."""
+    ci = load_profile("ci")
+    assert {check: {name: limit.describe() for name, limit in limits.items()}
+            for check, limits in ci.checks.items()} == {
+        "compatibility": {}, "heldout": {}, "link": {}, "conversions": {}, "teleop": {},
+        "regression": {},
+        "accuracy": {"accuracy.rmse.elv_angle": "< 3 deg",
+                     "accuracy.rmse.shoulder_elv": "< 2 deg",
+                     "accuracy.direction_rmse": "< 3 deg"},
+        "latency": {"latency.end_to_end.p99": "< 12 ms"}}
+    assert ci.setting("regression_accuracy_margin_deg") == 0.25
     assert load_profile("default").limits("latency")["latency.end_to_end.max"].high == 12.0
 
 
@@ -156,6 +172,10 @@ def test_the_reference_ennet_passes_and_writes_every_report(tmp_path, fast_profi
     code, output, report = conform(tmp_path, fast_profile)
     assert code == 0, output
     assert last_line(output).startswith("PASS")
+    # the profile states no latency limit (timing is never asserted in unit tests): the
+    # verdict line says the check judged nothing
+    assert "latency" in last_line(output).partition(";")[2]
+    assert last_line(output).endswith(" with no limit (figures reported only)")
     assert verdicts(report) == {"compatibility": "pass", "heldout": "pass", "accuracy": "pass",
                                 "latency": "pass", "link": "pass", "conversions": "pass",
                                 "teleop": "pass", "regression": "skip"}
@@ -223,6 +243,68 @@ def test_a_baseline_enables_the_regression_check(tmp_path, fast_profile):
                                                                                    abs=1e-9)
     # measured, not asserted to pass: no timing is asserted to pass (module docstring)
     assert measured["regression.latency_p99_ratio"]["value"] > 0
+
+
+def _figures(report: dict, worse_by: float) -> dict:
+    """``report`` (a conformance.json) as a baseline whose accuracy figures were better than
+    the run's by ``worse_by`` degrees."""
+    figures = json.loads(json.dumps(report))
+    for check in figures["checks"]:
+        for m in check["measurements"]:
+            if check["name"] == "accuracy" and m["unit"] == "deg":
+                m["value"] -= worse_by
+    return figures
+
+
+def test_a_figures_baseline_gates_accuracy_against_an_earlier_run(tmp_path, fast_profile):
+    """CI passed no baseline, so a model or code change that made the reference model
+    0.3° less accurate passed the gate while the absolute limits held. An earlier run's
+    conformance.json is a baseline: its accuracy figures, on the same recording, are the
+    bar (within the margin, 0.25°); latency has no model to time beside this one."""
+    code, output, first = conform(tmp_path / "first", fast_profile, "-k", "accuracy")
+    assert first["reference_sha256"] == sha256_file(HELDOUT)
+    assert len(first["profile"]["sha256"]) == 64
+    for worse_by, verdict in ((0.0, "pass"), (0.2, "pass"), (0.3, "fail")):
+        baseline = tmp_path / f"baseline-{worse_by}.json"
+        baseline.write_text(json.dumps(_figures(first, worse_by)), encoding="utf-8")
+        code, output, report = conform(tmp_path / f"run-{worse_by}", fast_profile,
+                                       "--baseline", str(baseline), "-k", "regression")
+        regression = next(c for c in report["checks"] if c["name"] == "regression")
+        assert regression["required"] and regression["verdict"] == verdict, output
+        measured = {m["name"]: m for m in regression["measurements"]}
+        assert measured["regression.accuracy.rmse.elv_angle"]["value"] == \
+            pytest.approx(worse_by, abs=1e-9)
+        assert "vs baseline figures (model " in \
+            measured["regression.accuracy.rmse.elv_angle"]["note"]
+        assert measured["regression.latency_p99_ratio"]["verdict"] == "skip"
+    assert "regression.accuracy.rmse.elv_angle = 0.3 deg" in last_line(output)
+
+
+def test_a_figures_baseline_of_another_recording_or_no_report_is_refused(tmp_path,
+                                                                         fast_profile):
+    from exohil.conformance.context import figures_baseline
+    from exohil.harness.session import SessionError
+
+    report = {"schema": "exohil-conformance/1", "reference": "x.mcap",
+              "reference_sha256": "a" * 64, "model": {"sha256": "b" * 64},
+              "checks": [{"name": "accuracy", "measurements": [
+                  {"name": "accuracy.rmse.elv_angle", "value": 1.5, "unit": "deg"},
+                  {"name": "accuracy.frames_scored", "value": 10.0, "unit": "count"}]}]}
+    path = tmp_path / "b.json"
+    path.write_text(json.dumps(report), encoding="utf-8")
+    assert figures_baseline(path, "a" * 64) == ({"accuracy.rmse.elv_angle": 1.5},
+                                                f"baseline figures (model {'b' * 12})")
+    with pytest.raises(SessionError, match="measured on another reference recording"):
+        figures_baseline(path, "c" * 64)
+    for text in ("{not json", json.dumps({"schema": "other"}), json.dumps([1])):
+        path.write_text(text, encoding="utf-8")
+        with pytest.raises(SessionError, match="not a conformance report"):
+            figures_baseline(path, "a" * 64)
+    # through the command: a required check that cannot compare fails, naming the file
+    code, output, out = conform(tmp_path / "run", fast_profile, "--baseline", str(path),
+                                "-k", "regression")
+    assert verdicts(out)["regression"] == "fail"
+    assert f"{path}: not a conformance report" in last_line(output)
 
 
 def test_a_candidate_slower_than_its_baseline_fails_regression(tmp_path, fast_profile,
