@@ -152,11 +152,12 @@ class Measurement:
     def failed(self) -> bool:
         return self.verdict is Verdict.FAIL
 
-    def describe(self) -> str:
-        """One line: ``name = value unit (limit) VERDICT``."""
-        value = "—" if math.isnan(self.value) else f"{self.value:.4g}"
+    def describe(self, with_note: bool = True) -> str:
+        """One line: ``name = value unit (limit) VERDICT; note`` (without the note when
+        ``with_note`` is False)."""
+        value = "—" if math.isnan(self.value) else _figure(self.value)
         limit = f" (limit {self.limit.describe()})" if self.limit else ""
-        note = f"; {self.note}" if self.note else ""
+        note = f"; {self.note}" if self.note and with_note else ""
         return f"{self.name} = {value} {self.unit}{limit} {self.verdict.value.upper()}{note}"
 
     def to_dict(self) -> dict[str, Any]:
@@ -209,3 +210,11 @@ def distribution(name: str, samples: Iterable[float] | np.ndarray, unit: str,
     return [Measurement.judge(f"{name}.{stat}", values[stat], unit, limits.get(stat), counted)
             for stat in DISTRIBUTION_STATS]
 
+
+def _figure(value: float) -> str:
+    """``value`` to 4 significant digits, written out where it is of a size a person reads
+    that way (10580 ms, not 1.058e+04 ms; 0.0001234), in powers of ten beyond."""
+    if value == 0 or not math.isfinite(value) or not 1e-4 <= abs(value) < 1e6:
+        return f"{value:.4g}"
+    return np.format_float_positional(value, precision=4, unique=False, fractional=False,
+                                      trim="-")

@@ -104,3 +104,12 @@ def test_a_limit_no_value_can_meet_or_every_value_meets_is_refused(low, high, sa
 def test_a_limit_on_a_statistic_a_distribution_lacks_is_refused():
     with pytest.raises(ValueError, match="limits on p95: a distribution has p50, p99, max"):
         distribution("lat", [1.0], "ms", {"p95": Limit(high=1, unit="ms")})
+
+
+@pytest.mark.parametrize(("value", "written"), [
+    (10580.3, "10580"), (4.0821, "4.082"), (0.00012344, "0.0001234"), (-3.21, "-3.21"),
+    (0.0, "0"), (5.5e-13, "5.5e-13"), (2.5e6, "2.5e+06"), (float("nan"), "—")])
+def test_a_measurement_is_written_out_where_a_person_reads_it_so(value, written):
+    """A failed latency read '1.058e+04 ms (limit < 12 ms)' on the gate's last line."""
+    m = Measurement.judge("latency.end_to_end.p99", value, "ms", Limit(high=12.0, unit="ms"))
+    assert m.describe().startswith(f"latency.end_to_end.p99 = {written} ms (limit < 12 ms) ")
