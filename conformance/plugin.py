@@ -189,8 +189,9 @@ def check(request: pytest.FixtureRequest, conformance_run, record_property):
                 record_property(key, value)
         failed = [m for m in measurements if m.failed]
         judged = [m for m in measurements if m.limit is not None]
-        if failed:
-            message = "; ".join(m.describe() for m in failed)
+        if failed:  # a note the measurement before gave (the frames scored) is not repeated
+            message = "; ".join(m.describe(with_note=m.note not in [f.note for f in failed[:i]])
+                                for i, m in enumerate(failed))
             done(Verdict.FAIL, message, measurements)
             pytest.fail(f"{name}: {message}", pytrace=False)
         if judged and all(m.verdict is Verdict.SKIP for m in judged):

@@ -362,6 +362,8 @@ def test_the_ann_in_place_of_ennet_fails_accuracy(tmp_path, fast_profile):
     code, output, report = conform(tmp_path, fast_profile, "-k", "accuracy", model=ANN)
     assert code != 0 and verdicts(report)["accuracy"] == "fail"
     assert last_line(output).startswith("FAIL: accuracy: accuracy.rmse.")
+    # both angles are scored on the same frames: the line says which once (it said it twice)
+    assert last_line(output).count("frames where elevation >= 20 deg") == 1, last_line(output)
 
 
 def test_ennet_with_perturbed_weights_fails_accuracy(tmp_path, fast_profile):
