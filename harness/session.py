@@ -553,7 +553,23 @@ def latency_measurements(run: PipelineRun, limits: Limits | None = None) -> list
     out: list[Measurement] = []
     for name, (hist, note) in latency_histograms(run).items():
         out += histogram_distribution(name, hist, "ms", _stat_limits(limits, name), note)
-    return out
+    return [_with_largest_part(m, out) for m in out]
+
+
+def _with_largest_part(m: Measurement, every: list[Measurement]) -> Measurement:
+    """An end-to-end figure that failed its limit, with the stage of the chain (the
+    intervals of :data:`LATENCY_INTERVALS`) whose same statistic is largest named in its
+    note, so a failed gate says where the time went; any other measurement as it is."""
+    head, _, stat = m.name.rpartition(".")
+    if not m.failed or head != "latency.end_to_end":
+        return m
+    parts = {p.name: p.value for p in every
+             if p.name.rpartition(".")[0] in LATENCY_INTERVALS and p.name.endswith("." + stat)
+             and math.isfinite(p.value)}
+    if not parts:
+        return m
+    largest = max(parts, key=lambda name: parts[name])
+    return replace(m, note=f"{m.note}; largest part: {largest} = {parts[largest]:.3g} ms")
 
 
 def coverage_measurement(tally: CoverageTally, limits: Limits | None = None) -> Measurement:

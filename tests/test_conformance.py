@@ -398,6 +398,8 @@ def test_a_slow_estimator_fails_latency(tmp_path, fast_profile, monkeypatch):
     code, output, report = conform(tmp_path / "out", profile, "-k", "latency")
     assert code != 0 and verdicts(report)["latency"] == "fail"
     assert last_line(output).startswith("FAIL: latency: latency.end_to_end.max")
+    # it says where the time went: the frames wait for the slow estimator
+    assert "largest part: latency.queue_and_estimate.max = " in last_line(output)
     attempts = measurements(report)["latency.attempts"]
     assert attempts["value"] == 2 and attempts["note"].count("(failed)") == 2
     assert "measuring a fresh segment" in output
