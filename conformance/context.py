@@ -275,8 +275,8 @@ class ConformanceRun:
                 + "".join(f"; {why}" for why in apart))
         unknown = [s.get("file", "?") for s in sources if "cut_from" not in s]
         if unknown and not trained:  # a checkpoint written before exohil recorded lineage
-            note += (f"; what {', '.join(unknown)} was cut from is not recorded (an older "
-                     "checkpoint): a part of this recording among them would go unseen")
+            note += (f"; the checkpoint does not record what {', '.join(unknown)} was cut "
+                     "from (written before exohil did), so a part of this one would go unseen")
         if not sources:
             note = "the checkpoint records no training recordings; cannot prove held-out"
         return [Measurement.judge("heldout.overlap", len(trained) if sources else 1, "count",

@@ -190,7 +190,7 @@ def shared_frames(scored: dict, trained: dict) -> tuple[bool, str]:
     name, other = scored.get("file", "?"), trained.get("file", "?")
     digest, trained_digest = scored.get("sha256"), trained.get("sha256")
     if digest == trained_digest:
-        return True, f"{name} is the training recording {other}"
+        return True, f"{name} was used to train the model (as {other})"
     if trained_digest in scored.get("cut_from", []):
         return True, f"{name} was cut from the training recording {other}"
     if digest in trained.get("cut_from", []):
