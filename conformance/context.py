@@ -32,7 +32,7 @@ from exohil.estimator.rates import same_rate
 from exohil.formats.alignment import angles_at_sensor_times
 from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.formats.recording import Recording
-from exohil.formats.recording_metadata import cut_lineage
+from exohil.formats.recording_metadata import cut_origins, shared_frames
 from exohil.harness.bench import (
     BenchConfig,
     Device,
@@ -259,15 +259,25 @@ class ConformanceRun:
         path = self.reference_file
         if path is None:
             raise CheckBlocked("no reference recording to compare with the training data")
-        # a part cut from a training recording (exohil record cut) is training data too
+        # a part cut from a training recording (exohil record cut) is training data too, and
+        # so is a recording a training recording was cut from, unless their times never meet
         reference = self.reference  # a file that is no recording fails here, not passes
-        digests = {sha256_file(path),
-                   *(cut_lineage(reference.metadata) if reference is not None else [])}
+        scored = {"file": path.name, "sha256": sha256_file(path)}
+        if reference is not None and len(reference.sensors):
+            scored.update(cut_origins(reference.metadata, float(reference.sensors.t[0]),
+                                      float(reference.sensors.t[-1])))
         sources = self.model.estimator.info.get("sources", [])
-        trained = [s.get("file", "?") for s in sources if s.get("sha256") in digests]
-        note = (f"{path.name} was used to train the model, or cut from a recording that was "
-                f"(as {', '.join(trained)}): score it on a recording it never saw" if trained else
-                f"{path.name} is not among the model's {len(sources)} training recording(s)")
+        judged = [shared_frames(scored, s) for s in sources]
+        trained = [why for overlap, why in judged if overlap]
+        apart = [why for overlap, why in judged if not overlap and why]
+        note = (f"{'; '.join(trained)}: score it on a recording the model never saw"
+                if trained else
+                f"{path.name} is not among the model's {len(sources)} training recording(s)"
+                + "".join(f"; {why}" for why in apart))
+        unknown = [s.get("file", "?") for s in sources if "cut_from" not in s]
+        if unknown and not trained:  # a checkpoint written before exohil recorded lineage
+            note += (f"; the checkpoint does not record what {', '.join(unknown)} was cut "
+                     "from (written before exohil did), so a part of this one would go unseen")
         if not sources:
             note = "the checkpoint records no training recordings; cannot prove held-out"
         return [Measurement.judge("heldout.overlap", len(trained) if sources else 1, "count",

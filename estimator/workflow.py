@@ -33,6 +33,7 @@ from exohil.estimator.trained import TrainedEstimator
 from exohil.estimator.training import TrainConfig, train
 from exohil.formats.digest import sha256_file
 from exohil.formats.recording import Recording
+from exohil.formats.recording_metadata import cut_origins
 
 
 def model_config(name: str, base: TrainConfig, rate_hz: float,
@@ -105,8 +106,11 @@ def load_recordings(
         stream = r.mocap.get(target.joint)
         if stream is None or any(a not in stream.names for a in target.angles):
             raise DatasetError(f"{p}: has no {target.joint} angles {list(target.angles)}")
-    return LoadedData(list(paths), recs, tuple(sensors), target, rate,
-                      [{"file": p.name, "sha256": sha256_file(p)} for p in paths])
+    # each with what it was cut from, for the heldout check (formats.recording_metadata)
+    sources = [{"file": p.name, "sha256": sha256_file(p),
+                **cut_origins(r.metadata, float(r.sensors.t[0]), float(r.sensors.t[-1]))}
+               for p, r in zip(paths, recs, strict=True)]
+    return LoadedData(list(paths), recs, tuple(sensors), target, rate, sources)
 
 
 def make_split(

@@ -171,6 +171,45 @@ def cut_lineage(metadata: dict[str, str]) -> list[str]:
                         *metadata.get("cut.origins_sha256", "").split(",")) if d]
 
 
+def cut_origins(metadata: dict[str, str], first_s: float, last_s: float) -> dict:
+    """What a checkpoint's ``info.sources`` entry records of a recording's lineage, so that
+    the heldout check sees a part cut from the recording it scores: ``cut_from``
+    (:func:`cut_lineage`; empty for a recording that was not cut, and absent only in
+    checkpoints written before) and ``span_s``, the recording's first and last sensor frame
+    times. ``exohil record cut`` keeps times as they were, so these lie on the clock of every
+    recording it was cut from."""
+    return {"cut_from": cut_lineage(metadata), "span_s": [first_s, last_s]}
+
+
+def shared_frames(scored: dict, trained: dict) -> tuple[bool, str]:
+    """Whether recording ``scored`` may hold frames of training recording ``trained``, and
+    why (empty when unrelated). Both are ``info.sources``-style entries: ``file``,
+    ``sha256`` and, for a cut, :func:`cut_origins`' keys (an entry without them, as older
+    checkpoints write, is taken as not cut). Two parts of one recording share no frame
+    only where both spans are known and do not meet; any other relation is an overlap."""
+    name, other = scored.get("file", "?"), trained.get("file", "?")
+    digest, trained_digest = scored.get("sha256"), trained.get("sha256")
+    if digest == trained_digest:
+        return True, f"{name} was used to train the model (as {other})"
+    if trained_digest in scored.get("cut_from", []):
+        return True, f"{name} was cut from the training recording {other}"
+    if digest in trained.get("cut_from", []):
+        return True, f"the training recording {other} was cut from {name}"
+    common = [d for d in scored.get("cut_from", []) if d in trained.get("cut_from", [])]
+    if not common:
+        return False, ""
+    shared = f"{name} and the training recording {other} were cut from one recording " \
+             f"(sha256 {common[0][:12]}…)"
+    span, trained_span = scored.get("span_s"), trained.get("span_s")
+    if not (span and trained_span):
+        return True, f"{shared}, and their times are not known"
+    if span[1] < trained_span[0] or trained_span[1] < span[0]:
+        return False, (f"{shared} but from other times ({span[0]:.3f}–{span[1]:.3f} s and "
+                       f"{trained_span[0]:.3f}–{trained_span[1]:.3f} s): no frame in common")
+    return True, (f"{shared} in overlapping times ({span[0]:.3f}–{span[1]:.3f} s and "
+                  f"{trained_span[0]:.3f}–{trained_span[1]:.3f} s)")
+
+
 def rate(
     path: Path, metadata: dict[str, str], key: str, estimate: float, notes: list[str]
 ) -> float:

@@ -317,6 +317,20 @@ def _angle_limits(items: tuple[tuple[str, float], ...],
     return dict(items)
 
 
+def _refuse_training_frames(train: list[dict], test: list[dict]) -> None:
+    """Refuse (a usage error) a --test recording that may share frames with a --train one:
+    the same recording by another path, or one cut from the other or both from one
+    recording at times that meet (the heldout check's rule, formats.recording_metadata)."""
+    from exohil.formats.recording_metadata import shared_frames
+
+    for scored in test:
+        for trained in train:
+            overlap, why = shared_frames(scored, trained)
+            if overlap:
+                raise click.UsageError(f"--test {scored['file']}: {why}: a model would be "
+                                       "scored on frames it was trained on")
+
+
 @click.command("table")
 @click.option("--train", "train_paths", multiple=True, required=True, type=InputFile(),
               help="Training recording (repeat the option for several).")
@@ -368,6 +382,8 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
     data = _load(train_paths, joint, angles)
     test_data = _load(test_paths, data.target.joint, ",".join(data.target.angles),
                       data.sensor_names) if test_paths else None
+    if test_data is not None:
+        _refuse_training_frames(data.sources, test_data.sources)
     split = wf.make_split(data, offset_frames, test_paths_data=test_data,
                           test_fraction=test_fraction, val_fraction=val_fraction)
     if not split.train or not split.test:

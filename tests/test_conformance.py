@@ -539,8 +539,101 @@ def test_a_part_cut_from_a_training_recording_fails_heldout(tmp_path, fast_profi
         code, output, report = conform(tmp_path / target.stem, fast_profile, "-k", "heldout",
                                        target=target)
         assert code != 0 and verdicts(report)["heldout"] == "fail", output
-        assert f"{target.name} was used to train the model, or cut from a recording" in \
+        assert f"{target.name} was cut from the training recording paper_protocol.mcap" in \
             last_line(output)
+
+
+def _cut(source: Path, out: Path, *span: str) -> Path:
+    cut = CliRunner().invoke(main, ["record", "cut", str(source), *span, "--out", str(out)])
+    assert cut.exit_code == 0, cut.output
+    return out
+
+
+def _train_ann(recording: Path, out: Path) -> Path:
+    trained = CliRunner().invoke(main, ["train", "--model", "ann", str(recording), "--out",
+                                        str(out), "--max-epochs", "1"])
+    assert trained.exit_code == 0, trained.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def cut_session(tmp_path_factory) -> dict[str, Path]:
+    """A 30 s synthetic session and parts of it (`record cut`): its first 15 s, the first
+    10 s of that part (a part of a part), the rest from 15 s and 10–20 s; with an ANN
+    trained on the first 15 s and one on the part of a part."""
+    from estimator_synth import shoulder_recording
+
+    d = tmp_path_factory.mktemp("cut")
+    whole = d / "session.mcap"
+    write_recording(whole, shoulder_recording(seconds=30.0))
+    first = _cut(whole, d / "first.mcap", "--stop", "15")
+    early = _cut(first, d / "early.mcap", "--stop", "10")
+    return {"whole": whole, "first": first, "early": early,
+            "rest": _cut(whole, d / "rest.mcap", "--start", "15"),
+            "middle": _cut(whole, d / "middle.mcap", "--start", "10", "--stop", "20"),
+            "on_first": _train_ann(first, d / "on_first.npz"),
+            "on_early": _train_ann(early, d / "on_early.npz")}
+
+
+def heldout(out: Path, profile: Path, target: Path, model: Path) -> tuple[str, str]:
+    """The heldout verdict and the note of ``heldout.overlap``."""
+    _, output, report = conform(out, profile, "-k", "heldout", target=target, model=model)
+    return verdicts(report)["heldout"], measurements(report)["heldout.overlap"]["note"]
+
+
+def test_a_model_trained_on_a_part_of_the_scored_recording_fails_heldout(
+        tmp_path, fast_profile, cut_session):
+    """The checkpoint records what its training recordings were cut from, so the recording
+    they were cut from is no held-out recording (it passed: only the part's digest was kept,
+    and the check followed lineage from the scored recording alone)."""
+    import hashlib
+
+    whole = cut_session["whole"]
+    info = load_checkpoint(cut_session["on_early"]).info
+    assert info["sources"][0]["cut_from"] == [
+        hashlib.sha256(cut_session["first"].read_bytes()).hexdigest(),
+        hashlib.sha256(whole.read_bytes()).hexdigest()]
+    for model, part in (("on_first", "first.mcap"), ("on_early", "early.mcap")):
+        verdict, note = heldout(tmp_path / model, fast_profile, whole, cut_session[model])
+        assert verdict == "fail", note
+        assert f"the training recording {part} was cut from session.mcap" in note
+
+
+def test_a_part_from_other_times_than_the_training_part_passes_heldout(
+        tmp_path, fast_profile, cut_session):
+    """Two parts of one recording share frames only where their times meet: for a model
+    trained on 0–15 s, the rest from 15 s is held out and 10–20 s is not; for one trained on
+    0–10 s (a part of that part), 10–20 s is held out."""
+    verdict, note = heldout(tmp_path / "rest", fast_profile, cut_session["rest"],
+                            cut_session["on_first"])
+    assert verdict == "pass", note
+    assert "rest.mcap and the training recording first.mcap were cut from one recording" in note
+    assert "no frame in common" in note
+    verdict, note = heldout(tmp_path / "middle", fast_profile, cut_session["middle"],
+                            cut_session["on_first"])
+    assert verdict == "fail", note
+    assert "middle.mcap and the training recording first.mcap were cut from one recording" \
+        in note and "in overlapping times" in note
+    verdict, note = heldout(tmp_path / "early", fast_profile, cut_session["middle"],
+                            cut_session["on_early"])
+    assert verdict == "pass", note
+    assert "no frame in common" in note
+
+
+def test_a_checkpoint_without_lineage_is_judged_on_digests_alone(
+        tmp_path, fast_profile, cut_session):
+    """A checkpoint written before sources recorded ``cut_from`` still loads and is judged
+    as it was; a pass says what it could not see."""
+    est = load_checkpoint(cut_session["on_first"])
+    est.info["sources"] = [{"file": s["file"], "sha256": s["sha256"]}
+                           for s in est.info["sources"]]
+    old = tmp_path / "old.npz"
+    save_checkpoint(old, est)
+    verdict, note = heldout(tmp_path / "first", fast_profile, cut_session["first"], old)
+    assert verdict == "fail" and "first.mcap was used to train the model" in note
+    verdict, note = heldout(tmp_path / "whole", fast_profile, cut_session["whole"], old)
+    assert verdict == "pass", note
+    assert "the checkpoint does not record what first.mcap was cut from" in note
 
 
 def test_a_target_that_is_no_recording_fails_every_check_that_reads_it(tmp_path, fast_profile):

@@ -151,8 +151,10 @@ def test_calibrate_then_evaluate_from_the_command_line(tmp_path, base):
     est = load_checkpoint(out)
     assert est.info["calibration"]["base_checkpoint"] == {"file": "base.npz",
                                                           "sha256": sha256_file(ckpt)}
-    assert est.info["calibration"]["recordings"] == [{"file": "cal.mcap",
-                                                      "sha256": sha256_file(cal)}]
+    # with what each was cut from (nothing here) and its span, for the heldout check
+    assert [{k: r[k] for k in ("file", "sha256", "cut_from")}
+            for r in est.info["calibration"]["recordings"]] == [
+        {"file": "cal.mcap", "sha256": sha256_file(cal), "cut_from": []}]
     assert est.info["command"].startswith("exohil ")  # sys.argv: pytest's under CliRunner
     scores = {}
     for name in (ckpt, out):

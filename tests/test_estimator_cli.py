@@ -198,6 +198,29 @@ def test_table_tells_test_frames_outside_the_training_readings(files):
     assert "lie outside" not in inside.stdout
 
 
+def test_table_refuses_a_test_recording_that_shares_frames_with_a_training_one(files):
+    """`table --train part --test whole`, part cut from whole, scored a model on its own
+    training frames; a part of other times is a test recording like any other."""
+    whole = files["dir"] / "whole_session.mcap"
+    write_recording(whole, shoulder_recording(seconds=6.0, seed=4))
+    parts = {}
+    for name, span in (("early", ["--stop", "3"]), ("late", ["--start", "3"])):
+        parts[name] = files["dir"] / f"{name}_part.mcap"
+        cut = CliRunner().invoke(main, ["record", "cut", str(whole), *span, "--out",
+                                        str(parts[name])])
+        assert cut.exit_code == 0, cut.output
+    for test in (whole, parts["late"]):
+        result = CliRunner().invoke(main, ["table", "--train", str(parts["early"]), "--test",
+                                           str(test), "--models", "classical"])
+        if test == whole:
+            assert result.exit_code == 2, result.output
+            assert ("--test whole_session.mcap: the training recording early_part.mcap was "
+                    "cut from whole_session.mcap: a model would be scored on frames it was "
+                    "trained on") in " ".join(result.output.split())
+        else:
+            assert result.exit_code == 0, result.output
+
+
 def test_table_rejects_unknown_models(files):
     line = _one_line_error(CliRunner().invoke(
         main, ["table", "--train", str(files["good"]), "--models", "ennet,gpt"]))
