@@ -377,6 +377,64 @@ def test_a_sign_error_in_the_elevation_conversion_fails_conversions(tmp_path, fa
     assert "humerus_axis_oracle" in last_line(output)
 
 
+def _offset_axial_rotation(monkeypatch, where: str) -> None:
+    """Add 0.5° to the ISB axial rotation γ on the way in and take it off on the way out, in
+    ``where`` ("ms_isb": ms_to_isb / isb_to_ms; "isb_quat": isb_to_quat / quat_to_isb), so
+    every round trip still holds and the humerus axis does not move."""
+    from exohil.kinematics import shoulder
+
+    offset = np.array([0.0, 0.0, np.deg2rad(0.5)])
+    if where == "ms_isb":
+        ms_to_isb, isb_to_ms = shoulder.ms_to_isb, shoulder.isb_to_ms
+        monkeypatch.setattr(shoulder, "ms_to_isb", lambda theta, phi=None, psi=None,
+                            convention="coupled": ms_to_isb(theta, phi, psi, convention) + offset)
+        monkeypatch.setattr(shoulder, "isb_to_ms", lambda alpha, beta=None, gamma=None,
+                            convention="coupled": isb_to_ms(
+                                shoulder.as_angles(alpha, beta, gamma) - offset,
+                                convention=convention))
+    else:
+        isb_to_quat, quat_to_isb = shoulder.isb_to_quat, shoulder.quat_to_isb
+        monkeypatch.setattr(shoulder, "isb_to_quat", lambda alpha, beta=None, gamma=None:
+                            isb_to_quat(shoulder.as_angles(alpha, beta, gamma) + offset))
+        monkeypatch.setattr(shoulder, "quat_to_isb", lambda q, plane_hint=0.0:
+                            quat_to_isb(q, plane_hint) - offset)
+
+
+@pytest.mark.parametrize("where, caught_by", [("ms_isb", "orientation_oracle"),
+                                               ("isb_quat", "orientation_oracle")])
+def test_an_axial_rotation_offset_fails_conversions(tmp_path, fast_profile, monkeypatch,
+                                                    where, caught_by):
+    """0.5° on γ, in and back out, passed the gate: round trips hold and the humerus axis
+    ignores rotation about the humerus. The whole-orientation oracle sees it."""
+    from exohil.conformance import conversions
+
+    _offset_axial_rotation(monkeypatch, where)
+    failed = {r.name: r.failure for r in conversions.run_properties(40, 0) if r.failure}
+    assert "humerus_axis_oracle" not in failed and "ms_quat_roundtrip" not in failed
+    assert caught_by in failed and "angles_rebuild_orientation" in failed
+    code, output, report = conform(tmp_path, fast_profile, "-k", "conversions")
+    assert code != 0 and verdicts(report)["conversions"] == "fail"
+    assert last_line(output).startswith("FAIL: conversions: conversions.failures")
+    assert caught_by in last_line(output)
+
+
+def test_the_orientation_oracle_runs_the_conventions_table_poses(monkeypatch):
+    """The poses of docs/conventions.md's example table, singular ones included, are run
+    besides the generated ones."""
+    from exohil.conformance import conversions
+
+    seen = []
+    oracle = conversions._ms_matrix
+
+    def spy(theta, phi, psi):
+        seen.append(tuple(round(float(np.rad2deg(v)), 9) for v in (theta, phi, psi)))
+        return oracle(theta, phi, psi)
+
+    monkeypatch.setattr(conversions, "_ms_matrix", spy)
+    conversions.run_properties(1, 0)
+    assert set(conversions.CONVENTION_TABLE_POSES_DEG) <= set(seen)
+
+
 def test_a_segment_shorter_than_the_profile_asks_for_is_not_passed(tmp_path, fast_profile):
     """A 2 s recording streamed for the profile's 3 s segment ended after 2 s, and latency
     and link passed on it without a word."""
