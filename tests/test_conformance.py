@@ -435,6 +435,43 @@ def test_the_orientation_oracle_runs_the_conventions_table_poses(monkeypatch):
     assert set(conversions.CONVENTION_TABLE_POSES_DEG) <= set(seen)
 
 
+def test_a_sink_that_swaps_pitch_and_roll_fails_teleop(tmp_path, fast_profile, monkeypatch):
+    """The teleop reference was the sink's own ``command_for``, so a sink sending
+    (roll, pitch, yaw) passed: the per-joint RMSE only traded places. The reference is now
+    the kinematics, and ``teleop.mapping_error`` has a limit."""
+    from exohil.harness.pipeline import RobotCommand
+    from exohil.harness.teleop import TeleopSink
+
+    command_for = TeleopSink.command_for
+
+    def swapped(self, elv_angle_deg, shoulder_elv_deg):
+        command = command_for(self, elv_angle_deg, shoulder_elv_deg)
+        return RobotCommand(joints=command.joints[[1, 0, 2]], clamped=command.clamped[[1, 0, 2]])
+
+    monkeypatch.setattr(TeleopSink, "command_for", swapped)
+    code, output, report = conform(tmp_path, fast_profile, "-k", "teleop")
+    assert code != 0 and verdicts(report)["teleop"] == "fail"
+    assert last_line(output).startswith("FAIL: teleop: teleop.mapping_error")
+
+
+def test_the_teleop_reference_is_the_sink_stream_without_the_sink():
+    """``nao_commands_for`` (vectorised, hints solved to a fixed point) equals a fresh
+    TeleopSink fed the same poses one by one, ties included: the arm straight along −Y
+    (roll −90°, pitch from the hint) twice in a row, and straight back (pitch limit from the
+    hint)."""
+    from exohil.harness.session import nao_commands_for
+    from exohil.harness.teleop import TeleopSink
+
+    rng = np.random.default_rng(3)
+    poses = np.column_stack([rng.uniform(-90, 130, 300), rng.uniform(0, 180, 300)])
+    poses[100:103] = [[-30.0, 80.0], [0.0, 90.0], [0.0, 90.0]]
+    poses[200:202] = [[-90.0, 90.0], [-90.0, 90.0]]
+    sink = TeleopSink([], ("elv_angle", "shoulder_elv"))
+    expected = np.array([sink.command_for(t, p).joints for t, p in poses])
+    assert np.array_equal(nao_commands_for(poses), expected)
+    assert nao_commands_for(np.empty((0, 2))).shape == (0, 3)
+
+
 def test_a_segment_shorter_than_the_profile_asks_for_is_not_passed(tmp_path, fast_profile):
     """A 2 s recording streamed for the profile's 3 s segment ended after 2 s, and latency
     and link passed on it without a word."""
