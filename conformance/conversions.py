@@ -10,6 +10,11 @@ checks a round trip, over the whole range including the singular poses:
   (sin φ sin θ, −cos φ, sin φ cos θ) in the ISB thorax frame (catches sign errors that a
   round trip cannot see);
 * at φ = 0 the orientation does not depend on θ;
+* the whole orientation (axial rotation included, which the humerus axis cannot see) of
+  MoBL-ARMS (θ, φ, ψ) equals R_y(θ) · R_x(−φ) · R_y(ψ − θ) built here from elementary
+  rotations, at random poses and at every pose of docs/conventions.md's table; and any
+  quaternion's MoBL-ARMS and ISB angles rebuild that quaternion's rotation through the same
+  elementary rotations (catches an offset on the axial rotation that cancels in round trips);
 * Z-Y'-X'' angles rebuild the same rotation;
 * an unclamped NAO command points the robot's upper arm exactly along the human humerus, and
   a clamped one stays within NAO's joint limits.
@@ -24,7 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from hypothesis import HealthCheck, given, seed, settings
+from hypothesis import HealthCheck, example, given, seed, settings
 from hypothesis import strategies as st
 
 from exohil.kinematics import robot, rotations, shoulder
@@ -56,6 +61,53 @@ def _rotation_error_deg(q1: np.ndarray, q2: np.ndarray) -> float:
     q1, q2 = q1 / np.linalg.norm(q1), q2 / np.linalg.norm(q2)
     chord = min(float(np.linalg.norm(q1 - q2)), float(np.linalg.norm(q1 + q2)))
     return math.degrees(4.0 * math.asin(min(1.0, chord / 2.0)))
+
+
+def _rx(angle: float) -> np.ndarray:
+    """Active rotation by ``angle`` (rad) about X: ``v' = R v`` in the frame it is given in."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(angle: float) -> np.ndarray:
+    """Active rotation by ``angle`` (rad) about Y."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _ms_matrix(theta: float, phi: float, psi: float) -> np.ndarray:
+    """Thorax ← humerus rotation of MoBL-ARMS (θ, φ, ψ) (rad), ideal axes, coupled form:
+    intrinsic R_y(θ) · R_x(−φ) · R_y(ψ − θ) in the ISB thorax frame (X anterior, Y superior,
+    Z lateral; docs/conventions.md, "Why the coupled form")."""
+    return _ry(theta) @ _rx(-phi) @ _ry(psi - theta)
+
+
+def _isb_matrix(alpha: float, beta: float, gamma: float) -> np.ndarray:
+    """Thorax ← humerus rotation of ISB Y-X'-Y'' angles (α, β, γ) (rad)."""
+    return _ry(alpha) @ _rx(beta) @ _ry(gamma)
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a quaternion (x, y, z, w), normalised first (the textbook form)."""
+    x, y, z, w = np.asarray(q, dtype=float) / float(np.linalg.norm(q))
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _matrix_error_deg(m1: np.ndarray, m2: np.ndarray) -> float:
+    """Angle of the rotation between two rotation matrices, deg: ‖R₁ − R₂‖_F = 2√2 sin(δ/2)
+    (accurate near 0, and defined at every pose, singular ones included)."""
+    chord = float(np.linalg.norm(m1 - m2)) / (2.0 * math.sqrt(2.0))
+    return math.degrees(2.0 * math.asin(min(1.0, chord)))
+
+
+#: (θ, φ, ψ), deg: the poses of docs/conventions.md's table "Example poses", singular ones
+#: (φ = 0) included.
+CONVENTION_TABLE_POSES_DEG = ((0, 0, 0), (0, 90, 0), (90, 90, 0), (-90, 45, 0), (45, 60, -30),
+                              (130, 120, 20), (-40, 30, -90), (90, 0, 10))
 
 
 def _quaternion(x: float, y: float, z: float, w: float) -> np.ndarray | None:
@@ -120,6 +172,38 @@ def _hanging_pose(t: _Tracker) -> Callable[..., None]:
     return prop
 
 
+def _orientation_oracle(t: _Tracker) -> Callable[..., None]:
+    def prop(theta: float, phi: float, psi: float) -> None:
+        m = _quat_matrix(shoulder.ms_to_quat(theta, phi, psi))
+        t.error(_matrix_error_deg(m, _ms_matrix(theta, phi, psi)),
+                f"orientation of MS {theta, phi, psi}")
+
+    for pose in CONVENTION_TABLE_POSES_DEG:  # run first, before the generated examples
+        prop = example(*(math.radians(v) for v in pose))(prop)
+    return given(ANGLE, st.floats(0.0, math.pi, allow_nan=False), ANGLE)(prop)
+
+
+def _angles_rebuild_orientation(t: _Tracker) -> Callable[..., None]:
+    singular = st.sampled_from([(0.0, 0.0, 0.0, 1.0), (0.0, 1.0, 0.0, 0.0),
+                                (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5)),
+                                (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0)])
+
+    @given(st.one_of(st.tuples(UNIT, UNIT, UNIT, UNIT), singular), ANGLE)
+    def prop(xyzw: tuple[float, float, float, float], hint: float) -> None:
+        q = _quaternion(*xyzw)
+        if q is None:
+            return
+        m = _quat_matrix(q)
+        given_q = tuple(round(float(v), 12) for v in q)
+        theta, phi, psi = (float(v) for v in shoulder.quat_to_ms(q, hint))
+        t.error(_matrix_error_deg(m, _ms_matrix(theta, phi, psi)),
+                f"quat {given_q} -> MS {theta, phi, psi} -> rotation")
+        alpha, beta, gamma = (float(v) for v in shoulder.quat_to_isb(q, hint))
+        t.error(_matrix_error_deg(m, _isb_matrix(alpha, beta, gamma)),
+                f"quat {given_q} -> ISB {alpha, beta, gamma} -> rotation")
+    return prop
+
+
 def _zyx_rebuild(t: _Tracker) -> Callable[..., None]:
     @given(st.tuples(UNIT, UNIT, UNIT, UNIT))
     def prop(xyzw: tuple[float, float, float, float]) -> None:
@@ -160,6 +244,8 @@ PROPERTIES: dict[str, Callable[[_Tracker], Callable[..., None]]] = {
     "quat_isb_roundtrip": _quat_isb_roundtrip,
     "humerus_axis_oracle": _humerus_axis_oracle,
     "hanging_pose_ignores_plane": _hanging_pose,
+    "orientation_oracle": _orientation_oracle,
+    "angles_rebuild_orientation": _angles_rebuild_orientation,
     "zyx_rebuilds_rotation": _zyx_rebuild,
     "nao_points_along_humerus": _nao_direction,
 }

@@ -66,9 +66,12 @@ CHECKS: dict[str, dict[str, str]] = {
              "link.bad_frames_delivered": "count", "link.dropped_unexplained": "count"},
     "conversions": {"conversions.failures": "count", "conversions.examples": "count",
                     "conversions.max_error": "deg"},
-    "teleop": {"teleop.rmse.*": "deg", "teleop.clamped_share": "ratio"},
+    "teleop": {"teleop.rmse.*": "deg", "teleop.clamped_share": "ratio",
+               "teleop.mapping_error": "deg"},
     "regression": {"regression.accuracy.*": "deg", "regression.latency_p99_ratio": "x"},
 }
+#: Tolerance of ``teleop.mapping_error``, deg: float round-off only (see BUILTIN_LIMITS).
+TELEOP_MAPPING_TOLERANCE_DEG = 1e-6
 #: Limits a check always applies unless the profile states its own for that measurement.
 BUILTIN_LIMITS: dict[str, dict[str, Limit]] = {
     "compatibility": {"compatibility.sensor_mismatch": Limit(high=0, unit="count",
@@ -85,6 +88,12 @@ BUILTIN_LIMITS: dict[str, dict[str, Limit]] = {
              "link.dropped_unexplained": Limit(high=0, unit="count", inclusive=True),
              "link.overflow": Limit(high=0, unit="count", inclusive=True)},
     "conversions": {"conversions.failures": Limit(high=0, unit="count", inclusive=True)},
+    # The sink and the reference run the same float operations on the same poses, so they
+    # agree bit for bit (0 measured); the tolerance only leaves room for a reordered float
+    # expression, and is the conversions check's (whose properties hold to ~1e-10 deg), far
+    # below any wiring error (a swapped joint or angle is degrees off).
+    "teleop": {"teleop.mapping_error": Limit(high=TELEOP_MAPPING_TOLERANCE_DEG, unit="deg",
+                                             inclusive=True)},
 }
 SETTINGS: dict[str, type] = {"realtime_seconds": float, "replay": str, "faults": str,
                              "conversion_examples": int, "seed": int,

@@ -58,13 +58,23 @@ from exohil.harness.bench import (
     device_rate_hz,
     open_device,
 )
+from exohil.harness.frame_source import Frame
 from exohil.harness.machine import HostLoad, HostLoadMeter
-from exohil.harness.pipeline import FrameRows, Pipeline, PipelineRun, RowsObserver, Sink, Status
+from exohil.harness.pipeline import (
+    FrameRows,
+    Pipeline,
+    PipelineRun,
+    RowsObserver,
+    Sample,
+    Sink,
+    Status,
+)
 from exohil.harness.recorder import RecorderSink, partial_path
 from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.robot_trace import RobotTrace, RobotTraceSink
 from exohil.harness.teleop import SHOULDER_ANGLES, SimulatedNao, TeleopSink
-from exohil.kinematics import NAO_JOINTS
+from exohil.kinematics import NAO_JOINTS, humerus_to_nao, ms_to_quat
+from exohil.kinematics.robot import Side
 
 Limits = Mapping[str, Limit]
 Progress = Callable[[Status], None]
@@ -193,7 +203,10 @@ class TruthTally:
     Accuracy is summed block by block (:class:`~exohil.estimator.evaluation.AccuracyTally`).
     With teleoperation, the robot command and the true (θ, φ) of the frames with ground truth
     are kept (at most :data:`TELEOP_MAX_FRAMES`, the first ones) and compared at the end with
-    the commands the same mapping gives for the true angles (:meth:`teleop_errors_deg`).
+    the commands the kinematics give for the true angles (:func:`nao_commands_for`,
+    :meth:`teleop_errors_deg`); the true angles are also fed through a fresh
+    :class:`TeleopSink`, the way the run feeds its estimates, to check the sink's wiring
+    against those commands (:meth:`teleop_mapping_error_deg`).
     """
 
     def __init__(self, reference: Recording, est: TrainedEstimator, teleop: bool) -> None:
@@ -204,9 +217,11 @@ class TruthTally:
         self._shoulder = [angles.index(a) for a in SHOULDER_ANGLES] if teleop else []
         self._commands: list[np.ndarray] = []
         self._truth: list[np.ndarray] = []
+        self._times: list[np.ndarray] = []
         self.teleop_frames = 0  #: frames with ground truth and a command
         self.teleop_kept = 0  #: of those, the ones kept to score (the first ones)
         self._errors: np.ndarray | None = None
+        self._reference: np.ndarray | None = None
 
     def __call__(self, rows: FrameRows) -> None:
         truth = truth_at(self.reference, self.est, rows.device_time_s)
@@ -220,20 +235,81 @@ class TruthTally:
         if take.size:
             self._commands.append(rows.commands[take].copy())
             self._truth.append(truth[take][:, self._shoulder])
+            self._times.append(np.asarray(rows.device_time_s)[take].copy())
             self.teleop_kept += int(take.size)
 
+    def _kept_truth(self) -> np.ndarray:
+        """(K, 2) true (θ, φ) of the kept frames, deg."""
+        return np.concatenate(self._truth) if self._truth else np.empty((0, 2))
+
+    def _reference_commands(self) -> np.ndarray:
+        """(K, 3) NAO commands for the true angles of the kept frames, rad (computed once)."""
+        if self._reference is None:
+            self._reference = nao_commands_for(self._kept_truth())
+        return self._reference
+
     def teleop_errors_deg(self) -> np.ndarray:
-        """(K, 3) robot command minus the command for the true angles, deg, of the kept frames
-        (computed once)."""
+        """(K, 3) robot command minus the command the kinematics give for the true angles
+        (:func:`nao_commands_for`), deg, of the kept frames (computed once)."""
         if self._errors is None:
             commands = (np.concatenate(self._commands) if self._commands
                         else np.empty((0, 3)))
-            truth = np.concatenate(self._truth) if self._truth else np.empty((0, 2))
-            mapping = TeleopSink([], SHOULDER_ANGLES)
-            reference = np.array([mapping.command_for(theta, phi).joints
-                                  for theta, phi in truth]).reshape(-1, 3)
-            self._errors = np.rad2deg(commands - reference)
+            self._errors = np.rad2deg(commands - self._reference_commands())
         return self._errors
+
+    def teleop_mapping_error_deg(self) -> float:
+        """Largest |joint difference|, deg, over the kept frames, between what a fresh
+        :class:`TeleopSink` built as the run builds its own commands for the true angles
+        (fed as the run feeds it: a :class:`Sample` of every estimator output, in the
+        estimator's order, through ``accept`` to a robot target) and
+        :func:`nao_commands_for` of the same angles; NaN without kept frames."""
+        truth = self._kept_truth()
+        if not truth.shape[0]:
+            return float("nan")
+        robot = _CommandLog()
+        sink = TeleopSink([robot], self.est.target.angles)
+        angles = np.full(len(self.est.target.angles), np.nan)
+        for i, (pose, t) in enumerate(zip(truth, np.concatenate(self._times), strict=True)):
+            angles[self._shoulder] = pose
+            sink.accept(Sample(Frame(i, float(t), np.empty(0), 0), angles.copy()))
+        sent = np.array(robot.joints).reshape(-1, 3)
+        if sent.shape != truth.shape[:1] + (3,):
+            return float("inf")  # a command not sent, or sent twice, to the robot
+        return float(np.max(np.abs(np.rad2deg(sent - self._reference_commands()))))
+
+
+class _CommandLog:
+    """A robot target that keeps every joint command it receives (rad, NAO_JOINTS order)."""
+
+    def __init__(self) -> None:
+        self.joints: list[np.ndarray] = []
+
+    def command(self, t: float, joints: np.ndarray, clamped: np.ndarray) -> None:
+        self.joints.append(np.array(joints, dtype=float))
+
+
+def nao_commands_for(truth_deg: np.ndarray, side: Side = "right") -> np.ndarray:
+    """(K, 3) NAO (ShoulderPitch, ShoulderRoll, ElbowYaw) commands, rad, for K MoBL-ARMS
+    (θ, φ) poses in deg, taken as a stream, straight from the kinematics: ψ = 0 (the suit does
+    not measure it; :class:`TeleopSink` holds it at 0), ideal axes, the coupled convention,
+    and each pose's hint the previous pose's unclamped joints (docs/conventions.md). The
+    reference the teleop check scores the sink against; vectorised: a pose's hint only
+    matters at a tie (roll ±90°, the arm straight back), so the stream is solved for all
+    poses at once and again with the hints that gives until no pose changes (twice, unless
+    ties follow one another)."""
+    truth = np.asarray(truth_deg, dtype=float).reshape(-1, 2)
+    if not truth.shape[0]:
+        return np.empty((0, 3))
+    q = ms_to_quat(np.deg2rad(truth[:, 0]), np.deg2rad(truth[:, 1]), 0.0)
+    arm = humerus_to_nao(q, side=side)  # pitch hint 0 everywhere, as for the first pose
+    for _ in range(truth.shape[0]):
+        hints = np.vstack([np.zeros((1, 3)), arm.unclamped[:-1]])
+        again = humerus_to_nao(q, side=side, hint=hints)
+        if np.array_equal(again.unclamped, arm.unclamped) and \
+                np.array_equal(again.angles, arm.angles):
+            break
+        arm = again
+    return arm.angles
 
 
 class LinkTally:
@@ -639,15 +715,19 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
 
 def teleop_measurements(result: SessionResult,
                         limits: Limits | None = None) -> list[Measurement]:
-    """Robot commands from the estimates against the commands the same mapping gives for the
-    true angles: RMSE per joint (deg, over the frames with ground truth, at most
-    :data:`TELEOP_MAX_FRAMES`) and the share of clamped commands (every frame)."""
+    """Robot commands from the estimates against the commands the kinematics give for the
+    true angles (:func:`nao_commands_for`): RMSE per joint (deg, over the frames with ground
+    truth, at most :data:`TELEOP_MAX_FRAMES`) and the share of clamped commands (every frame);
+    and ``teleop.mapping_error`` (deg), the largest difference between the teleoperation
+    sink's commands for the true angles and those of :func:`nao_commands_for`, which catches
+    a wiring error in the sink that the RMSE (estimate errors and all) cannot tell apart."""
     limits = limits or {}
     run, scoring = result.run, result.scoring
     names = [f"teleop.rmse.{j}" for j in NAO_JOINTS]
     if scoring is None or not result.robots or run.commanded == 0:
         why = "no reference" if scoring is None else "no teleoperation (not a shoulder model)"
-        return [Measurement.skipped(n, "deg", why, limits.get(n)) for n in names]
+        return [Measurement.skipped(n, "deg", why, limits.get(n))
+                for n in [*names, "teleop.mapping_error"]]
     err = scoring.teleop_errors_deg()
     note = f"{scoring.teleop_kept} frames"
     if scoring.teleop_kept < scoring.teleop_frames:
@@ -656,6 +736,14 @@ def teleop_measurements(result: SessionResult,
                              note) if err.shape[0] else
            Measurement.skipped(n, "deg", "no frame with both a command and the truth",
                                limits.get(n)) for j, n in enumerate(names)]
+    mapping = scoring.teleop_mapping_error_deg()
+    out.append(Measurement.judge(
+        "teleop.mapping_error", mapping, "deg", limits.get("teleop.mapping_error"),
+        f"the sink's commands for the true angles of {scoring.teleop_kept} frames against the "
+        "kinematics' (humerus_to_nao), largest |difference|") if math.isfinite(mapping) or
+        mapping == math.inf else Measurement.skipped(
+        "teleop.mapping_error", "deg", "no frame with both a command and the truth",
+        limits.get("teleop.mapping_error")))
     share = run.clamped_commands / run.frames if run.frames else float("nan")
     out.append(Measurement.judge("teleop.clamped_share", share, "ratio",
                                  limits.get("teleop.clamped_share"),

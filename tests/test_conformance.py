@@ -463,6 +463,101 @@ def test_a_sign_error_in_the_elevation_conversion_fails_conversions(tmp_path, fa
     assert "humerus_axis_oracle" in last_line(output)
 
 
+def _offset_axial_rotation(monkeypatch, where: str) -> None:
+    """Add 0.5° to the ISB axial rotation γ on the way in and take it off on the way out, in
+    ``where`` ("ms_isb": ms_to_isb / isb_to_ms; "isb_quat": isb_to_quat / quat_to_isb), so
+    every round trip still holds and the humerus axis does not move."""
+    from exohil.kinematics import shoulder
+
+    offset = np.array([0.0, 0.0, np.deg2rad(0.5)])
+    if where == "ms_isb":
+        ms_to_isb, isb_to_ms = shoulder.ms_to_isb, shoulder.isb_to_ms
+        monkeypatch.setattr(shoulder, "ms_to_isb", lambda theta, phi=None, psi=None,
+                            convention="coupled": ms_to_isb(theta, phi, psi, convention) + offset)
+        monkeypatch.setattr(shoulder, "isb_to_ms", lambda alpha, beta=None, gamma=None,
+                            convention="coupled": isb_to_ms(
+                                shoulder.as_angles(alpha, beta, gamma) - offset,
+                                convention=convention))
+    else:
+        isb_to_quat, quat_to_isb = shoulder.isb_to_quat, shoulder.quat_to_isb
+        monkeypatch.setattr(shoulder, "isb_to_quat", lambda alpha, beta=None, gamma=None:
+                            isb_to_quat(shoulder.as_angles(alpha, beta, gamma) + offset))
+        monkeypatch.setattr(shoulder, "quat_to_isb", lambda q, plane_hint=0.0:
+                            quat_to_isb(q, plane_hint) - offset)
+
+
+@pytest.mark.parametrize("where, caught_by", [("ms_isb", "orientation_oracle"),
+                                               ("isb_quat", "orientation_oracle")])
+def test_an_axial_rotation_offset_fails_conversions(tmp_path, fast_profile, monkeypatch,
+                                                    where, caught_by):
+    """0.5° on γ, in and back out, passed the gate: round trips hold and the humerus axis
+    ignores rotation about the humerus. The whole-orientation oracle sees it."""
+    from exohil.conformance import conversions
+
+    _offset_axial_rotation(monkeypatch, where)
+    failed = {r.name: r.failure for r in conversions.run_properties(40, 0) if r.failure}
+    assert "humerus_axis_oracle" not in failed and "ms_quat_roundtrip" not in failed
+    assert caught_by in failed and "angles_rebuild_orientation" in failed
+    code, output, report = conform(tmp_path, fast_profile, "-k", "conversions")
+    assert code != 0 and verdicts(report)["conversions"] == "fail"
+    assert last_line(output).startswith("FAIL: conversions: conversions.failures")
+    assert caught_by in last_line(output)
+
+
+def test_the_orientation_oracle_runs_the_conventions_table_poses(monkeypatch):
+    """The poses of docs/conventions.md's example table, singular ones included, are run
+    besides the generated ones."""
+    from exohil.conformance import conversions
+
+    seen = []
+    oracle = conversions._ms_matrix
+
+    def spy(theta, phi, psi):
+        seen.append(tuple(round(float(np.rad2deg(v)), 9) for v in (theta, phi, psi)))
+        return oracle(theta, phi, psi)
+
+    monkeypatch.setattr(conversions, "_ms_matrix", spy)
+    conversions.run_properties(1, 0)
+    assert set(conversions.CONVENTION_TABLE_POSES_DEG) <= set(seen)
+
+
+def test_a_sink_that_swaps_pitch_and_roll_fails_teleop(tmp_path, fast_profile, monkeypatch):
+    """The teleop reference was the sink's own ``command_for``, so a sink sending
+    (roll, pitch, yaw) passed: the per-joint RMSE only traded places. The reference is now
+    the kinematics, and ``teleop.mapping_error`` has a limit."""
+    from exohil.harness.pipeline import RobotCommand
+    from exohil.harness.teleop import TeleopSink
+
+    command_for = TeleopSink.command_for
+
+    def swapped(self, elv_angle_deg, shoulder_elv_deg):
+        command = command_for(self, elv_angle_deg, shoulder_elv_deg)
+        return RobotCommand(joints=command.joints[[1, 0, 2]], clamped=command.clamped[[1, 0, 2]])
+
+    monkeypatch.setattr(TeleopSink, "command_for", swapped)
+    code, output, report = conform(tmp_path, fast_profile, "-k", "teleop")
+    assert code != 0 and verdicts(report)["teleop"] == "fail"
+    assert last_line(output).startswith("FAIL: teleop: teleop.mapping_error")
+
+
+def test_the_teleop_reference_is_the_sink_stream_without_the_sink():
+    """``nao_commands_for`` (vectorised, hints solved to a fixed point) equals a fresh
+    TeleopSink fed the same poses one by one, ties included: the arm straight along −Y
+    (roll −90°, pitch from the hint) twice in a row, and straight back (pitch limit from the
+    hint)."""
+    from exohil.harness.session import nao_commands_for
+    from exohil.harness.teleop import TeleopSink
+
+    rng = np.random.default_rng(3)
+    poses = np.column_stack([rng.uniform(-90, 130, 300), rng.uniform(0, 180, 300)])
+    poses[100:103] = [[-30.0, 80.0], [0.0, 90.0], [0.0, 90.0]]
+    poses[200:202] = [[-90.0, 90.0], [-90.0, 90.0]]
+    sink = TeleopSink([], ("elv_angle", "shoulder_elv"))
+    expected = np.array([sink.command_for(t, p).joints for t, p in poses])
+    assert np.array_equal(nao_commands_for(poses), expected)
+    assert nao_commands_for(np.empty((0, 2))).shape == (0, 3)
+
+
 def test_a_segment_shorter_than_the_profile_asks_for_is_not_passed(tmp_path, fast_profile):
     """A 2 s recording streamed for the profile's 3 s segment ended after 2 s, and latency
     and link passed on it without a word."""
