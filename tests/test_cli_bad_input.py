@@ -57,6 +57,7 @@ BASE: dict[str, dict[str, list[str]]] = {
     "evaluate": {"checkpoint": [str(MODEL)], "recordings": [str(RECORDING)]},
     "fixtures build": {"fixtures_dir": ["--dir", "{tmp}/fixtures"],
                        "shoulder_ik_dir": ["--shoulder-ik", "{tmp}"]},
+    "fixtures list": {},
     "import csv": {"input_file": [str(RECORDING)], "out": ["--out", "{tmp}/csv.mcap"],
                    "rate": ["--rate", "100"], "sensor_cols": ["--sensor-cols", "1-4"]},
     "import mot": {"input_file": [str(RECORDING)], "out": ["--out", "{tmp}/mot.mcap"]},
