@@ -27,6 +27,7 @@ from typing import Any, NoReturn
 from exohil.formats.atomic import same_file, write_text
 from exohil.formats.errors import InputError
 from exohil.formats.measurement import Measurement
+from exohil.harness.cli_types import cannot_write_in
 from exohil.harness.machine import machine
 
 EPILOG = ("Every figure is a measurement (name, value, unit, limit, verdict): a figure with a "
@@ -63,8 +64,9 @@ def json_file(value: str) -> Path:
     path = file_name(value)
     if not path.parent.is_dir():
         raise argparse.ArgumentTypeError(f"no such folder: {path.parent}")
-    if not os.access(path.parent, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"cannot write in folder {path.parent}")
+    problem = cannot_write_in(path.parent)
+    if problem:
+        raise argparse.ArgumentTypeError(f"cannot write in folder {path.parent}: {problem}")
     return path
 
 

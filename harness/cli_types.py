@@ -222,7 +222,7 @@ class OutputFile(_UsablePath):
         folder = Path(path).parent
         if not folder.is_dir():
             self.fail(f"folder {folder.absolute()} does not exist (create it first)", param, ctx)
-        problem = _cannot_write_in(folder)
+        problem = cannot_write_in(folder)
         if problem:
             self.fail(f"cannot write in folder {folder.absolute()}: {problem}", param, ctx)
         return path
@@ -242,13 +242,13 @@ class OutputDir(_UsablePath):
         if not ancestor.is_dir():
             self.fail(f"{os.fspath(path)!r} lies inside {os.fspath(ancestor)!r}, which is "
                       "not a folder", param, ctx)
-        problem = _cannot_write_in(ancestor)
+        problem = cannot_write_in(ancestor)
         if problem:
             self.fail(f"cannot write in folder {ancestor}: {problem}", param, ctx)
         return path
 
 
-def _cannot_write_in(folder: Path) -> str | None:
+def cannot_write_in(folder: Path) -> str | None:
     """Why a new file cannot be created in ``folder`` (tried with a temporary file, removed at
     once; a permission check alone would pass for root), or None."""
     try:
