@@ -37,11 +37,18 @@ import time
 from pathlib import Path
 
 from benchmarks.bench_discrepancy import print_confusion, print_rates
-from benchmarks.report import BenchmarkError, description, out_folder, positive_int, run_main
+from benchmarks.report import (
+    BenchmarkError,
+    description,
+    out_folder,
+    positive_int,
+    refuse_overwrite,
+    run_main,
+)
 from exohil.emulators.discrepancy import run
 from exohil.emulators.discrepancy.hidden import KINDS, first_effect
 from exohil.emulators.discrepancy.workers import default_workers, parallel_map
-from exohil.formats.atomic import same_file, write_text
+from exohil.formats.atomic import write_text
 from exohil.formats.errors import InputError
 from exohil.formats.recording_reader import read_recording
 from exohil.harness.machine import machine
@@ -138,9 +145,8 @@ def main() -> None:
         inputs += [args.twins / f"{Path(e['file']).stem}.json" for e in truth] if args.twins \
             else []
         for entry in truth:
-            hit = same_file(args.out / f"{Path(entry['file']).stem}.json", inputs)
-            if hit is not None:
-                parser.error(f"--out {args.out} would overwrite the input {hit}")
+            refuse_overwrite(parser, "--out", args.out / f"{Path(entry['file']).stem}.json",
+                             inputs)
     print(f"machine: {machine()}")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
