@@ -32,7 +32,7 @@ from exohil.estimator.rates import same_rate
 from exohil.formats.alignment import angles_at_sensor_times
 from exohil.formats.measurement import Limit, Measurement, distribution
 from exohil.formats.recording import Recording
-from exohil.formats.recording_metadata import cut_origins, shared_frames
+from exohil.formats.recording_metadata import shared_frames, source_entry
 from exohil.harness.bench import (
     BenchConfig,
     Device,
@@ -262,10 +262,8 @@ class ConformanceRun:
         # a part cut from a training recording (exohil record cut) is training data too, and
         # so is a recording a training recording was cut from, unless their times never meet
         reference = self.reference  # a file that is no recording fails here, not passes
-        scored = {"file": path.name, "sha256": sha256_file(path)}
-        if reference is not None and len(reference.sensors):
-            scored.update(cut_origins(reference.metadata, float(reference.sensors.t[0]),
-                                      float(reference.sensors.t[-1])))
+        scored = ({"file": path.name, "sha256": self.reference_sha256} if reference is None
+                  else source_entry(path, reference, self.reference_sha256))
         sources = self.model.estimator.info.get("sources", [])
         judged = [shared_frames(scored, s) for s in sources]
         trained = [why for overlap, why in judged if overlap]
@@ -362,8 +360,7 @@ class ConformanceRun:
             raise CheckBlocked("no reference recording to compare accuracy on")
         mine = accuracy_measurements(self.replay.estimates, self.replay.truth,
                                      self.model.estimator.target.angles)
-        figures = self.baseline_path.suffix.lower() == ".json"
-        if figures:
+        if self.baseline_path.suffix.lower() == ".json":  # an earlier run's figures
             base_values, whose = figures_baseline(self.baseline_path, self.reference_sha256)
             baseline = None
         else:
@@ -403,6 +400,11 @@ class ConformanceRun:
         """The reference recording's sha256 (None without one)."""
         path = self.reference_file
         return None if path is None else sha256_file(path)
+
+    @cached_property
+    def profile_sha256(self) -> str | None:
+        """The profile file's sha256, for the reports (None for a profile made in code)."""
+        return None if self.profile.path is None else sha256_file(self.profile.path)
 
 
 def figures_baseline(path: Path, reference_sha256: str | None) -> tuple[dict[str, float], str]:

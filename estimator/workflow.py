@@ -31,9 +31,8 @@ from exohil.estimator.rates import same_rate
 from exohil.estimator.splits import Split, cut_at_segments, time_block_split, trial_split
 from exohil.estimator.trained import TrainedEstimator
 from exohil.estimator.training import TrainConfig, train
-from exohil.formats.digest import sha256_file
 from exohil.formats.recording import Recording
-from exohil.formats.recording_metadata import cut_origins
+from exohil.formats.recording_metadata import source_entry
 
 
 def model_config(name: str, base: TrainConfig, rate_hz: float,
@@ -106,11 +105,9 @@ def load_recordings(
         stream = r.mocap.get(target.joint)
         if stream is None or any(a not in stream.names for a in target.angles):
             raise DatasetError(f"{p}: has no {target.joint} angles {list(target.angles)}")
-    # each with what it was cut from, for the heldout check (formats.recording_metadata)
-    sources = [{"file": p.name, "sha256": sha256_file(p),
-                **cut_origins(r.metadata, float(r.sensors.t[0]), float(r.sensors.t[-1]))}
-               for p, r in zip(paths, recs, strict=True)]
+    sources = [source_entry(p, r) for p, r in zip(paths, recs, strict=True)]
     return LoadedData(list(paths), recs, tuple(sensors), target, rate, sources)
+
 
 
 def make_split(

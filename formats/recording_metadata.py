@@ -18,8 +18,15 @@ from pathlib import Path
 from mcap.records import Metadata
 
 from exohil.formats import strict_json
+from exohil.formats.digest import sha256_file
 from exohil.formats.errors import RecordingError
-from exohil.formats.recording import FORMAT_NAME, FORMAT_VERSION, SENSOR_TOPIC, Segment
+from exohil.formats.recording import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    SENSOR_TOPIC,
+    Recording,
+    Segment,
+)
 
 METADATA_NAME = "exohil.recording"
 ANGLE_UNIT = "deg"
@@ -171,20 +178,25 @@ def cut_lineage(metadata: dict[str, str]) -> list[str]:
                         *metadata.get("cut.origins_sha256", "").split(",")) if d]
 
 
-def cut_origins(metadata: dict[str, str], first_s: float, last_s: float) -> dict:
-    """What a checkpoint's ``info.sources`` entry records of a recording's lineage, so that
-    the heldout check sees a part cut from the recording it scores: ``cut_from``
-    (:func:`cut_lineage`; empty for a recording that was not cut, and absent only in
-    checkpoints written before) and ``span_s``, the recording's first and last sensor frame
-    times. ``exohil record cut`` keeps times as they were, so these lie on the clock of every
-    recording it was cut from."""
-    return {"cut_from": cut_lineage(metadata), "span_s": [first_s, last_s]}
+def source_entry(path: Path, rec: Recording, sha256: str | None = None) -> dict:
+    """What a checkpoint's ``info.sources`` records of one recording read from ``path``, so
+    that the heldout check sees a part cut from the recording it scores (the check describes
+    that recording the same way): ``file``, ``sha256`` (given when already known) and, where
+    it has sensor frames, ``cut_from`` (:func:`cut_lineage`; empty for a recording that was
+    not cut, and absent only in checkpoints written before) and ``span_s``, its first and
+    last sensor frame times. ``exohil record cut`` keeps times as they were, so these lie on
+    the clock of every recording it was cut from."""
+    entry: dict = {"file": path.name, "sha256": sha256 or sha256_file(path)}
+    if len(rec.sensors):
+        entry.update(cut_from=cut_lineage(rec.metadata),
+                     span_s=[float(rec.sensors.t[0]), float(rec.sensors.t[-1])])
+    return entry
 
 
 def shared_frames(scored: dict, trained: dict) -> tuple[bool, str]:
     """Whether recording ``scored`` may hold frames of training recording ``trained``, and
     why (empty when unrelated). Both are ``info.sources``-style entries: ``file``,
-    ``sha256`` and, for a cut, :func:`cut_origins`' keys (an entry without them, as older
+    ``sha256`` and, for a cut, :func:`source_entry`'s other keys (an entry without them, as older
     checkpoints write, is taken as not cut). Two parts of one recording share no frame
     only where both spans are known and do not meet; any other relation is an overlap."""
     name, other = scored.get("file", "?"), trained.get("file", "?")
