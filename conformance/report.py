@@ -25,7 +25,6 @@ from typing import Any
 
 from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
-from exohil.formats.digest import sha256_file
 from exohil.formats.measurement import Verdict
 from exohil.harness.machine import machine
 
@@ -65,8 +64,7 @@ def report_dict(run: Any, results: list[Any]) -> dict[str, Any]:
         "model": model,
         "baseline": None if run.baseline_path is None else str(run.baseline_path),
         "profile": {"name": run.profile.name, "path": str(run.profile.path),
-                    "sha256": None if run.profile.path is None
-                    else sha256_file(run.profile.path)},
+                    "sha256": run.profile_sha256},
         "versions": {"exohil": _version("exohil"), "python": platform.python_version(),
                      **{p: _version(p) for p in ("numpy", "torch", "onnxruntime", "pytest",
                                                  "hypothesis")}},
@@ -91,8 +89,7 @@ def summary_markdown(run: Any, results: list[Any]) -> str:
     lines = [f"# exohil conformance: {verdict.value.upper()}", "",
              f"- target: `{run.target}`", f"- model: `{run.model_path}`",
              f"- profile: `{run.profile.name}`"
-             + ("" if run.profile.path is None else
-                f" (sha256 {sha256_file(run.profile.path)[:12]})"),
+             + ("" if run.profile_sha256 is None else f" (sha256 {run.profile_sha256[:12]})"),
              *([] if run.baseline_path is None else [f"- baseline: `{run.baseline_path}`"]),
              f"- machine: {machine()}", "",
              "| check | verdict | measurement | value | unit | limit |",

@@ -736,14 +736,13 @@ def teleop_measurements(result: SessionResult,
                              note) if err.shape[0] else
            Measurement.skipped(n, "deg", "no frame with both a command and the truth",
                                limits.get(n)) for j, n in enumerate(names)]
-    mapping = scoring.teleop_mapping_error_deg()
-    out.append(Measurement.judge(
-        "teleop.mapping_error", mapping, "deg", limits.get("teleop.mapping_error"),
+    mapping, limit = scoring.teleop_mapping_error_deg(), limits.get("teleop.mapping_error")
+    out.append(Measurement.skipped("teleop.mapping_error", "deg",
+                                   "no frame with both a command and the truth", limit)
+               if math.isnan(mapping) else Measurement.judge(
+        "teleop.mapping_error", mapping, "deg", limit,
         f"the sink's commands for the true angles of {scoring.teleop_kept} frames against the "
-        "kinematics' (humerus_to_nao), largest |difference|") if math.isfinite(mapping) or
-        mapping == math.inf else Measurement.skipped(
-        "teleop.mapping_error", "deg", "no frame with both a command and the truth",
-        limits.get("teleop.mapping_error")))
+        "kinematics' (humerus_to_nao), largest |difference|"))
     share = run.clamped_commands / run.frames if run.frames else float("nan")
     out.append(Measurement.judge("teleop.clamped_share", share, "ratio",
                                  limits.get("teleop.clamped_share"),
