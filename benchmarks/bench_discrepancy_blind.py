@@ -69,18 +69,18 @@ def load_truth(folder: Path) -> list[dict]:
     """The answer key, checked: every entry names an existing file and a known effect."""
     key = folder / "truth.json"
     if not key.is_file():
-        raise SystemExit(f"error: {key} not found (the answer key this benchmark scores against)")
+        raise InputError(f"{key} not found (the answer key this benchmark scores against)")
     try:
         truth = json.loads(key.read_text())
     except json.JSONDecodeError as exc:
-        raise SystemExit(f"error: {key}: not JSON ({exc})") from None
+        raise InputError(f"{key}: not JSON ({exc})") from None
     if not isinstance(truth, list) or not all(isinstance(e, dict) for e in truth):
-        raise SystemExit(f"error: {key}: must be a list of objects, one per recording")
+        raise InputError(f"{key}: must be a list of objects, one per recording")
     if not truth:
-        raise SystemExit(f"error: {key}: lists no recording")
+        raise InputError(f"{key}: lists no recording")
     for entry in truth:
         if entry.get("effect") not in KINDS or not (folder / str(entry.get("file"))).is_file():
-            raise SystemExit(f"error: {key}: bad entry {entry.get('file')!r} "
+            raise InputError(f"{key}: bad entry {entry.get('file')!r} "
                              f"(effect must be one of {', '.join(KINDS)}, file must exist)")
     return truth
 
@@ -98,7 +98,7 @@ def load_twins(folder: Path, truth: list[dict]) -> dict[str, float]:
             twin = json.loads(path.read_text())
             twins[entry["file"]] = float(twin["gap_before"])
         except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise SystemExit(f"error: {path}: no twin summary with a gap_before ({exc}); "
+            raise InputError(f"{path}: no twin summary with a gap_before ({exc}); "
                              f"run the twins with --out {folder} first") from None
     return twins
 

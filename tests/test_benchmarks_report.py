@@ -111,10 +111,10 @@ def test_the_blind_scorer_refuses_an_answer_key_it_cannot_score(tmp_path, entry,
     refused with one line before any recording is run; so is a folder without one."""
     (tmp_path / "rec_00.mcap").write_bytes(b"")
     out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path))
-    assert out.returncode != 0 and "truth.json not found" in out.stderr, out.stderr
+    assert out.returncode == 2 and "truth.json not found" in out.stderr, out.stderr
     (tmp_path / "truth.json").write_text(json.dumps([entry]))
     out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path))
-    assert out.returncode != 0 and error in out.stderr and "Traceback" not in out.stderr, (
+    assert out.returncode == 2 and error in out.stderr and "Traceback" not in out.stderr, (
         out.stderr)
 
 
@@ -127,11 +127,11 @@ def test_the_blind_scorer_refuses_twins_it_cannot_read_before_running_anything(t
     twins = tmp_path / "twins"
     twins.mkdir()
     out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path), "--twins", str(twins))
-    assert out.returncode != 0 and "rec_00.json" in out.stderr, out.stderr
+    assert out.returncode == 2 and "rec_00.json" in out.stderr, out.stderr
     assert "rec_01" not in out.stderr and "Traceback" not in out.stderr, out.stderr
     (twins / "rec_00.json").write_text(json.dumps({"gap_after": 1.0}))
     out = run_module("benchmarks.bench_discrepancy_blind", str(tmp_path), "--twins", str(twins))
-    assert out.returncode != 0 and "gap_before" in out.stderr, out.stderr
+    assert out.returncode == 2 and "gap_before" in out.stderr, out.stderr
 
 
 def test_what_an_effect_adds_over_its_twin_is_in_noise_variances(monkeypatch, capsys):
