@@ -17,7 +17,10 @@ checks a round trip, over the whole range including the singular poses:
   elementary rotations (catches an offset on the axial rotation that cancels in round trips);
 * Z-Y'-X'' angles rebuild the same rotation;
 * an unclamped NAO command points the robot's upper arm exactly along the human humerus, and
-  a clamped one stays within NAO's joint limits.
+  a clamped one stays within NAO's joint limits;
+* an unclamped NAO command, on either arm, reproduces the whole humerus orientation (elbow
+  yaw included, which the direction cannot see) against the NAO arm frame built here from the
+  documented frames and the hanging pose.
 
 Runs are reproducible: a fixed seed, a set number of examples, no example database.
 """
@@ -239,6 +242,45 @@ def _nao_direction(t: _Tracker) -> Callable[..., None]:
     return prop
 
 
+#: NAO torso ← ISB thorax, from the two frames' definitions (NAO: X forward, Y left, Z up;
+#: ISB: X anterior, Y superior, Z lateral-right): x = x, y = −z, z = y.
+_NAO_TORSO_FROM_THORAX = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+#: The mirror through the sagittal plane (NAO's Y → −Y): the right arm's pose → the left's.
+_SAGITTAL_MIRROR = np.diag([1.0, -1.0, 1.0])
+
+
+def _rz(angle: float) -> np.ndarray:
+    """Active rotation by ``angle`` (rad) about Z."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _nao_arm_oracle(theta: float, phi: float, psi: float, side: robot.Side) -> np.ndarray:
+    """NAO torso ← upper arm rotation that reproduces MoBL-ARMS (θ, φ, ψ) (rad) on ``side``.
+
+    The arm frames are tied by the documented pose with the arm hanging: the humerus frame
+    equals the thorax frame there, and NAO's command is pitch +90°, roll 0, elbow yaw 0
+    (docs/conventions.md), so arm ← humerus is fixed as (torso ← thorax)ᵀ · R_y(90°). The left
+    arm is the mirror image of the right one (same angles, mirrored ISB frame)."""
+    humerus_from_arm = _NAO_TORSO_FROM_THORAX.T @ _ry(math.pi / 2)
+    right = _NAO_TORSO_FROM_THORAX @ _ms_matrix(theta, phi, psi) @ humerus_from_arm
+    return right if side == "right" else _SAGITTAL_MIRROR @ right @ _SAGITTAL_MIRROR
+
+
+def _nao_orientation(t: _Tracker) -> Callable[..., None]:
+    @given(ANGLE, st.floats(0.0, math.pi, allow_nan=False), ANGLE,
+           st.sampled_from(["right", "left"]))
+    def prop(theta: float, phi: float, psi: float, side: robot.Side) -> None:
+        arm = robot.humerus_to_nao(shoulder.ms_to_quat(theta, phi, psi), side=side)
+        if arm.any_clamped:
+            return
+        pitch, roll, yaw = (float(v) for v in arm.angles)
+        commanded = _ry(pitch) @ _rz(roll) @ _rx(yaw)  # ShoulderPitch, -Roll, ElbowYaw
+        t.error(_matrix_error_deg(commanded, _nao_arm_oracle(theta, phi, psi, side)),
+                f"NAO {side} arm orientation for MS {theta, phi, psi}")
+    return prop
+
+
 PROPERTIES: dict[str, Callable[[_Tracker], Callable[..., None]]] = {
     "ms_quat_roundtrip": _ms_quat_roundtrip,
     "quat_isb_roundtrip": _quat_isb_roundtrip,
@@ -248,6 +290,7 @@ PROPERTIES: dict[str, Callable[[_Tracker], Callable[..., None]]] = {
     "angles_rebuild_orientation": _angles_rebuild_orientation,
     "zyx_rebuilds_rotation": _zyx_rebuild,
     "nao_points_along_humerus": _nao_direction,
+    "nao_reproduces_orientation": _nao_orientation,
 }
 
 

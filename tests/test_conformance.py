@@ -504,6 +504,34 @@ def test_an_axial_rotation_offset_fails_conversions(tmp_path, fast_profile, monk
     assert caught_by in last_line(output)
 
 
+@pytest.mark.parametrize("mutation", ["yaw_offset", "left_yaw_not_mirrored"])
+def test_an_elbow_yaw_error_fails_conversions(tmp_path, fast_profile, monkeypatch, mutation):
+    """An elbow-yaw error in ``humerus_to_nao`` passed the gate: the NAO property checked only
+    the arm's direction, which elbow yaw does not move. The NAO orientation property sees it."""
+    from exohil.conformance import conversions
+    from exohil.kinematics import robot
+
+    mapping = robot.humerus_to_nao
+
+    def wrong(q, side="right", hint=None):
+        arm = mapping(q, side=side, hint=hint)
+        angles = arm.angles.copy()
+        if mutation == "yaw_offset":
+            angles[..., 2] = np.clip(angles[..., 2] + np.deg2rad(0.5),
+                                     *robot.NAO_LIMITS[side][2])
+        elif side == "left":
+            angles[..., 2] *= -1.0
+        return robot.NaoArm(angles=angles, clamped=arm.clamped, unclamped=arm.unclamped)
+
+    monkeypatch.setattr(robot, "humerus_to_nao", wrong)
+    failed = {r.name: r.failure for r in conversions.run_properties(40, 0) if r.failure}
+    assert "nao_points_along_humerus" not in failed
+    assert "nao_reproduces_orientation" in failed
+    code, output, report = conform(tmp_path, fast_profile, "-k", "conversions")
+    assert code != 0 and verdicts(report)["conversions"] == "fail"
+    assert "nao_reproduces_orientation" in last_line(output)
+
+
 def test_the_orientation_oracle_runs_the_conventions_table_poses(monkeypatch):
     """The poses of docs/conventions.md's example table, singular ones included, are run
     besides the generated ones."""
