@@ -72,7 +72,7 @@ from exohil.harness.pipeline import (
 from exohil.harness.recorder import RecorderSink, partial_path
 from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.robot_trace import RobotTrace, RobotTraceSink
-from exohil.harness.teleop import SHOULDER_ANGLES, SimulatedNao, TeleopSink
+from exohil.harness.teleop import HYSTERESIS_DEG, SHOULDER_ANGLES, SimulatedNao, TeleopSink
 from exohil.kinematics import NAO_JOINTS, humerus_to_nao, ms_to_quat
 from exohil.kinematics.robot import Side
 
@@ -292,24 +292,22 @@ def nao_commands_for(truth_deg: np.ndarray, side: Side = "right") -> np.ndarray:
     """(K, 3) NAO (ShoulderPitch, ShoulderRoll, ElbowYaw) commands, rad, for K MoBL-ARMS
     (θ, φ) poses in deg, taken as a stream, straight from the kinematics: ψ = 0 (the suit does
     not measure it; :class:`TeleopSink` holds it at 0), ideal axes, the coupled convention,
-    and each pose's hint the previous pose's unclamped joints (docs/conventions.md). The
-    reference the teleop check scores the sink against; vectorised: a pose's hint only
-    matters at a tie (roll ±90°, the arm straight back), so the stream is solved for all
-    poses at once and again with the hints that gives until no pose changes (twice, unless
-    ties follow one another)."""
+    and each pose's hint the previous pose's command with the sink's hysteresis
+    (docs/conventions.md). The reference the teleop check scores the sink against. A pose's
+    hint matters only where some joint is clamped (a tie, a choice between two limits), so all
+    poses are solved at once without hints and those alone again, one by one in order."""
     truth = np.asarray(truth_deg, dtype=float).reshape(-1, 2)
     if not truth.shape[0]:
         return np.empty((0, 3))
     q = ms_to_quat(np.deg2rad(truth[:, 0]), np.deg2rad(truth[:, 1]), 0.0)
-    arm = humerus_to_nao(q, side=side)  # pitch hint 0 everywhere, as for the first pose
-    for _ in range(truth.shape[0]):
-        hints = np.vstack([np.zeros((1, 3)), arm.unclamped[:-1]])
-        again = humerus_to_nao(q, side=side, hint=hints)
-        if np.array_equal(again.unclamped, arm.unclamped) and \
-                np.array_equal(again.angles, arm.angles):
-            break
-        arm = again
-    return arm.angles
+    first = humerus_to_nao(q, side=side)  # no hint: the first pose's command, and every pose
+    angles = first.angles.copy()          # where nothing is clamped
+    sticky = np.deg2rad(HYSTERESIS_DEG)
+    for k in np.flatnonzero(first.any_clamped):
+        if k:
+            angles[k] = humerus_to_nao(q[k], side=side, hint=angles[k - 1],
+                                       hysteresis=sticky).angles
+    return angles
 
 
 class LinkTally:

@@ -3,7 +3,10 @@
 The chain is the paper's: MoBL-ARMS (θ, φ, ψ) → ISB Y-X'-Y'' → quaternion → NAO joints, with
 the coupled MS→ISB convention (docs/conventions.md). The estimator gives θ and φ only; the axial
 rotation ψ is held at a fixed value (0 by default). The previous command is the hint at the
-NAO roll singularity, so the command stream stays continuous.
+NAO roll singularity, so the command stream stays continuous there; where a joint must choose
+between its two limits (the arm behind the shoulder, an elbow yaw beyond ±119.5°) the previous
+command's limit is kept until the other is nearer by more than :data:`HYSTERESIS_DEG`, so an
+estimate that wavers across the boundary does not swing the joint from limit to limit.
 
 :class:`TeleopSink` is a pipeline sink; it sends each command to its robot targets, anything
 implementing :class:`JointTarget`: :class:`SimulatedNao` (keeps the commanded joint state and
@@ -68,6 +71,13 @@ class SimulatedNao:
 SHOULDER_ANGLES = ("elv_angle", "shoulder_elv")
 
 
+#: How much nearer (deg) the other limit must be before a stream leaves its pitch or elbow-yaw
+#: limit (``humerus_to_nao``'s ``hysteresis``), and so the most the arm may sit off the nearest
+#: command there. Overhead the wanted elbow yaw turns at twice θ's rate (2θ + 180° at φ = 150°,
+#: ψ = 0), and θ's error grows as 1/sin φ; 10° keeps a ±2° wavering θ there on one limit.
+HYSTERESIS_DEG = 10.0
+
+
 class TeleopSink:
     """A pipeline sink: each (θ, φ) estimate → one NAO command on every robot target.
 
@@ -98,8 +108,9 @@ class TeleopSink:
     def command_for(self, elv_angle_deg: float, shoulder_elv_deg: float) -> RobotCommand:
         """The NAO command for one pose (continuous with the previous one), not sent."""
         q = ms_to_quat(np.deg2rad(elv_angle_deg), np.deg2rad(shoulder_elv_deg), self.psi)
-        arm = humerus_to_nao(q, side=self.side, hint=self._previous)
-        self._previous = arm.unclamped
+        arm = humerus_to_nao(q, side=self.side, hint=self._previous,
+                             hysteresis=np.deg2rad(HYSTERESIS_DEG))
+        self._previous = arm.angles
         return RobotCommand(joints=arm.angles, clamped=arm.clamped)
 
     def accept(self, sample: Sample) -> None:

@@ -94,7 +94,7 @@ def _pitch_of(hint, shape: tuple[int, ...]) -> np.ndarray:
                          f"{shape + (3,)}") from None
 
 
-def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
+def humerus_to_nao(q, side: Side = "right", hint=None, hysteresis: float = 0.0) -> NaoArm:
     """Thorax ← humerus quaternion ``(..., 4)`` → NAO (ShoulderPitch, ShoulderRoll, ElbowYaw).
 
     The upper-arm direction comes first. The matched line is the NAO upper arm's X axis (the
@@ -113,13 +113,25 @@ def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
     one, not the clipped ``unclamped``). Where the nearest direction is not unique (the arm
     pointing straight along ±Y, roll = ±π/2, or straight into the unreachable wedge behind the
     shoulder), the pitch closest to ``hint`` is taken: ``hint`` is ``(..., 3)`` previous joint
-    angles (radians, the previous ``unclamped``), or None for pitch 0. Pass the previous output
-    to keep a stream continuous; away from these ties the command is a continuous function of
-    the wanted direction, but it moves fast near them (docs/conventions.md). Never NaN, never
-    raises for unit input.
+    angles (radians, the previous command ``angles``), or None for pitch 0. Pass the previous
+    output to keep a stream continuous; away from these ties the command is a continuous
+    function of the wanted direction, but it moves fast near them (docs/conventions.md).
+
+    Two choices flip from one limit to the other across a surface of poses, not only at a
+    point: the pitch limit for an arm pointing behind the shoulder (the two are equally near
+    whenever the arm is horizontal there), and the elbow-yaw limit when the wanted yaw lies
+    beyond ±119.5° (equally near at 180°, which an arm overhead reaches as θ turns). With a
+    ``hint``, ``hysteresis`` (radians, ≥ 0) keeps the hint's limit in both choices until the
+    other one is nearer by more than that: the arm axis (pitch) or the arm frame (yaw) may be
+    up to ``hysteresis`` farther from the wanted pose than the nearest command, and a stream
+    that wavers across the surface no longer swings the joint from limit to limit (239° of
+    pitch, 239° of yaw). Without a hint it is ignored. Never NaN, never raises for unit input.
     """
     if side not in NAO_LIMITS:
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+    if not hysteresis >= 0.0 or not np.isfinite(hysteresis):
+        raise ValueError(f"hysteresis must be finite and >= 0 (radians), got {hysteresis!r}")
+    sticky = 0.0 if hint is None else float(hysteresis)
     m = NAO_FROM_ISB @ quat_to_matrix(q) @ HUMERUS_FROM_NAO_ARM
     # Arm direction = first column = (cos p cos r, sin r, −sin p cos r).
     direction = m[..., :, 0]
@@ -134,7 +146,7 @@ def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
     mirror = np.array([1.0, -1.0, -1.0]) if side == "left" else np.ones(3)
     limits = NAO_LIMITS[side]
     right_limits = np.sort(limits * mirror[:, None], axis=1)
-    p_cmd, r_cmd = _nearest_reachable(direction, pitch, roll, pitch_hint, right_limits)
+    p_cmd, r_cmd = _nearest_reachable(direction, pitch, roll, pitch_hint, right_limits, sticky)
     yaw = exact[..., 2]
     reached = (p_cmd == pitch) & (r_cmd == roll)
     if not np.all(reached):  # the yaw that brings R_y(p) R_z(r) R_x(yaw) closest to m
@@ -142,14 +154,31 @@ def humerus_to_nao(q, side: Side = "right", hint=None) -> NaoArm:
                           -1, -2) @ m
         yaw_best = np.arctan2(arm[..., 2, 1] - arm[..., 1, 2], arm[..., 1, 1] + arm[..., 2, 2])
         yaw = np.where(reached, yaw, yaw_best)
-    yaw = np.clip(yaw, *right_limits[2])
+    yaw_hint = None if hint is None else np.asarray(hint, dtype=float)[..., 2] * mirror[2]
+    yaw = _nearest_yaw(yaw, right_limits[2], yaw_hint, sticky)
     command = np.stack([p_cmd, r_cmd, yaw], axis=-1) * mirror
     unclamped = exact * mirror
     outside = (unclamped < limits[:, 0]) | (unclamped > limits[:, 1])
     return NaoArm(angles=command, clamped=outside, unclamped=unclamped)
 
 
-def _nearest_reachable(direction, pitch, roll, pitch_hint, limits):
+def _nearest_yaw(yaw, limits, yaw_hint, sticky: float):
+    """Elbow yaw ``yaw`` (radians, in (−π, π]) within ``limits``: itself, or the nearer limit
+    around the circle (the one ``np.clip`` gives, as the limits straddle 0); with a
+    ``yaw_hint`` the limit nearer the hint is kept unless the other is nearer by more than
+    ``sticky`` radians."""
+    low, high = limits
+    clipped = np.clip(yaw, low, high)
+    if yaw_hint is None or sticky == 0.0:
+        return clipped
+    outside = (yaw < low) | (yaw > high)
+    to_high, to_low = np.abs(wrap_angle(yaw - high)), np.abs(wrap_angle(yaw - low))
+    hint_high = (np.abs(wrap_angle(yaw_hint - high)) <= np.abs(wrap_angle(yaw_hint - low)))
+    take_high = np.where(hint_high, to_high <= to_low + sticky, to_high < to_low - sticky)
+    return np.where(outside, np.where(take_high, high, low), clipped)
+
+
+def _nearest_reachable(direction, pitch, roll, pitch_hint, limits, sticky: float = 0.0):
     """Right-arm (pitch, roll) within ``limits`` whose arm X axis is closest to ``direction``.
 
     ``direction`` ``(..., 3)`` is a unit vector in the NAO torso frame, ``pitch``/``roll`` its
@@ -159,7 +188,8 @@ def _nearest_reachable(direction, pitch, roll, pitch_hint, limits):
     limits (for any fixed roll, the nearer longitude is better since cos r ≥ 0), at the roll
     that maximises sin r sin r* + cos r cos r* cos Δ on that meridian, or at a roll limit; all
     six candidates are compared, and ties within 1e-12 rad go to the pitch limit nearer the
-    hint, then to the order above.
+    hint, then to the order above; ``sticky`` (radians) widens that margin for the hint's
+    pitch limit: the other wins only when nearer by more than it.
     """
     (p_low, p_high), (r_low, r_high) = limits[0], limits[1]
     shape = np.shape(pitch)
@@ -183,6 +213,7 @@ def _nearest_reachable(direction, pitch, roll, pitch_hint, limits):
                           axis=-1)
         errors = np.arctan2(np.linalg.norm(np.cross(points, d[:, None, :]), axis=-1),
                             np.einsum("nkj,nj->nk", points, d))
+        errors[:, :3] -= sticky  # the first three lie on the pitch limit nearer the hint
         best = np.argmax(errors <= errors.min(axis=-1, keepdims=True) + 1e-12, axis=-1)
         rows = np.arange(len(best))
         p_cmd[outside], r_cmd[outside] = p_c[rows, best], r_c[rows, best]

@@ -569,10 +569,11 @@ def test_a_sink_that_swaps_pitch_and_roll_fails_teleop(tmp_path, fast_profile, m
 
 
 def test_the_teleop_reference_is_the_sink_stream_without_the_sink():
-    """``nao_commands_for`` (vectorised, hints solved to a fixed point) equals a fresh
+    """``nao_commands_for`` (vectorised, then the clamped poses one by one) equals a fresh
     TeleopSink fed the same poses one by one, ties included: the arm straight along −Y
-    (roll −90°, pitch from the hint) twice in a row, and straight back (pitch limit from the
-    hint)."""
+    (roll −90°, pitch from the hint) twice in a row, straight back (pitch limit from the
+    hint), and poses wavering across the two limit choices the hysteresis holds (the arm
+    horizontal behind the shoulder, θ about 0 overhead)."""
     from exohil.harness.session import nao_commands_for
     from exohil.harness.teleop import TeleopSink
 
@@ -580,6 +581,8 @@ def test_the_teleop_reference_is_the_sink_stream_without_the_sink():
     poses = np.column_stack([rng.uniform(-90, 130, 300), rng.uniform(0, 180, 300)])
     poses[100:103] = [[-30.0, 80.0], [0.0, 90.0], [0.0, 90.0]]
     poses[200:202] = [[-90.0, 90.0], [-90.0, 90.0]]
+    poses[220:240] = np.column_stack([np.full(20, -60.0), 90.0 + rng.normal(0.0, 3.0, 20)])
+    poses[250:270] = np.column_stack([rng.normal(0.0, 3.0, 20), np.full(20, 150.0)])
     sink = TeleopSink([], ("elv_angle", "shoulder_elv"))
     expected = np.array([sink.command_for(t, p).joints for t, p in poses])
     assert np.array_equal(nao_commands_for(poses), expected)

@@ -61,3 +61,17 @@ def test_abduction_through_the_roll_limit_follows_the_nearest_direction():
     assert commands[90.0][:2] == pytest.approx([90.0, -76.0])  # pitch from the hint
     assert commands[95.0][:2] == pytest.approx([-90.0, -76.0])
     assert commands[120.0][:2] == pytest.approx([-90.0, -60.0])  # reachable: exact
+
+
+@pytest.mark.parametrize("poses, joint", [
+    ([(-60.0, 89.95), (-60.0, 90.05)] * 50, 0),  # the arm horizontal behind the side plane
+    ([(-2.0, 150.0), (2.0, 150.0)] * 50, 2),     # overhead, θ wavering across 0
+])
+def test_a_pose_wavering_across_a_limit_choice_does_not_swing_the_joint(poses, joint):
+    """The probe's reproducers: 0.05° about the horizontal behind the shoulder swung
+    ShoulderPitch between +119.5° and −119.5° on every frame, and ±2° of θ overhead swung
+    ElbowYaw the same way. The sink keeps the previous command's limit."""
+    sink = TeleopSink([], NAMES)
+    stream = np.rad2deg([sink.command_for(t, p).joints for t, p in poses])
+    assert np.ptp(stream[:, joint]) < 1e-9
+    assert np.max(np.abs(np.diff(stream, axis=0))) < 3.0

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from exohil.harness.cli import main
 from exohil.kinematics import NAO_LIMITS, humerus_to_nao, ms_to_quat, rotation_angle_between
 from exohil.kinematics.robot import HUMERUS_FROM_NAO_ARM, NAO_FROM_ISB
-from exohil.kinematics.rotations import X, Y, Z, elementary_matrix, matrix_to_quat
+from exohil.kinematics.rotations import X, Y, Z, elementary_matrix, matrix_to_quat, quat_to_matrix
 
 pytestmark = pytest.mark.filterwarnings("error")
 deg = np.deg2rad
@@ -107,3 +107,67 @@ def test_reachable_direction_is_kept_even_when_elbow_yaw_clamps():
     assert np.rad2deg(arm.angles[:2]) == pytest.approx(np.rad2deg(arm.unclamped[:2]))
     assert np.rad2deg(arm.angles) == pytest.approx([-88.58, -49.89, -119.5], abs=0.01)
     assert arm.clamped.tolist() == [False, False, True]
+
+
+def _on_hint(theta_deg, phi_deg, hint_deg, hysteresis_deg, side="right"):
+    q = ms_to_quat(deg(theta_deg), deg(phi_deg), 0.0)
+    return np.rad2deg(humerus_to_nao(q, side=side, hint=deg(np.asarray(hint_deg, dtype=float)),
+                                     hysteresis=deg(hysteresis_deg)).angles)
+
+
+def test_hysteresis_keeps_the_hints_pitch_limit_behind_the_shoulder():
+    # 60° behind the side plane, the arm just below horizontal: the nearest pitch limit is
+    # −119.5° (+119.5° just above), a choice that flipped at any noise. From +119.5° the
+    # stream stays there until −119.5° is nearer by more than the hysteresis.
+    assert _on_hint(-60.0, 90.05, [0.0, 0.0, 0.0], 0.0)[0] == pytest.approx(-119.5)
+    assert _on_hint(-60.0, 89.95, [0.0, 0.0, 0.0], 0.0)[0] == pytest.approx(119.5)
+    held = _on_hint(-60.0, 90.05, [119.5, -49.5, -11.4], 10.0)
+    assert held[0] == pytest.approx(119.5)
+    assert _on_hint(-60.0, 100.0, [119.5, -49.5, -11.4], 10.0)[0] == pytest.approx(-119.5)
+    assert _on_hint(-60.0, 90.05, [119.5, -49.5, -11.4], 0.0)[0] == pytest.approx(-119.5)
+
+
+@pytest.mark.parametrize("side, sign", [("right", 1.0), ("left", -1.0)])
+def test_hysteresis_keeps_the_hints_elbow_yaw_limit_overhead(side, sign):
+    # φ = 150°, ψ = 0: the wanted elbow yaw is near 180° and turns at twice θ's rate, so the
+    # clamped yaw flipped from +119.5° to −119.5° as θ crossed 0.
+    assert _on_hint(-1.0, 150.0, [0, 0, 0], 0.0, side)[2] == pytest.approx(sign * 119.5)
+    assert _on_hint(1.0, 150.0, [0, 0, 0], 0.0, side)[2] == pytest.approx(-sign * 119.5)
+    hint = [-90.0, sign * -30.0, sign * 119.5]
+    assert _on_hint(2.0, 150.0, hint, 10.0, side)[2] == pytest.approx(sign * 119.5)
+    assert _on_hint(4.0, 150.0, hint, 10.0, side)[2] == pytest.approx(-sign * 119.5)
+
+
+def test_hysteresis_costs_at_most_itself_and_needs_a_hint():
+    rng = np.random.default_rng(5)
+    q = rng.normal(size=(4000, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    hints = np.column_stack([rng.uniform(-2.1, 2.1, 4000), rng.uniform(-1.3, 1.3, 4000),
+                             rng.uniform(-2.1, 2.1, 4000)])
+    sticky = deg(10.0)
+    nearest = humerus_to_nao(q, hint=hints)
+    held = humerus_to_nao(q, hint=hints, hysteresis=sticky)
+    assert np.any(held.angles != nearest.angles)  # the sample does reach the choices
+
+    def frames(angles):
+        return (elementary_matrix(Y, angles[:, 0]) @ elementary_matrix(Z, angles[:, 1])
+                @ elementary_matrix(X, angles[:, 2]))
+
+    wanted = NAO_FROM_ISB @ quat_to_matrix(q) @ HUMERUS_FROM_NAO_ARM
+
+    def axis_error(angles):
+        a, b = frames(angles)[:, :, 0], wanted[:, :, 0]
+        return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
+
+    assert np.all(axis_error(held.angles) <= axis_error(nearest.angles) + sticky + 1e-9)
+    same_axis = np.all(held.angles[:, :2] == nearest.angles[:, :2], axis=1)
+    yaw_gap = np.abs(np.angle(np.exp(1j * (held.angles[:, 2] - nearest.angles[:, 2]))))
+    off_best = np.abs(np.angle(np.exp(1j * (held.angles[:, 2] - held.unclamped[:, 2]))))
+    nearest_off = np.abs(np.angle(np.exp(1j * (nearest.angles[:, 2] - held.unclamped[:, 2]))))
+    reached = same_axis & ~held.clamped[:, 0] & ~held.clamped[:, 1]
+    assert np.all(off_best[reached] <= nearest_off[reached] + sticky + 1e-9)
+    assert np.all(yaw_gap[~held.clamped[:, 2] & reached] == 0.0)
+    assert np.array_equal(humerus_to_nao(q, hysteresis=sticky).angles, humerus_to_nao(q).angles)
+    for bad in (-1e-3, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="hysteresis"):
+            humerus_to_nao(q[0], hint=hints[0], hysteresis=bad)
