@@ -108,3 +108,23 @@ def test_cli_writes_the_model_and_rejects_bad_input(tmp_path, capsys):
     not_xml.write_text("<robot", encoding="utf-8")
     with pytest.raises(UrdfError, match="not XML"):
         build_nao_arms_mjcf(not_xml)
+
+
+def test_cli_refuses_an_output_it_cannot_or_must_not_write(tmp_path, capsys):
+    """OUT = URDF silently replaced the URDF by the MJCF; a folder or a missing folder was a
+    traceback. Each is now one error line, exit 1, and nothing is written."""
+    urdf = tmp_path / "nao.urdf"
+    urdf.write_bytes(NAO_URDF.read_bytes())
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    for out, message in ((urdf, "is the input URDF; refusing to overwrite it"),
+                         (tmp_path / "." / "nao.urdf", "refusing to overwrite it"),
+                         (folder, "it is a folder"),
+                         (tmp_path / "missing" / "arms.xml", "does not exist")):
+        capsys.readouterr()
+        assert main([str(urdf), str(out)]) == 1, out
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
+    assert urdf.read_bytes() == NAO_URDF.read_bytes()
+    assert list(folder.iterdir()) == [] and not (tmp_path / "missing").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder", "nao.urdf"]
