@@ -279,9 +279,11 @@ def _arm_pictures(result: SessionResult, out_dir: Path, notes: list[str]) -> Fil
         notes.append("no arm.gif / arm_*.png: no robot sample has a true pose")
         return []
     step = max(1, int(np.ceil(known.size / GIF_MAX_FRAMES)))
+    shown = known[::step]
     span = float(trace.device_time_s[known[-1]] - trace.device_time_s[known[0]])
-    fps = min(25.0, max(1.0, (known.size / step) / span)) if span > 0 else 1.0
-    gif = write_arm_animation(trace.arm_samples(known[::step]), out_dir / "arm.gif", fps=fps)
+    # the frames play over the span they sample (25 fps at most, the trace's rate)
+    fps = min(25.0, max(1.0, shown.size / span)) if span > 0 else 1.0
+    gif = write_arm_animation(trace.arm_samples(shown), out_dir / "arm.gif", fps=fps)
     stills = known[np.linspace(0, known.size - 1, ARM_FRAMES).astype(int)]
     frames = render_arm_frames(trace.arm_samples(np.unique(stills)), out_dir)
     return [("arm animation", gif)] + [("arm frame", p) for p in frames]
