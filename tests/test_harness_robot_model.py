@@ -50,6 +50,25 @@ def test_model_has_the_urdf_joints_axes_and_limits():
         assert np.array_equal(MODEL.actuator_ctrlrange[i], MODEL.jnt_range[i])
 
 
+def test_the_mappings_limits_differ_from_the_urdfs_as_docs_robot_md_says():
+    """docs/robot.md: NAO_LIMITS are 1.5e-6 rad inside the URDF's for pitch and elbow yaw,
+    and 2.3e-7..2.7e-7 rad outside them for roll (it said 'at most 2e-6 rad inside'), less
+    than MujocoNao's 1e-6 rad out-of-range tolerance."""
+    from exohil.harness.robot_mujoco import LIMIT_TOLERANCE
+    from exohil.kinematics.robot import NAO_JOINTS, NAO_LIMITS
+
+    by_name = {j.name: j for j in JOINTS.values()}
+    for side, prefix in (("right", "R"), ("left", "L")):
+        for k, joint in enumerate(NAO_JOINTS):
+            urdf = by_name[prefix + joint]
+            inside = [NAO_LIMITS[side][k, 0] - urdf.lower, urdf.upper - NAO_LIMITS[side][k, 1]]
+            if joint == "ShoulderRoll":
+                assert all(-2.7e-7 <= d <= -2.3e-7 for d in inside), (side, inside)
+                assert max(map(abs, inside)) < LIMIT_TOLERANCE
+            else:
+                assert all(1.5e-6 <= d <= 1.6e-6 for d in inside), (side, inside)
+
+
 @settings(max_examples=100)
 @given(st.lists(st.floats(0.0, 1.0), min_size=8, max_size=8))
 def test_mujoco_forward_kinematics_equals_urdf_forward_kinematics(fractions):
