@@ -74,13 +74,14 @@ def _inputs(config: BenchConfig) -> list[Path | None]:
 def _outputs(config: BenchConfig, json_out: Path | None,
              out_dir: Path | None) -> list[tuple[str, Path | None]]:
     """Every file the run writes, with the option that names it."""
-    from exohil.harness.demo_report import REPORT_FILES
+    from exohil.harness.demo_report import REPORT_FILES, report_files_in
 
     outputs = [("--record", config.record), ("--json", json_out)]
     if out_dir is not None:
         outputs += [("--out", out_dir / name) for name in REPORT_FILES]
-        # the report replaces every arm_*.png in the folder with its numbered stills
-        outputs += [("--out", path) for path in sorted(out_dir.glob("arm_*.png"))]
+        # the report replaces or removes every numbered arm still (arm_NNNNN.png) in the folder
+        outputs += [("--out", path) for path in report_files_in(out_dir)
+                    if path.name not in REPORT_FILES]
     return outputs
 
 

@@ -21,13 +21,16 @@ A run keeps per-frame rows only for its first and last frames (about a minute ea
 ``angles.png`` when there is a gap between them; a note says so), while ``summary.json`` and
 ``latency.png`` cover every frame. ``exohil demo --record`` writes every frame as it goes.
 
-Every file is written under a temporary name and renamed when complete. Matplotlib draws
-with the Agg backend (files only).
+Every file is written under a temporary name and renamed when complete. A report written
+into a folder that holds an earlier one never mixes the two: the pictures this run does not
+draw (``hysteresis.png``, ``arm.gif``, ``arm_NNNNN.png`` by those exact names) are removed;
+nothing else in the folder is touched. Matplotlib draws with the Agg backend (files only).
 """
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +57,16 @@ Files = list[tuple[str, Path]]
 #: The report's files whose names are fixed (arm_*.png are numbered).
 REPORT_FILES = ("run.mcap", "summary.json", "summary.md", "angles.png", "latency.png",
                 "hysteresis.png", "arm.gif")
+#: The names of the numbered arm stills (``arm_00000.png`` ...).
+ARM_STILL = re.compile(r"arm_[0-9]{5}\.png")
+
+
+def report_files_in(out_dir: Path) -> list[Path]:
+    """The files in ``out_dir`` that a report writes or replaces: :data:`REPORT_FILES` and the
+    numbered arm stills, by those exact names (what else the folder holds is not a report's)."""
+    named = [out_dir / name for name in REPORT_FILES]
+    stills = sorted(p for p in out_dir.glob("arm_*.png") if ARM_STILL.fullmatch(p.name))
+    return [p for p in named + stills if p.is_file() or p.is_symlink()]
 
 
 def _save(figure: Figure, path: Path) -> Path:
@@ -243,6 +256,11 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     md = out_dir / "summary.md"
     js = out_dir / "summary.json"
     listed = [*files, ("summary table", md), ("summary JSON", js)]
+    # an earlier report's pictures that this run did not draw would pass for this run's
+    written = {path.name for _, path in listed}
+    for stale in report_files_in(out_dir):
+        if stale.name not in written:
+            stale.unlink()
     write_text(md, summary_markdown(s, listed))
     write_text(js, strict_json.dumps(s, indent=2) + "\n")
     return listed, notes
@@ -261,11 +279,11 @@ def _arm_pictures(result: SessionResult, out_dir: Path, notes: list[str]) -> Fil
         notes.append("no arm.gif / arm_*.png: no robot sample has a true pose")
         return []
     step = max(1, int(np.ceil(known.size / GIF_MAX_FRAMES)))
+    shown = known[::step]
     span = float(trace.device_time_s[known[-1]] - trace.device_time_s[known[0]])
-    fps = min(25.0, max(1.0, (known.size / step) / span)) if span > 0 else 1.0
-    gif = write_arm_animation(trace.arm_samples(known[::step]), out_dir / "arm.gif", fps=fps)
+    # the frames play over the span they sample (25 fps at most, the trace's rate)
+    fps = min(25.0, max(1.0, shown.size / span)) if span > 0 else 1.0
+    gif = write_arm_animation(trace.arm_samples(shown), out_dir / "arm.gif", fps=fps)
     stills = known[np.linspace(0, known.size - 1, ARM_FRAMES).astype(int)]
-    for old in out_dir.glob("arm_*.png"):
-        old.unlink()
     frames = render_arm_frames(trace.arm_samples(np.unique(stills)), out_dir)
     return [("arm animation", gif)] + [("arm frame", p) for p in frames]

@@ -29,7 +29,7 @@ import xml.etree.ElementTree as ET
 from math import cos, sin
 from pathlib import Path
 
-from exohil.formats.atomic import write_text
+from exohil.formats.atomic import same_file, write_text
 from exohil.formats.errors import InputError
 from exohil.harness.paths import FIXTURES_DIR
 
@@ -183,19 +183,42 @@ def _inertial(body: ET.Element, links: dict[str, ET.Element], link_name: str) ->
                   fullinertia=_fmt(tensor))
 
 
+def _cannot_write(out: Path, urdf: Path) -> str | None:
+    """Why ``out`` cannot take the MJCF of ``urdf`` (the input itself, a folder, in a missing
+    folder), or None."""
+    if same_file(out, [urdf]) is not None:
+        return f"{out} is the input URDF; refusing to overwrite it"
+    if out.is_dir():
+        return f"cannot write {out}: it is a folder"
+    if not out.absolute().parent.is_dir():
+        return f"cannot write {out}: folder {out.absolute().parent} does not exist"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m exohil.harness.robot_model URDF OUT``: write the MJCF (temp name, rename)."""
+    """``python -m exohil.harness.robot_model URDF OUT``: write the MJCF (temp name, rename).
+
+    Returns 0, 2 for a wrong number of arguments, 1 with one ``error:`` line for a bad URDF
+    or an output that cannot be written (the URDF itself, a folder, a missing folder)."""
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 2:
         print("usage: python -m exohil.harness.robot_model URDF OUT", file=sys.stderr)
         return 2
-    try:
-        text = build_nao_arms_mjcf(args[0])
-    except (OSError, UrdfError) as err:
-        print(f"error: {err}", file=sys.stderr)
+    urdf, out = Path(args[0]), Path(args[1])
+    problem = _cannot_write(out, urdf)
+    if problem is None:
+        try:
+            text = build_nao_arms_mjcf(urdf)
+        except (OSError, UrdfError) as err:
+            problem = str(err)
+    if problem is None:
+        try:
+            write_text(out, text)
+        except OSError as err:  # no permission, disk full: the old file stays as it was
+            problem = f"cannot write {out}: {err.strerror or err}"
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
         return 1
-    out = Path(args[1])
-    write_text(out, text)
     print(f"wrote {out}")
     return 0
 

@@ -161,12 +161,14 @@ class MujocoNao:
         (s, the estimate's time) is not used for timing: the delay is measured on this
         process's clock.
 
-        Raises ValueError for a wrong shape (of either) or non-finite angles, RuntimeError
-        after close.
+        Raises RuntimeError before ``start()`` (no physics would take the command) or after
+        close, ValueError for a wrong shape (of either) or non-finite angles.
         Never blocks beyond a lock swap.
         """
         if self._closed:
             raise RuntimeError("MujocoNao is closed")
+        if self._thread is None:
+            raise RuntimeError("MujocoNao is not running (call start() first)")
         received = time.perf_counter()
         angles = np.asarray(joints, dtype=float)
         if angles.shape != (3,):

@@ -169,7 +169,11 @@ def write_arm_animation(samples: Sequence[ArmSample], path_gif: str | Path, *,
                         fps: float = 10.0, dpi: int = 80) -> Path:
     """Write the samples as an animated GIF (one frame each, ``fps`` frames per second).
 
-    Written under a temporary name beside ``path_gif`` and renamed when complete.
+    GIF stores each frame's delay in 10 ms units: frame k shows from ``k / fps`` to
+    ``(k + 1) / fps`` with both times rounded to 10 ms, so the delays differ by at most 10 ms
+    and the animation lasts ``len(samples) / fps`` to within 5 ms (a fixed delay, rounded
+    once, would drift: 159.5 ms frames played at 150 ms lose 6 % of the time). Written under
+    a temporary name beside ``path_gif`` and renamed when complete.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from PIL import Image
@@ -197,5 +201,13 @@ def write_arm_animation(samples: Sequence[ArmSample], path_gif: str | Path, *,
     images = [Image.fromarray(frame).quantize(palette=palette, dither=Image.Dither.NONE)
               for frame in frames]
     return write_with(path, lambda tmp: images[0].save(
-        tmp, format="GIF", save_all=True, append_images=images[1:], duration=1000.0 / fps,
-        loop=0))
+        tmp, format="GIF", save_all=True, append_images=images[1:],
+        duration=gif_delays_ms(len(images), fps), loop=0))
+
+
+def gif_delays_ms(frames: int, fps: float) -> list[int]:
+    """Per-frame delays (ms, multiples of 10: GIF's unit) of ``frames`` frames at ``fps``:
+    the differences of the frames' start times ``k / fps`` rounded to 10 ms, so they add up
+    to ``frames / fps`` rounded to 10 ms."""
+    starts = [round(100.0 * k / fps) for k in range(frames + 1)]
+    return [10 * (b - a) for a, b in zip(starts, starts[1:], strict=False)]

@@ -11,6 +11,11 @@ in docs/robot.md)::
 UDP is fire-and-forget: sending never blocks (a non-blocking socket), and a datagram the
 kernel refuses is counted in the summary instead of raising, so a robot bridge that is down
 cannot stall the pipeline.
+
+The datagram may drive a real robot, so ``rad`` is always within NAO's limits for the side
+(:data:`~exohil.kinematics.robot.NAO_LIMITS`, which the schema states per joint): an angle
+beyond them is clipped to the limit, its ``clamped`` flag set, and the command counted
+(``out_of_range`` in the summary), as ``MujocoNao`` clips to its model's limits.
 """
 
 from __future__ import annotations
@@ -22,9 +27,23 @@ import time
 
 import numpy as np
 
-from exohil.kinematics import NAO_JOINTS
+from exohil.kinematics import NAO_JOINTS, NAO_LIMITS
 
 SCHEMA_ID = "exohil.nao_command/1"
+#: Commands beyond the limits by more than this (rad) count as out of range; the clamped flag
+#: is set for them (as ``robot_mujoco.LIMIT_TOLERANCE``).
+LIMIT_TOLERANCE = 1e-6
+
+
+def _side_limits(side: str) -> dict:
+    """The schema's per-joint bounds of ``rad`` and ``deg`` for one side."""
+    def bounds(limits: np.ndarray) -> list[dict]:
+        return [{"type": "number", "minimum": float(lo), "maximum": float(hi)}
+                for lo, hi in limits]
+    limits = NAO_LIMITS[side]
+    return {"if": {"properties": {"side": {"const": side}}, "required": ["side"]},
+            "then": {"properties": {"rad": {"prefixItems": bounds(limits)},
+                                    "deg": {"prefixItems": bounds(np.rad2deg(limits))}}}}
 
 #: JSON schema of one datagram.
 COMMAND_SCHEMA = {
@@ -44,11 +63,17 @@ COMMAND_SCHEMA = {
         "joints": {"type": "array", "minItems": 3, "maxItems": 3,
                    "items": {"type": "string", "pattern": "^[RL](ShoulderPitch|ShoulderRoll|"
                                                          "ElbowYaw)$"}},
-        "rad": {"type": "array", "minItems": 3, "maxItems": 3, "items": {"type": "number"}},
-        "deg": {"type": "array", "minItems": 3, "maxItems": 3, "items": {"type": "number"}},
+        "rad": {"type": "array", "minItems": 3, "maxItems": 3, "items": {"type": "number"},
+                "description": "ShoulderPitch, ShoulderRoll, ElbowYaw (rad), within NAO's "
+                               "limits for the side (allOf)"},
+        "deg": {"type": "array", "minItems": 3, "maxItems": 3, "items": {"type": "number"},
+                "description": "the same in degrees"},
         "clamped": {"type": "array", "minItems": 3, "maxItems": 3,
-                    "items": {"type": "boolean"}},
+                    "items": {"type": "boolean"},
+                    "description": "the joint's exact value was outside its limit (by the "
+                                   "mapping, or clipped by the sender)"},
     },
+    "allOf": [_side_limits("right"), _side_limits("left")],
 }
 
 
@@ -98,10 +123,14 @@ class UdpJointTarget:
         self.send_errors = 0
         self.last_error: str | None = None
         self.clamped_commands = 0
+        self.out_of_range = 0
+        self._limits = NAO_LIMITS[side]
 
     def command(self, t: float, joints: np.ndarray, clamped: np.ndarray) -> None:
         """Send one datagram: ``joints`` radians in NAO_JOINTS order, ``clamped`` flags.
 
+        Angles beyond NAO's limits for the side are clipped to them; a joint clipped by more
+        than ``LIMIT_TOLERANCE`` is flagged clamped and the command counted as out of range.
         Raises ValueError for a wrong shape or non-finite values, RuntimeError after close.
         """
         if self._sock is None:
@@ -113,13 +142,17 @@ class UdpJointTarget:
                              f"and {flags.shape}")
         if not (np.all(np.isfinite(angles)) and math.isfinite(t)):
             raise ValueError(f"t and joints must be finite, got t={t!r}, {angles.tolist()}")
+        target = np.clip(angles, self._limits[:, 0], self._limits[:, 1])
+        beyond = np.abs(target - angles) > LIMIT_TOLERANCE
+        flags = flags | beyond
         message = {"schema": SCHEMA_ID, "seq": self._seq, "t": float(t),
                    "sent_unix_ns": time.time_ns(), "side": self.side, "joints": self._names,
-                   "rad": angles.tolist(), "deg": np.rad2deg(angles).tolist(),
+                   "rad": target.tolist(), "deg": np.rad2deg(target).tolist(),
                    "clamped": flags.tolist()}
         payload = json.dumps(message, allow_nan=False, separators=(",", ":")).encode()
         self._seq += 1
         self.clamped_commands += int(flags.any())
+        self.out_of_range += int(beyond.any())
         try:
             self.bytes_sent += self._sock.sendto(payload, self._address)
         except OSError as err:  # full buffer, unreachable network: count, do not stall
@@ -139,8 +172,10 @@ class UdpJointTarget:
         self.close()
 
     def summary(self) -> dict:
-        """JSON-able: destination, commands and datagrams sent, bytes, send errors."""
+        """JSON-able: destination, commands and datagrams sent, bytes, send errors, commands
+        with a clamped joint and commands clipped here to NAO's limits (``out_of_range``)."""
         return {"host": self.host, "port": self.port, "side": self.side,
                 "commands": self._seq, "datagrams_sent": self._seq - self.send_errors,
                 "bytes_sent": self.bytes_sent, "send_errors": self.send_errors,
-                "last_error": self.last_error, "clamped_commands": self.clamped_commands}
+                "last_error": self.last_error, "clamped_commands": self.clamped_commands,
+                "out_of_range": self.out_of_range}

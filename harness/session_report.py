@@ -9,7 +9,7 @@ module lays them out as the summary JSON and the lines a person reads.
      "frames": {"sent", "received", "dropped", "crc_errors"},
      "teleop": {"rmse_deg": {joint: deg}, "clamped_share",
                 "robot_tracking_deg": {"p50", "p99", "max"}, "robot_axis_error_deg": {...},
-                "robots": {class: summary}},
+                "robots": {name: summary}},
      "device_lost": text or null, "ended_early": text or null (an emulator's recording
      shorter than the seconds asked for),
      "device_log": {kind: count}, "values_clipped_to_wire_range": count,
@@ -19,6 +19,10 @@ module lays them out as the summary JSON and the lines a person reads.
      "sensor_rate_warning": text or null (a device at another frame rate than the model's),
      "measurements": [Measurement.to_dict(), ...],
      "model", "model_sha256", "backend", "target", "machine", "finished_at"}
+
+``teleop.robots`` holds every robot target's ``summary()`` (:func:`robot_summaries`), named by
+its class (``MujocoNao``, ``UdpJointTarget``, ...); when several targets share a class (``--sink
+udp:A --sink udp:B``) each is named ``Class[k]``, k from 0 in the order the sinks were given.
 """
 
 from __future__ import annotations
@@ -53,6 +57,21 @@ def _value(measurements: list[Measurement], name: str) -> float | None:
         if m.name == name:
             return None if math.isnan(m.value) else round(m.value, 4)
     return None
+
+
+def robot_summaries(robots: list[Any]) -> dict[str, Any]:
+    """Each robot's ``summary()`` (those that have one) by name: its class name, or
+    ``Class[k]`` (k from 0, in order) when several robots share a class (module doc)."""
+    reporting = [r for r in robots if hasattr(r, "summary")]
+    classes = [type(r).__name__ for r in reporting]
+    out: dict[str, Any] = {}
+    seen: dict[str, int] = {}
+    for robot, name in zip(reporting, classes, strict=True):
+        if classes.count(name) > 1:
+            k = seen[name] = seen.get(name, -1) + 1
+            name = f"{name}[{k}]"
+        out[name] = robot.summary()
+    return out
 
 
 def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str, Any]:
@@ -96,8 +115,7 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
             **{f"{name}_deg": {stat: _value(measurements, f"teleop.{name}.{stat}")
                                for stat in ("p50", "p99", "max")}
                for name in ("robot_tracking", "robot_axis_error")},
-            "robots": {type(r).__name__: r.summary() for r in result.robots
-                       if hasattr(r, "summary")},
+            "robots": robot_summaries(result.robots),
         },
         "wall_s": round(run.wall_s, 3),
         "measurements": [m.to_dict() for m in measurements],

@@ -109,6 +109,55 @@ def test_demo_refuses_to_write_onto_its_input(tmp_path, name, output):
     assert copy.read_bytes() == before
 
 
+def test_a_report_into_an_earlier_reports_folder_leaves_none_of_its_pictures(tmp_path):
+    """A run without a MuJoCo robot draws no arm pictures; an earlier run's arm.gif and
+    arm_0000k.png used to stay beside the new summary, as if this run had drawn them. Files
+    that are not the report's (other names) stay."""
+    out = tmp_path / "report"
+    out.mkdir()
+    earlier = ["arm.gif", "arm_00000.png", "arm_00003.png"]
+    theirs = ["arm_notes.png", "arm_1.png", "arm_00000.png.bak", "notes.txt"]
+    for name in earlier + theirs:
+        (out / name).write_bytes(b"earlier")
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--no-faults", "--sink",
+                                       "simulated", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "no arm.gif / arm_*.png" in result.output
+    left = {p.name for p in out.iterdir()}
+    assert not left & set(earlier), left
+    assert set(theirs) <= left
+    assert all((out / name).read_bytes() == b"earlier" for name in theirs)
+    listed = (out / "summary.md").read_text()
+    assert "arm.gif" not in listed and "arm_0" not in listed
+
+
+def test_every_robot_target_keeps_its_statistics_in_the_summary(tmp_path):
+    """`--sink` is repeatable; two targets of one class used to share one key of
+    teleop.robots, so the summary kept only the last one's statistics."""
+    import socket
+
+    receivers = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2)]
+    try:
+        for r in receivers:
+            r.bind(("127.0.0.1", 0))
+        ports = [r.getsockname()[1] for r in receivers]
+        summary_path = tmp_path / "s.json"
+        result = CliRunner().invoke(main, [
+            "demo", "--seconds", "1", "--no-faults", "--sink", f"udp:127.0.0.1:{ports[0]}",
+            "--sink", "simulated", "--sink", f"udp:127.0.0.1:{ports[1]}",
+            "--json", str(summary_path), "--out", str(tmp_path / "out")])
+    finally:
+        for r in receivers:
+            r.close()
+    assert result.exit_code == 0, result.output
+    s = json.loads(summary_path.read_text())
+    robots = s["teleop"]["robots"]
+    assert set(robots) == {"UdpJointTarget[0]", "SimulatedNao", "UdpJointTarget[1]"}
+    assert [robots[f"UdpJointTarget[{k}]"]["port"] for k in range(2)] == ports
+    for k in range(2):
+        assert robots[f"UdpJointTarget[{k}]"]["commands"] == s["frames"]["received"]
+
+
 def test_a_session_refuses_to_record_onto_its_model(tmp_path):
     import shutil
 

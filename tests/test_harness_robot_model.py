@@ -50,6 +50,25 @@ def test_model_has_the_urdf_joints_axes_and_limits():
         assert np.array_equal(MODEL.actuator_ctrlrange[i], MODEL.jnt_range[i])
 
 
+def test_the_mappings_limits_differ_from_the_urdfs_as_docs_robot_md_says():
+    """docs/robot.md: NAO_LIMITS are 1.5e-6 rad inside the URDF's for pitch and elbow yaw,
+    and 2.3e-7..2.7e-7 rad outside them for roll (it said 'at most 2e-6 rad inside'), less
+    than MujocoNao's 1e-6 rad out-of-range tolerance."""
+    from exohil.harness.robot_mujoco import LIMIT_TOLERANCE
+    from exohil.kinematics.robot import NAO_JOINTS, NAO_LIMITS
+
+    by_name = {j.name: j for j in JOINTS.values()}
+    for side, prefix in (("right", "R"), ("left", "L")):
+        for k, joint in enumerate(NAO_JOINTS):
+            urdf = by_name[prefix + joint]
+            inside = [NAO_LIMITS[side][k, 0] - urdf.lower, urdf.upper - NAO_LIMITS[side][k, 1]]
+            if joint == "ShoulderRoll":
+                assert all(-2.7e-7 <= d <= -2.3e-7 for d in inside), (side, inside)
+                assert max(map(abs, inside)) < LIMIT_TOLERANCE
+            else:
+                assert all(1.5e-6 <= d <= 1.6e-6 for d in inside), (side, inside)
+
+
 @settings(max_examples=100)
 @given(st.lists(st.floats(0.0, 1.0), min_size=8, max_size=8))
 def test_mujoco_forward_kinematics_equals_urdf_forward_kinematics(fractions):
@@ -108,3 +127,23 @@ def test_cli_writes_the_model_and_rejects_bad_input(tmp_path, capsys):
     not_xml.write_text("<robot", encoding="utf-8")
     with pytest.raises(UrdfError, match="not XML"):
         build_nao_arms_mjcf(not_xml)
+
+
+def test_cli_refuses_an_output_it_cannot_or_must_not_write(tmp_path, capsys):
+    """OUT = URDF silently replaced the URDF by the MJCF; a folder or a missing folder was a
+    traceback. Each is now one error line, exit 1, and nothing is written."""
+    urdf = tmp_path / "nao.urdf"
+    urdf.write_bytes(NAO_URDF.read_bytes())
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    for out, message in ((urdf, "is the input URDF; refusing to overwrite it"),
+                         (tmp_path / "." / "nao.urdf", "refusing to overwrite it"),
+                         (folder, "it is a folder"),
+                         (tmp_path / "missing" / "arms.xml", "does not exist")):
+        capsys.readouterr()
+        assert main([str(urdf), str(out)]) == 1, out
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
+    assert urdf.read_bytes() == NAO_URDF.read_bytes()
+    assert list(folder.iterdir()) == [] and not (tmp_path / "missing").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder", "nao.urdf"]

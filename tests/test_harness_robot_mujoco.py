@@ -99,8 +99,21 @@ def test_the_mappings_limit_values_are_not_out_of_range():
     assert summary["out_of_range_commands"] == 0 and summary["clamped_commands"] == 2
 
 
+def test_a_command_before_start_is_refused():
+    """It used to be counted as taken while no physics ran (CoppeliaNao refuses it too)."""
+    nao = MujocoNao()
+    with pytest.raises(RuntimeError, match=r"not running \(call start\(\) first\)"):
+        nao.command(0.0, np.zeros(3), NO_CLAMP)
+    assert nao.summary()["commands"] == 0
+    nao.start()
+    nao.command(0.0, np.zeros(3), NO_CLAMP)
+    nao.close()
+    assert nao.summary()["commands"] == 1
+
+
 def test_bad_commands_and_arguments_raise():
     nao = MujocoNao()
+    nao.start()  # commands are taken only while running
     with pytest.raises(ValueError, match="shape"):
         nao.command(0.0, np.zeros(4), NO_CLAMP)
     with pytest.raises(ValueError, match="finite"):

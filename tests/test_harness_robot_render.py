@@ -51,6 +51,22 @@ def test_animation_is_a_gif_with_one_frame_per_sample(samples, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["arm.gif"]  # no partial file left
 
 
+@pytest.mark.parametrize("fps", [6.27, 12.56, 25.0, 3.0])
+def test_animation_lasts_its_frames_over_fps_to_10_ms(samples, tmp_path, fps):
+    """GIF delays are 10 ms units: one delay of 1000 / fps ms, rounded once, made a 15 s demo
+    play in 14.1 s (159.5 ms frames at 150 ms). The rounding is spread over the frames."""
+    frames = [samples[k % 3] for k in range(40)]  # no two consecutive frames alike
+    path = write_arm_animation(frames, tmp_path / "arm.gif", fps=fps, dpi=30)
+    delays = []
+    with Image.open(path) as image:
+        assert image.n_frames == len(frames)
+        for k in range(image.n_frames):
+            image.seek(k)
+            delays.append(image.info["duration"])
+    assert abs(sum(delays) - 1000.0 * len(frames) / fps) <= 5.0
+    assert max(delays) - min(delays) <= 10
+
+
 def test_each_animation_frame_shows_its_own_sample_alone(samples, tmp_path):
     # the moving lines are drawn over a saved background: a frame must not keep the lines of
     # the frame before it, so the same sample draws the same picture wherever it falls

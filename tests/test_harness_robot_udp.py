@@ -27,7 +27,8 @@ def receive(sock: socket.socket) -> dict:
 @pytest.mark.parametrize("side", ["right", "left"])
 def test_each_command_is_one_datagram_matching_the_schema(receiver, side):
     port = receiver.getsockname()[1]
-    commands = [(0.004 * k, np.deg2rad([90.0 - 10 * k, -20.0 * k, 5.0]),
+    roll = -1.0 if side == "right" else 1.0  # within either side's limits (-76°..18° right)
+    commands = [(0.004 * k, np.deg2rad([90.0 - 10 * k, roll * 20.0 * k, 5.0]),
                  np.array([False, k == 2, False])) for k in range(3)]
     with UdpJointTarget("127.0.0.1", port, side=side) as target:
         for t, joints, clamped in commands:
@@ -46,6 +47,50 @@ def test_each_command_is_one_datagram_matching_the_schema(receiver, side):
     assert summary["commands"] == 3 and summary["datagrams_sent"] == 3
     assert summary["send_errors"] == 0 and summary["clamped_commands"] == 1
     json.dumps(summary)
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_angles_beyond_naos_limits_are_clipped_flagged_and_counted(receiver, side):
+    """The datagram may drive a real NAO: 3 rad of pitch used to go out as is, with clamped
+    false, and the schema accepted it."""
+    from exohil.kinematics.robot import NAO_LIMITS
+
+    limits = NAO_LIMITS[side]
+    roll_out = -1.5 if side == "right" else 1.5  # beyond -76° (right) / 76° (left)
+    with UdpJointTarget("127.0.0.1", receiver.getsockname()[1], side=side) as target:
+        target.command(0.0, np.array([3.0, 0.0, 0.0]), np.zeros(3, bool))
+        target.command(0.004, np.array([0.0, roll_out, -2.5]), np.array([True, False, False]))
+        target.command(0.008, limits[:, 1].copy(), np.zeros(3, bool))  # at the limit: as is
+        messages = [receive(receiver) for _ in range(3)]
+        summary = target.summary()
+    assert messages[0]["rad"] == [limits[0, 1], 0.0, 0.0]
+    assert messages[0]["clamped"] == [True, False, False]
+    assert messages[1]["rad"] == [0.0, limits[1, 0 if side == "right" else 1], limits[2, 0]]
+    assert messages[1]["clamped"] == [True, True, True]
+    assert messages[2]["rad"] == limits[:, 1].tolist()
+    assert messages[2]["clamped"] == [False, False, False]
+    for message in messages:
+        jsonschema.validate(message, COMMAND_SCHEMA)
+        assert message["deg"] == pytest.approx(np.rad2deg(message["rad"]).tolist())
+    assert summary["out_of_range"] == 2 and summary["clamped_commands"] == 2
+
+
+def test_the_schema_states_naos_limits_per_side():
+    from exohil.kinematics.robot import NAO_LIMITS
+
+    message = {"schema": "exohil.nao_command/1", "seq": 0, "t": 0.0, "sent_unix_ns": 0,
+               "side": "right", "joints": ["RShoulderPitch", "RShoulderRoll", "RElbowYaw"],
+               "rad": [3.0, 0.0, 0.0], "deg": [171.9, 0.0, 0.0], "clamped": [False] * 3}
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(message, COMMAND_SCHEMA)
+    # a right arm's roll of -60° is within its limits and beyond the left arm's
+    roll = np.deg2rad(-60.0)
+    message.update(rad=[0.0, roll, 0.0], deg=[0.0, -60.0, 0.0])
+    jsonschema.validate(message, COMMAND_SCHEMA)
+    assert NAO_LIMITS["left"][1, 0] > roll
+    message.update(side="left", joints=["LShoulderPitch", "LShoulderRoll", "LElbowYaw"])
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(message, COMMAND_SCHEMA)
 
 
 def test_bad_arguments_and_commands_are_clear_errors(receiver, monkeypatch):
