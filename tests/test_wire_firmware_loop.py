@@ -70,7 +70,9 @@ int main(int argc, char **argv) {
     if (argc > 5) { g_busy_from = atof(argv[4]); g_busy_to = atof(argv[5]); }
     setup();
     uint64_t end = g_now + (uint64_t)(seconds * 1e6);
-    while (g_now < end) loop();
+    unsigned long loops = 0;
+    while (g_now < end) { loop(); ++loops; }
+    fprintf(stderr, "%lu\n", loops);
     return 0;
 }
 """
@@ -92,9 +94,15 @@ def sketch(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _run(exe: Path, *args: float) -> list[tuple[int, int]]:
+    return _run_loops(exe, *args)[0]
+
+
+def _run_loops(exe: Path, *args: float) -> tuple[list[tuple[int, int]], int]:
+    """(seq, t_us) of each frame sent, and how many times loop() ran."""
     done = subprocess.run([str(exe), *map(str, args)], capture_output=True, text=True,
                           check=True, timeout=60)
-    return [(int(a), int(b)) for a, b in (line.split() for line in done.stdout.splitlines())]
+    lines = (line.split() for line in done.stdout.splitlines())
+    return [(int(a), int(b)) for a, b in lines], int(done.stderr)
 
 
 def test_sketch_sends_at_250_hz(sketch: Path) -> None:
@@ -123,3 +131,13 @@ def test_stall_past_half_the_micros_range_costs_only_the_stall(sketch: Path) -> 
     assert abs(last_t - sim_end_us) < 2 * PERIOD_US  # it ran to the end of the simulation
     after = [t for _, t in frames if t > 2_200_000_000]
     assert len(after) >= 70_000  # ~300 s at 250 Hz after the stall, not a 36-min wait
+
+
+def test_host_not_reading_drops_frames_instead_of_blocking(sketch: Path) -> None:
+    frames, loops = _run_loops(sketch, 3.0, -1, 0, 1.0, 1.5)  # IN bank busy for 0.5 s
+    assert loops == pytest.approx(750, abs=2)  # sampling went on: write() never spun
+    seqs = [s for s, _ in frames]
+    assert seqs[-1] - seqs[0] + 1 == pytest.approx(750, abs=2)  # periods still counted
+    assert len(frames) == pytest.approx(750 - 125, abs=3)  # the busy 0.5 s is one gap
+    times = [t for _, t in frames]
+    assert max(b - a for a, b in zip(times, times[1:], strict=False)) < 510_000

@@ -13,10 +13,14 @@
  * a catch-up burst). The wait is bounded by one period, so a stall of any length (even past
  * the 2^32 us micros() wrap, ~71.6 min) costs only the stall itself.
  *
- * The loop never calls `if (SerialUSB)`: on the SAM core (ArduinoCore-sam
- * cores/arduino/USB/CDC.cpp) Serial_::operator bool() calls delay(10) on every call (the loop
- * ran at ~99 Hz); SerialUSB.dtr() reads the same line state without delay. A frame sampled
- * while no host has the port open is dropped; seq still advances, so the host sees a gap.
+ * Sending never waits on the host (SAM core, ArduinoCore-sam cores/arduino/USB/CDC.cpp):
+ * `if (SerialUSB)` is not used in loop() because Serial_::operator bool() calls delay(10)
+ * on every call (the loop would run at ~99 Hz); SerialUSB.dtr() reads the same line state
+ * without delay. availableForWrite() always reports 511 on this core and USBD_Send/UDD_Send
+ * spin until the CDC IN endpoint's single bank is free, with no timeout, so the sketch checks
+ * that bank (TXINI, the flag UDD_Send waits on) itself: a frame sampled while no host has the
+ * port open, or while the previous USB packet has not been collected (host not reading), is
+ * dropped; seq still advances, so the host sees the loss as a gap.
  */
 #include "exohil_wire.h"
 
@@ -37,6 +41,14 @@ static uint16_t countsToCentiMm(uint8_t channel, uint32_t counts)
 {
     uint32_t value = kOffsetCentiMm[channel] + (counts * kGainNum[channel]) / kGainDen;
     return value > 0xFFFFu ? 0xFFFFu : (uint16_t)value;
+}
+
+// Whether SerialUSB.write() of one small frame returns at once: a host has the port open
+// (DTR; write() drops bytes otherwise) and the CDC IN endpoint's bank is free (UDD_Send
+// would otherwise spin until the host collects the previous packet).
+static bool usbCanSend()
+{
+    return SerialUSB.dtr() && (UOTGHS->UOTGHS_DEVEPTISR[CDC_TX] & UOTGHS_DEVEPTISR_TXINI) != 0;
 }
 
 void setup()
@@ -63,7 +75,7 @@ void loop()
 
     uint8_t frame[EXOHIL_MAX_FRAME_BYTES];
     size_t n = exohil_frame_encode(seq, t_us, values, kSensorCount, frame);
-    if (SerialUSB.dtr()) {  // a host has the port open
+    if (usbCanSend()) {
         SerialUSB.write(frame, n);
     }
     ++seq;  // counts periods, sent or not: gaps tell the host what was lost
