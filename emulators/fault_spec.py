@@ -148,11 +148,16 @@ def parse_fault_spec(spec: str) -> FaultPlan:
 
 
 def load_fault_file(path: Path) -> FaultPlan:
-    """Read a TOML fault file (``[[fault]]`` tables); ValueError on malformed input."""
+    """Read a TOML fault file (``[[fault]]`` tables and nothing else); ValueError on
+    malformed input, another top-level key included."""
     try:
         data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: invalid TOML: {exc}") from None
+    unknown = sorted(set(data) - {"fault"})
+    if unknown:  # e.g. [[faults]]: would run with no fault at all
+        raise ValueError(f"{path}: unknown top-level key(s) {', '.join(map(repr, unknown))}; "
+                         "a fault file holds only [[fault]] tables")
     entries = data.get("fault", [])
     if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
         raise ValueError(f"{path}: expected [[fault]] tables")
