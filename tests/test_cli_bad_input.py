@@ -181,6 +181,7 @@ def fixed_bad_values(param: click.Parameter, tmp: Path) -> list[str]:
                 "drop:rate=true", "drop:rat=0.1", *(f"drop:rate={v}" for v in NON_FINITE),
                 "drop:burst=1e400", "stall:every_s=nan", "disconnect:at_s=1e10",
                 "noise:sigma_mm=inf", "noise:sigma_mm=1/nan", "hysteresis:operators=1e9",
+                "drop:rate=0.1/0.2", "stall:every_s=1/2", "disconnect:at_s=1/2",
                 "drop:rate=2", str(tmp / "no-such-faults.toml"),
                 str(tmp / "misspelled-faults.toml")]
     if isinstance(kind, ct.Robot):
