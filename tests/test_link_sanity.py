@@ -155,3 +155,23 @@ def test_a_block_of_overtaken_frames_is_late_not_a_reset() -> None:
     got, stats = decode(data)
     assert [f.seq for f in got] == [*range(100, 110), *range(115, 120)]
     assert stats.implausible == 5 and stats.sequence_resets == 0
+
+
+@pytest.mark.parametrize("chunk", [10_001, 10_000, 300, 64, 7, 1])
+def test_a_long_run_without_delimiter_is_one_resync_however_it_is_chunked(chunk: int) -> None:
+    """10,000 noise bytes then 0x00 gave 1, 156 or 227 resyncs depending on the read size,
+    and garbage 10000 (the closing delimiter, counted on the reject path, was not)."""
+    data = wire(4) + b"\x55" * 10_000 + b"\x00" + wire(5)
+    frames, stats = decode(*(data[i:i + chunk] for i in range(0, len(data), chunk)))
+    assert [f.seq for f in frames] == [4, 5]
+    assert stats.resyncs == 1 and stats.garbage_bytes == 10_001
+    assert stats.bytes_read == len(data)
+
+
+def test_a_reset_during_a_long_run_counts_its_bytes_not_another_resync() -> None:
+    stats = LinkStats()
+    decoder = StreamDecoder(stats)
+    decoder.feed(b"\x55" * 600, host_ns=0)
+    decoder.feed(b"\x55" * 100, host_ns=1)
+    decoder.reset()
+    assert stats.resyncs == 1 and stats.garbage_bytes == 700
