@@ -94,3 +94,14 @@ def test_run_at_the_configured_rate_does_not_warn(tmp_path: Path) -> None:
     s = json.loads(summary.read_text())
     assert s["device_rate_hz"] == pytest.approx(250.0, rel=1e-3)
     assert s["device_rate_warning"] is None and "frames/s" not in result.output
+
+
+def test_a_device_sending_text_is_told_apart_from_a_silent_one() -> None:
+    """A sketch printing CSV: 'no frame arrived' with no hint that ~KBs arrived."""
+    with pty_device(lambda k: f"{k},512,1023,2047,4095\r\n".encode(), 0.004) as port:
+        result = CliRunner().invoke(main, ["run", port, "--duration", "1.5"])
+    assert result.exit_code == 1, result.output
+    lines = [line for line in result.output.splitlines() if line.startswith("Error")]
+    assert len(lines) == 1 and "no frame arrived from the serial device" in lines[0]
+    assert "bytes arrived and none was a wire-protocol v1 frame" in lines[0]
+    assert int(lines[0].split(" bytes arrived")[0].rsplit("(", 1)[1]) > 1000
