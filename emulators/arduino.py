@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from exohil.emulators.effects import Signal
-from exohil.emulators.fault_spec import FaultPlan, fault_plan
+from exohil.emulators.fault_spec import FaultPlan, check_sensor_count, fault_plan
 from exohil.emulators.faults import FaultRecord, FrameFaultInjector
 from exohil.emulators.pty_port import VirtualSerialPort
 from exohil.formats.recording import Recording
@@ -116,6 +116,7 @@ class ArduinoEmulator:
                              f"{values[bad]}")
         self.rate_hz = float(rate_hz)
         self.plan = faults if isinstance(faults, FaultPlan) else fault_plan(faults)
+        check_sensor_count(self.plan, int(values.shape[1]))
         self.seed = int(seed)
         self.seq0 = int(seq0 or 0)
         self.t_us0 = int(t_us0 or 0)

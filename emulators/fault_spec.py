@@ -110,10 +110,26 @@ def fault_from_dict(entry: dict[str, Any]) -> FrameFault | Effect:
     if unknown:
         raise ValueError(f"{kind}: unknown parameter(s) {', '.join(unknown)}; "
                          f"allowed: {', '.join(sorted(allowed))}")
+    listed = sorted(name for name, value in params.items() if isinstance(value, list))
+    if listed:  # a frame-level fault acts on whole frames: one value, not one per sensor
+        raise ValueError(f"{kind}: {listed[0]} takes one number, got {params[listed[0]]!r} "
+                         "(per-sensor lists are for value-level effects)")
     try:
         return cls(**params)
     except (TypeError, OverflowError) as exc:
         raise ValueError(f"{kind}: {exc}") from None
+
+
+def check_sensor_count(plan: FaultPlan, sensors: int) -> None:
+    """ValueError unless every per-sensor list in ``plan`` has one value per sensor (the
+    effects would otherwise fail once streaming has begun)."""
+    for effect in plan.value_effects:
+        for f in fields(effect):  # type: ignore[arg-type]  # every Effect is a dataclass
+            value = getattr(effect, f.name)
+            if isinstance(value, list | tuple) and len(value) != sensors:
+                raise ValueError(f"{effect.name}: {f.name} lists {len(value)} values for "
+                                 f"{sensors} sensors; give one number or {sensors} values "
+                                 "separated by '/'")
 
 
 def plan_from_dicts(entries: list[dict[str, Any]]) -> FaultPlan:
@@ -148,11 +164,16 @@ def parse_fault_spec(spec: str) -> FaultPlan:
 
 
 def load_fault_file(path: Path) -> FaultPlan:
-    """Read a TOML fault file (``[[fault]]`` tables); ValueError on malformed input."""
+    """Read a TOML fault file (``[[fault]]`` tables and nothing else); ValueError on
+    malformed input, another top-level key included."""
     try:
         data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: invalid TOML: {exc}") from None
+    unknown = sorted(set(data) - {"fault"})
+    if unknown:  # e.g. [[faults]]: would run with no fault at all
+        raise ValueError(f"{path}: unknown top-level key(s) {', '.join(map(repr, unknown))}; "
+                         "a fault file holds only [[fault]] tables")
     entries = data.get("fault", [])
     if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
         raise ValueError(f"{path}: expected [[fault]] tables")

@@ -41,6 +41,7 @@ from exohil.formats.recording_metadata import (
     DEFAULT_MOCAP_RATE_HZ,
     DEFAULT_SENSOR_RATE_HZ,
     METADATA_NAME,
+    RESERVED_KEYS,
     metadata_record,
     plain_field,
     segments_text,
@@ -123,6 +124,7 @@ class RecordingWriter:
             self.name, self.sensor_names, sensor_units, sensor_rate_hz, mocap_rate_hz, metadata
         )
         self._segments: list[Segment] = []
+        self._late: dict[str, str] = {}
         self._last_seq: int | None = None
         self._last_t = 0.0
         self._counts: dict[int, int] = {}
@@ -266,6 +268,16 @@ class RecordingWriter:
                                  "finite times, t0 <= t1")
         self._segments.append(Segment(segment.name, t0, t1))
 
+    def add_metadata(self, extra: Mapping[str, str]) -> None:
+        """Provenance known only at the end (e.g. a measured rate): stored in the metadata
+        record written at close (a durable file then holds a second record, merged on read).
+        The format's own keys cannot be changed this way."""
+        self._check_open()
+        fixed = set(extra) & RESERVED_KEYS
+        if fixed:
+            raise RecordingError(f"{self.name}: cannot change {sorted(fixed)} at close")
+        self._late.update({str(k): str(v) for k, v in extra.items()})
+
     def _emit(self, channel: int, t: float, payload: dict[str, Any]) -> None:
         data = encode_message(payload)
         stamp = seconds_to_ns(t)
@@ -293,7 +305,8 @@ class RecordingWriter:
             metadata = dict(self._metadata)
             if self._segments:
                 metadata["segments"] = segments_text(self._segments)
-            if not self.durable or self._segments:  # a durable file has it already
+            metadata.update(self._late)
+            if not self.durable or self._segments or self._late:  # durable: has it already
                 self._writer.add_metadata(METADATA_NAME, dict(sorted(metadata.items())))
             self._writer.finish()
             if self.durable:

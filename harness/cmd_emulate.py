@@ -90,12 +90,13 @@ def emulate_command(recording: Path, rate: float | None, loop: bool, faults: str
       exohil emulate rec.mcap --faults 'drop:rate=0.01,burst=3;stall:every_s=5,duration_ms=40'
     """
     from exohil.emulators.arduino import ArduinoEmulator
-    from exohil.emulators.fault_spec import fault_plan
+    from exohil.emulators.fault_spec import check_sensor_count, fault_plan
 
     refuse_overwriting_inputs([("--fault-log", fault_log)], [recording])
     source = _load_recording(recording)
     try:
         plan = fault_plan(faults)
+        check_sensor_count(plan, len(source.sensor_names))
     except (ValueError, OSError) as exc:
         raise click.BadParameter(str(exc), param_hint="--faults") from exc
     try:

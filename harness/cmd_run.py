@@ -163,7 +163,9 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
               help="Seconds to run [default: until Ctrl-C].")
 @click.option("--rate", type=Finite(0.0, MAX_RATE_HZ, min_open=True), default=None,
               help="The device's frame rate, Hz, written into what the run records "
-                   "[default: the bench's, else the reference's, else 250].")
+                   "[default: the bench's, else the reference's, else 250]. The run warns "
+                   "when the device's own timestamps show a rate more than 1% away, and "
+                   "records that measured rate beside it.")
 @click.option("--backend", type=click.Choice(["auto", "numpy", "torch", "torchscript",
                                               "onnxruntime"]), default=None,
               help="Streaming inference backend [auto].")

@@ -53,8 +53,9 @@ class LinkStats:
         crc_errors: packets whose CRC did not match.
         decode_errors: packets that were not valid COBS or had a wrong length/type.
         garbage_bytes: bytes discarded (rejected packets, partial packets at reconnect,
-            over-long runs without a delimiter).
-        resyncs: times the decoder discarded data and re-locked on the next delimiter.
+            over-long runs without a delimiter; a discarded packet's closing delimiter too).
+        resyncs: times the decoder discarded data and re-locked on the next delimiter (one
+            per rejected packet or per run without a delimiter, however it was chunked).
         disconnects: times the link was lost (read error, the device vanished).
         reconnects: successful re-opens after a disconnect, of the same device.
         wrong_device: re-open attempts refused because the path led to another device

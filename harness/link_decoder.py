@@ -109,19 +109,28 @@ class StreamDecoder:
         for packet in packets:
             frames += self._decode(bytes(packet), host_ns)
         if len(self._partial) > MAX_PACKET_SIZE:  # no delimiter in sight: drop and re-lock
-            self._reject_bytes(len(self._partial))
+            self._discard(len(self._partial))
             self._partial.clear()
-            self._discarding = True
         return frames
 
     def reset(self) -> None:
         """Forget a partial packet (after a reconnect the byte stream starts afresh); the
         next gap in the numbering is also counted in ``dropped_in_disconnects``."""
         if self._partial:
-            self._reject_bytes(len(self._partial))
+            self._discard(len(self._partial))
         self._partial.clear()
         self._discarding = False
         self._after_disconnect = self._last is not None
+
+    def _discard(self, n: int) -> None:
+        """Drop ``n`` bytes of a run with no delimiter yet: one resync per run, however the
+        run arrives in chunks; its bytes all count as garbage (the closing delimiter too, in
+        :meth:`_decode`, as on the reject path)."""
+        if self._discarding:
+            self._stats.garbage_bytes += n
+        else:
+            self._reject_bytes(n)
+        self._discarding = True
 
     def _reject_bytes(self, n: int) -> None:
         self._stats.garbage_bytes += n
@@ -129,7 +138,7 @@ class StreamDecoder:
 
     def _decode(self, packet: bytes, host_ns: int) -> list[Frame]:
         if self._discarding:  # the end of an over-long run already counted as a resync
-            self._stats.garbage_bytes += len(packet)
+            self._stats.garbage_bytes += len(packet) + 1  # its closing delimiter included
             self._discarding = False
             return []
         if not packet:

@@ -9,6 +9,10 @@ first, a chunk closed and synced to disk at least every second) and renamed to `
 closed. A killed run leaves ``<path>.partial``, which the reader reads (noting it was cut
 short, at most the last second lost) and ``exohil record recover`` turns into a clean file;
 an existing file at ``path`` is only replaced by a complete recording.
+
+The metadata's ``sensor_rate_hz`` is the configured (nominal) rate; the device's rate as its
+frames show it (:mod:`~exohil.harness.device_rate`, over at least 1 s of device time) is written
+beside it at close as ``measured_sensor_rate_hz``.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from pathlib import Path
 
 from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
 from exohil.formats.recording_writer import RecordingWriter
+from exohil.harness.device_rate import measured_rate_hz
 from exohil.harness.pipeline import Sample
 
 _STOP = object()
@@ -43,6 +48,9 @@ class RecorderSink:
                                        sensor_rate_hz=sensor_rate_hz, durable=True)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self.frames_written = 0
+        self.sensor_rate_hz = sensor_rate_hz
+        self._first: tuple[int, float] | None = None
+        self._last: tuple[int, float] | None = None
         self.error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
@@ -60,6 +68,9 @@ class RecorderSink:
             try:
                 self._writer.add_sensor_frame(item.seq, item.device_time_s, item.values_mm)
                 self.frames_written += 1
+                self._last = (item.seq, item.device_time_s)
+                if self._first is None:
+                    self._first = self._last
             except Exception as err:  # keep draining; close() re-raises
                 self.error = err
 
@@ -70,6 +81,10 @@ class RecorderSink:
         ``.partial`` file is removed and a recording already at ``path`` stays as it was."""
         self._queue.put(_STOP)
         self._thread.join()
+        measured = self.measured_rate_hz()
+        if measured is not None and self.error is None:
+            # beside the configured sensor_rate_hz, never instead of it (docs/recording-format.md)
+            self._writer.add_metadata({"measured_sensor_rate_hz": f"{measured:.3f}"})
         self._writer.close()
         if self.error is not None:
             raise self.error
@@ -77,6 +92,13 @@ class RecorderSink:
             self.partial_path.unlink()
             return
         self.partial_path.replace(self.path)
+
+    def measured_rate_hz(self) -> float | None:
+        """The device's frame rate by its own seq and timestamps over the frames written
+        (:func:`~exohil.harness.device_rate.measured_rate_hz`)."""
+        if self._first is None or self._last is None:
+            return None
+        return measured_rate_hz(self._first[0], self._last[0], self._first[1], self._last[1])
 
     def __enter__(self) -> RecorderSink:
         return self

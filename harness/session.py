@@ -358,14 +358,20 @@ def unseen_wraps(seq0: int) -> int:
     return seq0 - seq0 % SEQ_MODULUS
 
 
-def _nothing_decoded_hint(crc_errors: int, decode_errors: int, sensors: int) -> str:
+def _nothing_decoded_hint(crc_errors: int, decode_errors: int, sensors: int,
+                          bytes_read: int = 0) -> str:
     """Why no frame was decoded, from what the link rejected (" (…)", or "" if nothing):
     packets of another shape alone suggest another sensor count; failed CRCs, a link that
-    corrupts what it carries."""
+    corrupts what it carries; bytes with no packet in them at all (no 0x00 delimiter, e.g.
+    text), a device that does not speak the wire protocol."""
     seen = [f"{n} packets {what}" for n, what in ((crc_errors, "failed their CRC"),
                                                   (decode_errors, "had another shape")) if n]
     if not seen:
-        return ""
+        if not bytes_read:
+            return ""
+        return (f" ({bytes_read} bytes arrived and none was a wire-protocol v1 frame: is the "
+                "device running another sketch (e.g. printing text) or another protocol, or is "
+                "this the wrong port? flash firmware/exohil_due, see docs/wire-protocol.md)")
     guess = (f"does the device send {sensors} sensors?" if not crc_errors else
              "a link that corrupts what it carries?")
     return f" ({', '.join(seen)}: {guess})"
@@ -528,7 +534,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
             link_tally.release()
     if run.frames == 0:
         hint = _nothing_decoded_hint(run.link.crc_errors, run.link.decode_errors,
-                                     len(est.sensor_names))
+                                     len(est.sensor_names), run.link.bytes_read)
         problem = (config.device.path_problem() if isinstance(config.device, SerialDevice)
                    else None) or device_lost or last_error
         why = f": {problem}" if problem else ""

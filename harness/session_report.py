@@ -17,6 +17,9 @@ module lays them out as the summary JSON and the lines a person reads.
                            "extremes_sigmas": {sensor: [low, high]}},
      "training_coverage_warning": text or null,
      "sensor_rate_warning": text or null (a device at another frame rate than the model's),
+     "sensor_rate_hz": the configured frame rate, "device_rate_hz": the device's measured
+     one (seq span / device-time span, harness/device_rate.py; null under 1 s of frames),
+     "device_rate_warning": text or null (they differ by more than 1 %),
      "measurements": [Measurement.to_dict(), ...],
      "model", "model_sha256", "backend", "target", "machine", "finished_at"}
 
@@ -33,6 +36,7 @@ from typing import Any
 
 from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
 from exohil.formats.measurement import Measurement
+from exohil.harness.device_rate import device_rate_warning, measured_rate_hz
 from exohil.harness.machine import machine
 from exohil.harness.session import (
     SessionResult,
@@ -81,6 +85,8 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
                                 if m.name.startswith("latency.")))
     counts = result.fault_counts
     run = result.run
+    device_hz = measured_rate_hz(run.first_seq, run.last_seq, run.first_device_time_s,
+                                 run.last_device_time_s)
     sent = None
     if counts is not None:
         sent = run.frames + sum(counts.get(k, 0) for k in ("drop", "corrupt", "truncate",
@@ -108,6 +114,9 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
                                       else result.coverage.warning()),
         "sensor_rate_warning": rate_mismatch(result.sensor_rate_hz, est.sensor_rate_hz,
                                              "the device's frame rate"),
+        "sensor_rate_hz": result.sensor_rate_hz,
+        "device_rate_hz": None if device_hz is None else round(device_hz, 3),
+        "device_rate_warning": device_rate_warning(device_hz, result.sensor_rate_hz),
         "teleop": {
             "rmse_deg": {m.name.removeprefix("teleop.rmse."): _value(measurements, m.name)
                          for m in measurements if m.name.startswith("teleop.rmse.")},
@@ -171,6 +180,8 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
                      f"p99 {axis['p99']:.1f}°  max {axis['max']:.1f}°")
     if s.get("training_coverage_warning"):
         lines.append(f"warning     {s['training_coverage_warning']}")
+    if s.get("device_rate_warning"):
+        lines.append(f"warning     {s['device_rate_warning']}")
     if s.get("sensor_rate_warning"):
         lines.append(f"warning     {s['sensor_rate_warning']}; {RATE_REMEDY}")
     if s["values_clipped_to_wire_range"]:

@@ -103,6 +103,8 @@ def _param(command: str, name: str) -> click.Parameter:
 def tmp(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("bad-input")
     (folder / "bad-profile.toml").write_text("[settings]\nseed = -1\n", encoding="utf-8")
+    (folder / "misspelled-faults.toml").write_text('[[faults]]\nkind = "drop"\nrate = 0.5\n',
+                                                   encoding="utf-8")
     return folder
 
 
@@ -179,7 +181,9 @@ def fixed_bad_values(param: click.Parameter, tmp: Path) -> list[str]:
                 "drop:rate=true", "drop:rat=0.1", *(f"drop:rate={v}" for v in NON_FINITE),
                 "drop:burst=1e400", "stall:every_s=nan", "disconnect:at_s=1e10",
                 "noise:sigma_mm=inf", "noise:sigma_mm=1/nan", "hysteresis:operators=1e9",
-                "drop:rate=2", str(tmp / "no-such-faults.toml")]
+                "drop:rate=0.1/0.2", "stall:every_s=1/2", "disconnect:at_s=1/2",
+                "drop:rate=2", str(tmp / "no-such-faults.toml"),
+                str(tmp / "misspelled-faults.toml")]
     if isinstance(kind, ct.Robot):
         return ["", "abc", "udp:", "udp:host", "udp:host:0", "udp::9000", "udp:host:65536",
                 "udp:host:x", "udp:host:1e3", "MUJOCO", "\x00"]

@@ -193,3 +193,24 @@ def test_emulate_rejects_bad_input_with_one_line(tmp_path: Path) -> None:
         assert result.exception is None or isinstance(result.exception, SystemExit), args
         lines = [line for line in result.output.splitlines() if line.startswith("Error")]
         assert len(lines) == 1, (args, result.output)
+
+
+@pytest.mark.parametrize(("spec", "problem"), [
+    ("noise:sigma_mm=1/1", "noise: sigma_mm lists 2 values for 4 sensors"),
+    ("drift:rate_mm_per_s=1/2/3/4/5", "drift: rate_mm_per_s lists 5 values for 4 sensors"),
+    ("drop:rate=0.1/0.2", "drop: rate takes one number, got [0.1, 0.2]"),
+    ("stall:every_s=1/2", "stall: every_s takes one number"),
+    ("disconnect:at_s=1/2", "disconnect: at_s takes one number"),
+])
+def test_emulate_refuses_faults_that_do_not_fit_before_streaming(spec: str,
+                                                                  problem: str) -> None:
+    """`noise:sigma_mm=1/1` started the emulator, printed its device path, then failed
+    (exit 1); `drop:rate=0.1/0.2` gave a raw TypeError text."""
+    recording = Path(__file__).resolve().parents[1] / "fixtures" / "paper_protocol.mcap"
+    result = CliRunner().invoke(main, ["emulate", str(recording), "--duration", "0.2",
+                                       "--faults", spec])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error") and problem in lines[0], lines
+    assert "/dev/" not in result.output and "not supported" not in result.output
+

@@ -232,6 +232,22 @@ def test_spec_string_and_toml_give_the_same_plan(tmp_path) -> None:
     assert [e.name for e in from_spec.value_effects] == ["noise"]
 
 
+@pytest.mark.parametrize(("text", "problem"), [
+    ('[[faults]]\nkind = "drop"\nrate = 0.5\n', "unknown top-level key(s) 'faults'"),
+    ('rate = 0.5\n[[fault]]\nkind = "drop"\n', "unknown top-level key(s) 'rate'"),
+    ('[[fault]]\nkind = "drop"\nrat = 0.5\n', "drop: unknown parameter(s) rat"),
+    ('[[fault]]\nkind = "noise"\nsigma = 0.5\n', "noise: unknown parameter(s) sigma"),
+])
+def test_a_fault_file_with_a_misspelled_name_is_refused(tmp_path, text: str,
+                                                        problem: str) -> None:
+    """`[[faults]]` (for `[[fault]]`) ran with no fault at all and no error."""
+    path = tmp_path / "faults.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError) as err:
+        load_fault_file(path)
+    assert problem in str(err.value)
+
+
 @pytest.mark.parametrize("bad", ["drop:rate=2", "warp:speed=9", "drop:rate", "drop:rat=0.1",
                                  "stall:every_s=1,duration_ms=2000", "noise:sigma_mm=-1",
                                  "drop:rate=abc", "noise:sigma_mm=1/x",

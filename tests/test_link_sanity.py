@@ -155,3 +155,42 @@ def test_a_block_of_overtaken_frames_is_late_not_a_reset() -> None:
     got, stats = decode(data)
     assert [f.seq for f in got] == [*range(100, 110), *range(115, 120)]
     assert stats.implausible == 5 and stats.sequence_resets == 0
+
+
+@pytest.mark.parametrize("chunk", [10_001, 10_000, 300, 64, 7, 1])
+def test_a_long_run_without_delimiter_is_one_resync_however_it_is_chunked(chunk: int) -> None:
+    """10,000 noise bytes then 0x00 gave 1, 156 or 227 resyncs depending on the read size,
+    and garbage 10000 (the closing delimiter, counted on the reject path, was not)."""
+    data = wire(4) + b"\x55" * 10_000 + b"\x00" + wire(5)
+    frames, stats = decode(*(data[i:i + chunk] for i in range(0, len(data), chunk)))
+    assert [f.seq for f in frames] == [4, 5]
+    assert stats.resyncs == 1 and stats.garbage_bytes == 10_001
+    assert stats.bytes_read == len(data)
+
+
+def test_a_reset_during_a_long_run_counts_its_bytes_not_another_resync() -> None:
+    stats = LinkStats()
+    decoder = StreamDecoder(stats)
+    decoder.feed(b"\x55" * 600, host_ns=0)
+    decoder.feed(b"\x55" * 100, host_ns=1)
+    decoder.reset()
+    assert stats.resyncs == 1 and stats.garbage_bytes == 700
+
+
+@pytest.mark.parametrize("overrun_us", [6_000, 20_000, 40_000, 100_000, 5_000_000])
+def test_firmware_skip_ahead_after_an_overrun_shows_a_plain_gap(overrun_us: int) -> None:
+    """The reference sketch after an overrun: the next frame is stamped late, seq advanced by
+    the periods skipped (exohil_pace_advance), then back on the period grid. The decoder
+    delivers every frame with the device's numbering: a gap, no implausible frame, no reset
+    (a catch-up burst instead cost frames or took false resets; docs/reliability.md)."""
+    stamps = [k * PERIOD_US + 120 for k in range(100)]
+    late = stamps[-1] + PERIOD_US + overrun_us  # when the overrunning iteration got going
+    skipped = (late - (stamps[-1] + PERIOD_US)) // PERIOD_US
+    seq = 100 + skipped
+    deadline = (seq + 1) * PERIOD_US
+    frames = [(seq, late)] + [(seq + 1 + k, deadline + k * PERIOD_US + 120) for k in range(50)]
+    data = b"".join(wire(k, t) for k, t in zip(range(100), stamps, strict=True))
+    data += b"".join(wire(s, t) for s, t in frames)
+    got, stats = decode(data)
+    assert [f.seq for f in got] == [*range(100), *(s for s, _ in frames)]
+    assert stats.dropped == skipped and stats.implausible == 0 and stats.sequence_resets == 0

@@ -172,7 +172,8 @@ def test_decoder_relocks_after_an_overlong_run_without_delimiter() -> None:
     assert decoder.feed(b"\x55" * 500, host_ns=0) == []
     got = decoder.feed(b"\x55" * 10 + b"\x00" + _stream([3]), host_ns=0)
     assert [f.seq for f in got] == [3]
-    assert stats.garbage_bytes == 510 and stats.decode_errors == 0
+    # the closing delimiter counts, as on the reject path (a bad packet + its delimiter)
+    assert stats.garbage_bytes == 511 and stats.resyncs == 1 and stats.decode_errors == 0
 
 
 def test_decoder_reset_drops_the_partial_packet() -> None:

@@ -1,5 +1,5 @@
 /*
- * exohil wire protocol v1: frame encoder (docs/wire-protocol.md).
+ * exohil wire protocol v1: frame encoder and period pacing (docs/wire-protocol.md).
  *
  * Plain C99, no Arduino dependencies, static inline only, so the same header builds the
  * Arduino Due sketch and the host-side test driver that checks it against the Python
@@ -93,6 +93,25 @@ static inline size_t exohil_frame_encode(uint16_t seq, uint32_t t_us, const uint
     size_t encoded = exohil_cobs_encode(body, n, out);
     out[encoded] = 0x00u;
     return encoded + 1u;
+}
+
+/* Pacing (u32 micros(), wrap-safe). Whether to keep waiting for deadline_us at now_us: only
+ * while the deadline is 1..period_us ahead. A deadline already reached, or one that looks
+ * further ahead (the loop stalled past 2^31 us and the signed difference flipped), is due. */
+static inline int exohil_pace_wait(uint32_t deadline_us, uint32_t now_us, uint32_t period_us)
+{
+    return (uint32_t)(deadline_us - now_us - 1u) < period_us;
+}
+
+/* Once due (now_us at or after *deadline_us): move *deadline_us to the first period boundary
+ * after now_us and return the periods that elapsed, 1 when on time, 1 + k after an overrun
+ * of k whole periods (skipped, never sent late as a burst). Exact for lateness < 2^32 us. */
+static inline uint32_t exohil_pace_advance(uint32_t *deadline_us, uint32_t now_us,
+                                           uint32_t period_us)
+{
+    uint32_t periods = (uint32_t)(now_us - *deadline_us) / period_us + 1u;
+    *deadline_us += periods * period_us;
+    return periods;
 }
 
 #endif /* EXOHIL_WIRE_H */
