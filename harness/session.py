@@ -426,7 +426,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     it sent has been processed, so its fault log and the host's counters cover the same
     frames; a serial device is read for ``seconds`` of wall time. ``seconds=None`` runs until
     ``stop`` is set (or, for the emulator, to the end of its recording; for a serial device with
-    a reference, until the device's clock passes the reference's end). Setting ``stop`` ends
+    a reference, until the device's clock passes the reference's end: an outage shorter than
+``DEVICE_TIMEOUT_S`` is ridden out, and a device that stops before that end is
+``device_lost``). Setting ``stop`` ends
     any run early, and the result covers what was processed. ``keep_frames`` = (first, last)
     sets how many per-frame rows the run keeps (default: the pipeline's); every figure covers
     every frame regardless. ``reference``: the bench's reference recording when the caller
@@ -499,6 +501,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                                                    "keep_last": keep_frames[1]}
             pipeline = Pipeline(opened.source, model.engine(), sinks, opened.device_clock,
                                 observers=observers, **keep)
+            short = None
             if opened.emulator is not None:
                 # until every frame the emulator sent is processed, outages included
                 limit = None if seconds is None else seconds + 30.0
@@ -506,19 +509,23 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 run = pipeline.run(duration_s=limit, stop=stop, progress=progress,
                                    source_done=lambda: emulator.finished)
             else:
-                end, wall, idle = None, seconds, None
+                end, wall = None, seconds
                 if seconds is None and reference is not None and len(reference.sensors):
                     t = reference.sensors.t
                     end = float(t[-1]) - 1.5 / reference.sensor_rate_hz  # its last frame
                     wall = float(t[-1] - t[0]) + 60.0  # a device that never gets there
-                    idle = 3.0  # or stops streaming first
+                # no idle timeout: an outage shorter than DEVICE_TIMEOUT_S is ridden out (the
+                # reader reconnects), a longer one ends the reader, and so the run
                 source = opened.source
                 run = pipeline.run(duration_s=wall, stop=stop, progress=progress,
-                                   until_device_time_s=end, idle_timeout_s=idle,
+                                   until_device_time_s=end,
                                    source_done=lambda: not source.alive)
-            device_lost = None
+                short = _short_of_reference(run, end, wall,
+                                            stopped=stop is not None and stop.is_set())
+            device_lost = short
             if opened.source.device_timed_out:
-                device_lost = opened.source.last_error or "the device stopped sending"
+                device_lost = "; ".join(why for why in (
+                    opened.source.last_error or "the device stopped sending", short) if why)
             last_error = opened.source.last_error
             emulator = opened.emulator
             fault_log = None if emulator is None else emulator.fault_log
@@ -548,6 +555,17 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     return SessionResult(config, model, run, truth, fault_log, seq0, clipped, host_load, robots,
                          trace, device_lost, scoring, link_tally, coverage, rate_hz,
                          _recording_ended(config, reference, seconds))
+
+
+def _short_of_reference(run: PipelineRun, end: float | None, wall: float | None,
+                        stopped: bool) -> str | None:
+    """Why a serial device streamed to a reference's end (device time ``end``, s) stopped
+    short of it within ``wall`` s, or None (reached, no such end, stopped on request, or
+    nothing arrived: that is an error of its own)."""
+    if end is None or stopped or run.frames == 0 or run.last_device_time_s >= end:
+        return None
+    return (f"its clock stopped at {run.last_device_time_s:.3f} s, before the reference's end "
+            f"({end:.3f} s){'' if wall is None else f' (the run waits {wall:g} s at most)'}")
 
 
 def _recording_ended(config: BenchConfig, recording: Recording | None,
