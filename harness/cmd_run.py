@@ -85,6 +85,20 @@ def _outputs(config: BenchConfig, json_out: Path | None,
     return outputs
 
 
+def _span(config: BenchConfig, seconds: float | None) -> str:
+    """How long the run lasts, for its header line."""
+    from exohil.harness.bench import EmulatorDevice, SerialDevice
+
+    device = config.device
+    if seconds is not None:
+        return f"{seconds:g} s"
+    if isinstance(device, SerialDevice) and device.reference is not None:
+        return "until the device's clock passes the reference's end (or Ctrl-C)"
+    if isinstance(device, EmulatorDevice) and not device.loop:
+        return "to the end of the recording (or Ctrl-C)"
+    return "until Ctrl-C"
+
+
 def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | None,
                    title: str, out_dir: Path | None = None) -> dict:
     """Run one session on ``config``, print the report, write the JSON and, with ``out_dir``,
@@ -103,7 +117,7 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
         except OSError as err:
             raise click.ClickException(f"cannot create the report folder {out_dir}: "
                                        f"{err.strerror or err}") from None
-    span = "until Ctrl-C" if seconds is None else f"{seconds:g} s"
+    span = _span(config, seconds)
     model = config.model.name if config.model else "?"
     device = config.device.describe() if config.device else "?"
     click.echo(f"{title}: {device} → acquisition → {model} → NAO, {span}", err=True)
