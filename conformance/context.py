@@ -159,19 +159,39 @@ class ConformanceRun:
         truth = angles_at_sensor_times(rec, est.target.joint, est.target.angles)
         return Replay(out, truth, seconds)
 
+    @property
+    def to_reference(self) -> bool:
+        """Whether the real-time segment is a serial device streamed to its reference's end
+        (one segment: the device's replay of the reference cannot be repeated)."""
+        return isinstance(self.device, SerialDevice) and self.reference_file is not None
+
     @cached_property
+    def _session_outcome(self) -> SessionResult | CheckBlocked:
+        try:
+            return self._segment()
+        except CheckBlocked as err:
+            return err
+
+    @property
     def session(self) -> SessionResult:
         """The real-time segment: ``realtime_seconds`` of the emulator, or of a serial device
         without reference; a serial device with a reference streams until its clock passes the
-        reference's end, so accuracy covers the whole reference session."""
-        return self._segment()
+        reference's end (:attr:`to_reference`). Run once: a segment that could not run is
+        reported by every check that asks for it, not run again for each."""
+        outcome = self._session_outcome
+        if isinstance(outcome, CheckBlocked):
+            raise CheckBlocked(str(outcome))
+        return outcome
+
+    def segment_result(self) -> SessionResult | None:
+        """The real-time segment if a check ran it (None if none did, or it could not run)."""
+        outcome = vars(self).get("_session_outcome")
+        return outcome if isinstance(outcome, SessionResult) else None
 
     def _segment(self, attempt: str = "") -> SessionResult:
         """Run one real-time segment (see :attr:`session`); ``attempt`` labels a repeat."""
         self._require_compatible()
-        seconds = self.profile.setting("realtime_seconds")
-        if isinstance(self.device, SerialDevice) and self.reference is not None:
-            seconds = None
+        seconds = None if self.to_reference else self.profile.setting("realtime_seconds")
         span = "to the end of the reference" if seconds is None else f"{seconds:g} s"
         self.say(f"real-time segment{attempt}: {self.device.describe()}, {span} ...")
 

@@ -152,7 +152,7 @@ def write_reports(out: Path, run: Any, results: list[Any]) -> None:
     write_text(out / "conformance.json",
                strict_json.dumps(report_dict(run, results), indent=2) + "\n")
     write_text(out / "summary.md", summary_markdown(run, results))
-    session = vars(run).get("session")  # the real-time segment, if a check ran it
+    session = run.segment_result()  # the real-time segment, if a check ran it
     if session is not None:
         from exohil.harness.run_recording import write_run_recording
 
