@@ -61,8 +61,9 @@ from exohil.harness.session import (
 
 #: The share of the profile's ``realtime_seconds`` a real-time segment must cover.
 SEGMENT_SHARE = 0.9
-#: The device time, s, a segment streamed to the reference's end must cover at least.
-MIN_SEGMENT_S = 1.0
+#: The share of a device's reference (its sensor frames' times) that the segment streamed to
+#: its end must cover for accuracy to be judged (``accuracy.reference_coverage``, %).
+REFERENCE_SHARE = 0.9
 
 
 class CheckBlocked(Exception):
@@ -208,23 +209,66 @@ class ConformanceRun:
         self.say(f"segment done; the host meanwhile: {result.host_load.describe()}")
         return result
 
-    def _whole_segment(self, result: SessionResult | None = None) -> SessionResult:
-        """The real-time segment (``result``, default :attr:`session`), refused where it
-        covered under :data:`SEGMENT_SHARE` of the device time the profile asks for (at
-        least :data:`MIN_SEGMENT_S` to the reference's end for a device with a reference):
-        latency, link and teleop figures of a few frames measure nothing."""
+    def _kept_segment(self, result: SessionResult | None = None) -> SessionResult:
+        """The real-time segment (``result``, default :attr:`session`); SessionError (the
+        checks fail) where the device was lost during it: its figures would pass for a
+        whole run's."""
         result = self.session if result is None else result
-        run = result.run
-        span = run.last_device_time_s - run.first_device_time_s if run.frames > 1 else 0.0
-        to_reference = isinstance(self.device, SerialDevice) and self.reference is not None
-        wanted = MIN_SEGMENT_S if to_reference else self.profile.setting("realtime_seconds")
+        if result.device_lost:
+            run = result.run
+            raise SessionError(f"the device was lost during the real-time segment, after "
+                               f"{_span_s(result):.3g} s of device time ({run.frames} frames):"
+                               f" {result.device_lost}")
+        return result
+
+    def _whole_segment(self, result: SessionResult | None = None) -> SessionResult:
+        """The real-time segment (``result``, default :attr:`session`), failed where the
+        device was lost (:meth:`_kept_segment`) and refused where it covered under
+        :data:`SEGMENT_SHARE` of the profile's ``realtime_seconds`` of device time, for a
+        device streamed to its reference's end too (its segment is the reference's span):
+        latency, link and teleop figures of a few frames measure nothing."""
+        result = self._kept_segment(result)
+        span = _span_s(result)
+        wanted = self.profile.setting("realtime_seconds")
         if span >= SEGMENT_SHARE * wanted:
             return result
-        why = ("the device's clock may be past the reference's end" if to_reference else
-               "the recording ends before that (it is also the reference, so it is not "
-               "looped), or the device stopped")
+        if self.to_reference:
+            ref = self.reference
+            held = (float(ref.sensors.t[-1] - ref.sensors.t[0])
+                    if ref is not None and len(ref.sensors) else 0.0)
+            why = (f"the segment of a device with a reference is the reference's span "
+                   f"({held:.3g} s; accuracy.reference_coverage says how much of it the device "
+                   f"streamed): give a reference of at least {SEGMENT_SHARE * wanted:.3g} s, or "
+                   "a profile with a shorter realtime_seconds")
+        else:
+            why = ("the recording ends before that (it is also the reference, so it is not "
+                   "looped), or the device stopped")
         raise CheckBlocked(f"the real-time segment covered {span:.3g} s of device time "
-                           f"({run.frames} frames) where {wanted:g} s are asked for: {why}")
+                           f"({result.run.frames} frames) where {wanted:g} s are asked for: "
+                           f"{why}")
+
+    def _reference_coverage(self, result: SessionResult,
+                            limits: dict[str, Limit]) -> Measurement:
+        """``accuracy.reference_coverage``: the share of the reference's sensor frames whose
+        times lie within the segment's device time, %; at least :data:`REFERENCE_SHARE`
+        unless the profile states its own limit. A device already streaming when the run
+        began, or one whose clock does not start where the reference does, scores only part
+        of the reference, and its figures would pass for the whole's."""
+        name = "accuracy.reference_coverage"
+        limit = limits.get(name, Limit(low=100 * REFERENCE_SHARE, unit="%", inclusive=True))
+        ref, run = self.reference, result.run
+        t = np.empty(0) if ref is None else ref.sensors.t
+        if not t.size:
+            return Measurement.skipped(name, "%", "the reference holds no sensor frame", limit)
+        half = 0.5 / (ref.sensor_rate_hz if ref is not None else 1.0)
+        lo, hi = run.first_device_time_s - half, run.last_device_time_s + half
+        covered = int(np.count_nonzero((t >= lo) & (t <= hi)))
+        scored = result.scoring.accuracy.scored if result.scoring is not None else 0
+        note = (f"the segment spans device time {run.first_device_time_s:.3f}..."
+                f"{run.last_device_time_s:.3f} s: {covered} of the reference's {t.size} frames "
+                f"({float(t[0]):.3f}...{float(t[-1]):.3f} s); {run.frames} frames received, "
+                f"{scored} scored")
+        return Measurement.judge(name, 100.0 * covered / t.size, "%", limit, note)
 
     # ---- checks ----------------------------------------------------------------------
     def compatibility_measurements(self) -> list[Measurement]:
@@ -310,7 +354,10 @@ class ConformanceRun:
                                          limits)
         if self.reference is None:
             raise CheckBlocked("no reference recording (give --reference for a device)")
-        return session_accuracy(self.session, limits)
+        if not self.to_reference:
+            return session_accuracy(self.session, limits)
+        result = self._kept_segment()
+        return [*session_accuracy(result, limits), self._reference_coverage(result, limits)]
 
     def latency_measurements(self) -> list[Measurement]:
         """Latency of the real-time segment, and how busy the host was during it.
@@ -486,6 +533,12 @@ def _paced_p99_ms(a: LoadedModel, b: LoadedModel, values: np.ndarray, frames: in
     pa = distribution("a", ta[warm_up:], "ms")[1].value
     pb = distribution("b", tb[warm_up:], "ms")[1].value
     return pa, pb
+
+
+def _span_s(result: SessionResult) -> float:
+    """The device time a segment's frames span, s (0 with under two frames)."""
+    run = result.run
+    return run.last_device_time_s - run.first_device_time_s if run.frames > 1 else 0.0
 
 
 def _host_measurements(load: HostLoad, limits: dict[str, Limit]) -> list[Measurement]:

@@ -55,7 +55,7 @@ CHECKS: dict[str, dict[str, str]] = {
                       "compatibility.outside_training": "%"},
     "heldout": {"heldout.overlap": "count"},
     "accuracy": {"accuracy.rmse.*": "deg", "accuracy.direction_rmse": "deg",
-                 "accuracy.frames_scored": "count"},
+                 "accuracy.frames_scored": "count", "accuracy.reference_coverage": "%"},
     "latency": {"latency.end_to_end.*": "ms", "latency.estimator.*": "ms",
                 "latency.device_to_host.*": "ms", "latency.decode.*": "ms",
                 "latency.queue_and_estimate.*": "ms", "latency.command.*": "ms",

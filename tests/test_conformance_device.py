@@ -102,6 +102,65 @@ def measured(report: dict) -> dict[str, dict]:
     return {m["name"]: m for c in report["checks"] for m in c["measurements"]}
 
 
+def test_a_whole_reference_streamed_passes_and_shows_its_coverage(heldout, tmp_path):
+    """The control: a 4 s reference streamed from its first frame, under a 3 s segment."""
+    ref = reference(heldout, tmp_path, 4.0)
+    with device(ref) as emulator:
+        code, output, report = conform(emulator.port, ref, profile(tmp_path), tmp_path / "out")
+    assert all(checks(report)[name]["verdict"] == "pass" for name in SEGMENT_CHECKS), output
+    coverage = measured(report)["accuracy.reference_coverage"]
+    assert coverage["verdict"] == "pass" and coverage["value"] >= 99.0
+    assert "of the reference's 995 frames" in coverage["note"]
+
+
+def test_a_device_lost_mid_run_fails_every_check_of_the_segment(heldout, tmp_path,
+                                                                  monkeypatch):
+    """The device stops 2 s into a 4 s reference: conform passed on what it had streamed,
+    the loss said nowhere."""
+    monkeypatch.setattr(bench, "DEVICE_TIMEOUT_S", 4.0)  # above the old 3 s idle timeout
+    ref = reference(heldout, tmp_path, 4.0)
+    with device(ref, duration_s=2.0) as emulator:
+        code, output, report = conform(emulator.port, ref, profile(tmp_path), tmp_path / "out")
+    assert code != 0
+    for name in SEGMENT_CHECKS:
+        check = checks(report)[name]
+        assert check["verdict"] == "fail", (name, check)
+        assert "the device was lost during the real-time segment" in check["message"]
+        assert "before the reference's end" in check["message"]
+
+
+def test_a_device_already_streaming_misses_the_reference_and_fails_accuracy(heldout,
+                                                                            tmp_path):
+    """The device streams 2.5 s of a 5 s reference before the run opens it: accuracy
+    passed on the half it scored, and nothing showed the reference's frame count."""
+    ref = reference(heldout, tmp_path, 5.0)
+    with device(ref, on_open=False) as emulator:
+        time.sleep(2.5)
+        code, output, report = conform(emulator.port, ref, profile(tmp_path), tmp_path / "out",
+                                       ("accuracy",))
+    assert code != 0
+    coverage = measured(report)["accuracy.reference_coverage"]
+    assert coverage["verdict"] == "fail" and coverage["value"] < 90.0, coverage
+    assert "of the reference's 1245 frames" in coverage["note"]
+    assert checks(report)["accuracy"]["verdict"] == "fail"
+
+
+def test_a_reference_shorter_than_the_profiles_segment_does_not_pass_the_segment_checks(
+        heldout, tmp_path):
+    """A 2 s reference under a 3 s segment: latency, link and teleop passed on it (any
+    segment of 1 s did); accuracy is judged on the reference it covers."""
+    ref = reference(heldout, tmp_path, 2.0)
+    with device(ref) as emulator:
+        code, output, report = conform(emulator.port, ref, profile(tmp_path), tmp_path / "out")
+    assert code != 0
+    assert checks(report)["accuracy"]["verdict"] == "pass", output
+    for name in ("latency", "link", "teleop"):
+        check = checks(report)[name]
+        assert check["verdict"] == "skip", (name, check)
+        assert "where 3 s are asked for" in check["message"]
+        assert "give a reference of at least 2.7 s" in check["message"]
+
+
 def test_a_segment_that_cannot_run_is_tried_once_for_every_check(tmp_path, heldout,
                                                                  monkeypatch):
     """A device that never appears: each of accuracy, latency, link and teleop waited out
