@@ -365,9 +365,17 @@ class ConformanceRun:
         A busy host only adds time. With ``latency_attempts`` > 1, a segment whose latency
         fails a limit is followed by a fresh one, up to that many in all, and the check is
         judged on the last: it passes only if one whole segment met every limit.
-        ``latency.attempts`` counts the segments; its note gives each one's figures."""
+        ``latency.attempts`` counts the segments; its note gives each one's figures. A
+        device streamed to its reference's end is judged on its one segment: it cannot
+        replay the reference again."""
         limits = self.profile.limits("latency")
         attempts = self.profile.setting("latency_attempts")
+        once = ""
+        if self.to_reference and attempts > 1:
+            attempts = 1
+            once = ("; judged on the one segment: a device streamed to its reference's end "
+                    "cannot replay it again (latency_attempts applies to the emulator and to "
+                    "a device without a reference)")
         result = self._whole_segment()
         tried: list[str] = []
         while True:
@@ -381,7 +389,7 @@ class ConformanceRun:
                      "segment, and a busy host only adds time: measuring a fresh segment")
             result = self._whole_segment(
                 self._segment(f" (latency attempt {len(tried) + 1} of {attempts})"))
-        note = "; ".join(f"{i}: {line}" for i, line in enumerate(tried, 1))
+        note = "; ".join(f"{i}: {line}" for i, line in enumerate(tried, 1)) + once
         return measured + [Measurement.judge("latency.attempts", len(tried), "count",
                                              limits.get("latency.attempts"), note)]
 

@@ -161,6 +161,23 @@ def test_a_reference_shorter_than_the_profiles_segment_does_not_pass_the_segment
         assert "give a reference of at least 2.7 s" in check["message"]
 
 
+def test_latency_of_a_device_with_a_reference_is_judged_on_its_one_segment(heldout, tmp_path):
+    """latency_attempts = 2 and a limit no machine meets: the check asked the device for a
+    second segment, found its clock past the reference's end and was skipped, the first
+    segment's failure discarded."""
+    ref = reference(heldout, tmp_path, 4.0)
+    prof = profile(tmp_path, attempts=2, latency='"latency.end_to_end.p50" = "< 0.001 ms"')
+    with device(ref) as emulator:
+        code, output, report = conform(emulator.port, ref, prof, tmp_path / "out",
+                                       ("latency",))
+    latency = checks(report)["latency"]
+    assert latency["verdict"] == "fail", latency
+    assert "latency.end_to_end.p50" in latency["message"]
+    attempts = measured(report)["latency.attempts"]
+    assert attempts["value"] == 1
+    assert "judged on the one segment" in attempts["note"]
+
+
 def test_a_segment_that_cannot_run_is_tried_once_for_every_check(tmp_path, heldout,
                                                                  monkeypatch):
     """A device that never appears: each of accuracy, latency, link and teleop waited out
