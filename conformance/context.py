@@ -237,9 +237,13 @@ class ConformanceRun:
             held = (float(ref.sensors.t[-1] - ref.sensors.t[0])
                     if ref is not None and len(ref.sensors) else 0.0)
             why = (f"the segment of a device with a reference is the reference's span "
-                   f"({held:.3g} s; accuracy.reference_coverage says how much of it the device "
-                   f"streamed): give a reference of at least {SEGMENT_SHARE * wanted:.3g} s, or "
-                   "a profile with a shorter realtime_seconds")
+                   f"({held:.3g} s)")
+            why += (": give a reference of at least "
+                    f"{SEGMENT_SHARE * wanted:.3g} s, or a profile with a shorter "
+                    "realtime_seconds" if held < SEGMENT_SHARE * wanted else
+                    ", and the device streamed only part of it (already streaming when the "
+                    "run opened it, or its clock not on the reference's): see "
+                    "accuracy.reference_coverage")
         else:
             why = ("the recording ends before that (it is also the reference, so it is not "
                    "looped), or the device stopped")

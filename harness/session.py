@@ -564,8 +564,9 @@ def _short_of_reference(run: PipelineRun, end: float | None, wall: float | None,
     nothing arrived: that is an error of its own)."""
     if end is None or stopped or run.frames == 0 or run.last_device_time_s >= end:
         return None
-    return (f"its clock stopped at {run.last_device_time_s:.3f} s, before the reference's end "
-            f"({end:.3f} s){'' if wall is None else f' (the run waits {wall:g} s at most)'}")
+    return (f"its last frame came at device time {run.last_device_time_s:.3f} s, before the "
+            f"reference's end ({end:.3f} s)"
+            f"{'' if wall is None else f'; the run waits {wall:g} s at most'}")
 
 
 def _recording_ended(config: BenchConfig, recording: Recording | None,

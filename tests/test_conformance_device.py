@@ -137,12 +137,15 @@ def test_a_device_already_streaming_misses_the_reference_and_fails_accuracy(held
     with device(ref, on_open=False) as emulator:
         time.sleep(2.5)
         code, output, report = conform(emulator.port, ref, profile(tmp_path), tmp_path / "out",
-                                       ("accuracy",))
+                                       ("accuracy", "latency"))
     assert code != 0
     coverage = measured(report)["accuracy.reference_coverage"]
     assert coverage["verdict"] == "fail" and coverage["value"] < 90.0, coverage
     assert "of the reference's 1245 frames" in coverage["note"]
     assert checks(report)["accuracy"]["verdict"] == "fail"
+    latency = checks(report)["latency"]  # a 5 s reference, of which under 2.7 s streamed
+    assert latency["verdict"] == "skip", latency
+    assert "the device streamed only part of it" in latency["message"]
 
 
 def test_a_reference_shorter_than_the_profiles_segment_does_not_pass_the_segment_checks(
