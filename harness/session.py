@@ -520,7 +520,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 run = pipeline.run(duration_s=wall, stop=stop, progress=progress,
                                    until_device_time_s=end,
                                    source_done=lambda: not source.alive)
-                short = _short_of_reference(run, end, wall,
+                short = _short_of_reference(run, end,
                                             stopped=stop is not None and stop.is_set())
             device_lost = short
             if opened.source.device_timed_out:
@@ -557,16 +557,14 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                          _recording_ended(config, reference, seconds))
 
 
-def _short_of_reference(run: PipelineRun, end: float | None, wall: float | None,
-                        stopped: bool) -> str | None:
+def _short_of_reference(run: PipelineRun, end: float | None, stopped: bool) -> str | None:
     """Why a serial device streamed to a reference's end (device time ``end``, s) stopped
-    short of it within ``wall`` s, or None (reached, no such end, stopped on request, or
-    nothing arrived: that is an error of its own)."""
+    short of it (silent for the device timeout, or past the run's wall-time bound), or None
+    (reached, no such end, stopped on request, or nothing arrived: an error of its own)."""
     if end is None or stopped or run.frames == 0 or run.last_device_time_s >= end:
         return None
     return (f"its last frame came at device time {run.last_device_time_s:.3f} s, before the "
-            f"reference's end ({end:.3f} s)"
-            f"{'' if wall is None else f'; the run waits {wall:g} s at most'}")
+            f"reference's end ({end:.3f} s)")
 
 
 def _recording_ended(config: BenchConfig, recording: Recording | None,
