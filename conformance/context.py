@@ -18,7 +18,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
 
@@ -40,6 +40,7 @@ from exohil.harness.bench import (
     SerialDevice,
     parse_target,
 )
+from exohil.harness.device_rate import measured_rate_hz
 from exohil.harness.machine import HostLoad
 from exohil.harness.pipeline import Status
 from exohil.harness.session import (
@@ -55,7 +56,6 @@ from exohil.harness.session import (
     run_session,
     session_accuracy,
     sha256_file,
-    streamed_rate_hz,
     teleop_measurements,
 )
 
@@ -216,12 +216,12 @@ class ConformanceRun:
             return [Measurement.judge("compatibility.sensor_mismatch", bad, "count",
                                       limits.get("compatibility.sensor_mismatch"),
                                       "frames of the model's sensor count arrive"),
-                    self._rate(streamed_rate_hz(session.run), "the device streams", limits),
+                    self._rate(self._device_rate_hz(session), "the device streams", limits),
                     self._coverage(session.coverage, limits)]
         stream = rec.mocap.get(est.target.joint)
         missing = [a for a in est.target.angles if stream is None or a not in stream.names]
         sensors_ok = tuple(rec.sensor_names) == est.sensor_names
-        return [
+        out = [
             Measurement.judge("compatibility.sensor_mismatch", 0 if sensors_ok else 1, "count",
                               limits.get("compatibility.sensor_mismatch"),
                               f"model {list(est.sensor_names)} vs device "
@@ -230,10 +230,35 @@ class ConformanceRun:
                               limits.get("compatibility.angle_mismatch"),
                               f"estimated angles missing from the reference: {missing}"
                               if missing else "every estimated angle has ground truth"),
-            self._rate(rec.sensor_rate_hz, "the reference's sensors run", limits),
-            self._coverage(stream_coverage(est, rec.sensors.values) if sensors_ok else None,
-                           limits),
         ]
+        if isinstance(self.device, EmulatorDevice) or not sensors_ok or missing:
+            # the emulator streams the reference itself, at its rate
+            return out + [
+                self._rate(rec.sensor_rate_hz, "the reference's sensors run", limits),
+                self._coverage(stream_coverage(est, rec.sensors.values) if sensors_ok
+                               else None, limits)]
+        # a device: what it streams, not what the reference holds, is what the model gets
+        session = self.session
+        rate = self._rate(self._device_rate_hz(session), "the device streams", limits)
+        reference = f"the reference's sensors at {rec.sensor_rate_hz:.5g} Hz"
+        if not same_rate(rec.sensor_rate_hz, est.sensor_rate_hz):
+            rate = Measurement.judge(rate.name, 1, "count", rate.limit,
+                                     f"{rate.note}; {reference}, not the model's")
+        else:
+            rate = replace(rate, note=f"{rate.note}; {reference}")
+        return out + [rate, self._coverage(session.coverage, limits)]
+
+    @staticmethod
+    def _device_rate_hz(session: SessionResult) -> float:
+        """The device's own frame rate over the session (sequence numbers per second of
+        device time, frames missed across a reboot included: the host's numbering goes on
+        by one there while its clock goes on by the gap); NaN under a second of it."""
+        run = session.run
+        lost = run.link.dropped_in_resets
+        rate = measured_rate_hz(run.first_seq, None if run.last_seq is None
+                                else run.last_seq + lost, run.first_device_time_s,
+                                run.last_device_time_s)
+        return math.nan if rate is None else rate
 
     def _rate(self, rate_hz: float, what: str, limits: dict[str, Limit]) -> Measurement:
         """``compatibility.rate_mismatch``: 1 when the device's frame rate is not the
