@@ -83,7 +83,9 @@ class ConformanceRun:
 
     def __init__(self, target: str | Device, model: Path, profile: Profile, *,
                  reference: Path | None = None, baseline: Path | None = None,
-                 backend: str = "auto", say: Callable[[str], None] = lambda line: None) -> None:
+                 backend: str = "auto", say: Callable[[str], None] = lambda line: None,
+                 sensor_names: tuple[str, ...] | None = None,
+                 rate_hz: float | None = None) -> None:
         device = parse_target(target) if isinstance(target, str) else target
         if isinstance(device, EmulatorDevice) and device.faults is None:
             device = EmulatorDevice(device.recording, profile.setting("faults") or None,
@@ -96,7 +98,10 @@ class ConformanceRun:
         self.model_path = Path(model)
         self.baseline_path = None if baseline is None else Path(baseline)
         self.backend = backend
-        self.config = BenchConfig(device=device, model=self.model_path, backend=backend)
+        #: what a bench file states of its device ([sensors] names, rate_hz), if anything
+        self.bench_sensor_names, self.bench_rate_hz = sensor_names, rate_hz
+        self.config = BenchConfig(device=device, model=self.model_path, backend=backend,
+                                  sensor_names=sensor_names, rate_hz=rate_hz)
         self.say = say  #: progress lines for long steps
         self.started = time.time()
 
@@ -116,6 +121,9 @@ class ConformanceRun:
 
     def compatible_reason(self) -> str | None:
         """Why the model cannot run on this target's data, or None."""
+        bench = self._bench_mismatch()
+        if bench:
+            return "; ".join(m.note for m in bench)
         rec, est = self.reference, self.model.estimator
         if rec is None:
             return None
@@ -207,7 +215,30 @@ class ConformanceRun:
                            f"({run.frames} frames) where {wanted:g} s are asked for: {why}")
 
     # ---- checks ----------------------------------------------------------------------
+    def _bench_mismatch(self) -> list[Measurement]:
+        """``compatibility.sensor_mismatch`` and ``rate_mismatch`` of what the bench file
+        states of its device against the model (none where it states nothing): a bench that
+        names other sensors or another rate is not the model's, whatever the stream shows."""
+        limits = self.profile.limits("compatibility")
+        est, out = self.model.estimator, []
+        names = self.bench_sensor_names
+        if names is not None and tuple(names) != est.sensor_names:
+            out.append(Measurement.judge("compatibility.sensor_mismatch", 1, "count",
+                                         limits.get("compatibility.sensor_mismatch"),
+                                         f"model {list(est.sensor_names)} vs the bench's "
+                                         f"[sensors] names {list(names)}"))
+        rate = self.bench_rate_hz
+        if rate is not None and not same_rate(rate, est.sensor_rate_hz):
+            out.append(Measurement.judge("compatibility.rate_mismatch", 1, "count",
+                                         limits.get("compatibility.rate_mismatch"),
+                                         f"the bench's [sensors] rate_hz {rate:g} Hz, the "
+                                         f"model's {est.sensor_rate_hz:g} Hz"))
+        return out
+
     def compatibility_measurements(self) -> list[Measurement]:
+        bench = self._bench_mismatch()
+        if bench:  # the device is not the model's: the session would refuse to run it
+            return bench
         limits = self.profile.limits("compatibility")
         rec, est = self.reference, self.model.estimator
         if rec is None:
