@@ -281,6 +281,9 @@ def test_a_figures_baseline_gates_accuracy_against_an_earlier_run(tmp_path, fast
         assert "vs baseline figures (model " in \
             measured["regression.accuracy.rmse.elv_angle"]["note"]
         assert measured["regression.latency_p99_ratio"]["verdict"] == "skip"
+        if verdict == "pass":  # passed on what it could judge, and says what it could not
+            assert regression["message"].endswith(
+                "; 1 not measurable here: regression.latency_p99_ratio"), regression["message"]
     assert "regression.accuracy.rmse.elv_angle = 0.3 deg" in last_line(output)
 
 
