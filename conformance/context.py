@@ -18,7 +18,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
 
@@ -40,6 +40,7 @@ from exohil.harness.bench import (
     SerialDevice,
     parse_target,
 )
+from exohil.harness.device_rate import measured_rate_hz
 from exohil.harness.machine import HostLoad
 from exohil.harness.pipeline import Status
 from exohil.harness.session import (
@@ -55,7 +56,6 @@ from exohil.harness.session import (
     run_session,
     session_accuracy,
     sha256_file,
-    streamed_rate_hz,
     teleop_measurements,
 )
 
@@ -84,7 +84,9 @@ class ConformanceRun:
 
     def __init__(self, target: str | Device, model: Path, profile: Profile, *,
                  reference: Path | None = None, baseline: Path | None = None,
-                 backend: str = "auto", say: Callable[[str], None] = lambda line: None) -> None:
+                 backend: str = "auto", say: Callable[[str], None] = lambda line: None,
+                 sensor_names: tuple[str, ...] | None = None,
+                 rate_hz: float | None = None) -> None:
         device = parse_target(target) if isinstance(target, str) else target
         if isinstance(device, EmulatorDevice) and device.faults is None:
             device = EmulatorDevice(device.recording, profile.setting("faults") or None,
@@ -97,7 +99,10 @@ class ConformanceRun:
         self.model_path = Path(model)
         self.baseline_path = None if baseline is None else Path(baseline)
         self.backend = backend
-        self.config = BenchConfig(device=device, model=self.model_path, backend=backend)
+        #: what a bench file states of its device ([sensors] names, rate_hz), if anything
+        self.bench_sensor_names, self.bench_rate_hz = sensor_names, rate_hz
+        self.config = BenchConfig(device=device, model=self.model_path, backend=backend,
+                                  sensor_names=sensor_names, rate_hz=rate_hz)
         self.say = say  #: progress lines for long steps
         self.started = time.time()
 
@@ -117,6 +122,9 @@ class ConformanceRun:
 
     def compatible_reason(self) -> str | None:
         """Why the model cannot run on this target's data, or None."""
+        bench = self._bench_mismatch()
+        if bench:
+            return "; ".join(m.note for m in bench)
         rec, est = self.reference, self.model.estimator
         if rec is None:
             return None
@@ -275,7 +283,30 @@ class ConformanceRun:
         return Measurement.judge(name, 100.0 * covered / t.size, "%", limit, note)
 
     # ---- checks ----------------------------------------------------------------------
+    def _bench_mismatch(self) -> list[Measurement]:
+        """``compatibility.sensor_mismatch`` and ``rate_mismatch`` of what the bench file
+        states of its device against the model (none where it states nothing): a bench that
+        names other sensors or another rate is not the model's, whatever the stream shows."""
+        limits = self.profile.limits("compatibility")
+        est, out = self.model.estimator, []
+        names = self.bench_sensor_names
+        if names is not None and tuple(names) != est.sensor_names:
+            out.append(Measurement.judge("compatibility.sensor_mismatch", 1, "count",
+                                         limits.get("compatibility.sensor_mismatch"),
+                                         f"model {list(est.sensor_names)} vs the bench's "
+                                         f"[sensors] names {list(names)}"))
+        rate = self.bench_rate_hz
+        if rate is not None and not same_rate(rate, est.sensor_rate_hz):
+            out.append(Measurement.judge("compatibility.rate_mismatch", 1, "count",
+                                         limits.get("compatibility.rate_mismatch"),
+                                         f"the bench's [sensors] rate_hz {rate:g} Hz, the "
+                                         f"model's {est.sensor_rate_hz:g} Hz"))
+        return out
+
     def compatibility_measurements(self) -> list[Measurement]:
+        bench = self._bench_mismatch()
+        if bench:  # the device is not the model's: the session would refuse to run it
+            return bench
         limits = self.profile.limits("compatibility")
         rec, est = self.reference, self.model.estimator
         if rec is None:
@@ -284,12 +315,12 @@ class ConformanceRun:
             return [Measurement.judge("compatibility.sensor_mismatch", bad, "count",
                                       limits.get("compatibility.sensor_mismatch"),
                                       "frames of the model's sensor count arrive"),
-                    self._rate(streamed_rate_hz(session.run), "the device streams", limits),
+                    self._rate(self._device_rate_hz(session), "the device streams", limits),
                     self._coverage(session.coverage, limits)]
         stream = rec.mocap.get(est.target.joint)
         missing = [a for a in est.target.angles if stream is None or a not in stream.names]
         sensors_ok = tuple(rec.sensor_names) == est.sensor_names
-        return [
+        out = [
             Measurement.judge("compatibility.sensor_mismatch", 0 if sensors_ok else 1, "count",
                               limits.get("compatibility.sensor_mismatch"),
                               f"model {list(est.sensor_names)} vs device "
@@ -298,10 +329,35 @@ class ConformanceRun:
                               limits.get("compatibility.angle_mismatch"),
                               f"estimated angles missing from the reference: {missing}"
                               if missing else "every estimated angle has ground truth"),
-            self._rate(rec.sensor_rate_hz, "the reference's sensors run", limits),
-            self._coverage(stream_coverage(est, rec.sensors.values) if sensors_ok else None,
-                           limits),
         ]
+        if isinstance(self.device, EmulatorDevice) or not sensors_ok or missing:
+            # the emulator streams the reference itself, at its rate
+            return out + [
+                self._rate(rec.sensor_rate_hz, "the reference's sensors run", limits),
+                self._coverage(stream_coverage(est, rec.sensors.values) if sensors_ok
+                               else None, limits)]
+        # a device: what it streams, not what the reference holds, is what the model gets
+        session = self.session
+        rate = self._rate(self._device_rate_hz(session), "the device streams", limits)
+        reference = f"the reference's sensors at {rec.sensor_rate_hz:.5g} Hz"
+        if not same_rate(rec.sensor_rate_hz, est.sensor_rate_hz):
+            rate = Measurement.judge(rate.name, 1, "count", rate.limit,
+                                     f"{rate.note}; {reference}, not the model's")
+        else:
+            rate = replace(rate, note=f"{rate.note}; {reference}")
+        return out + [rate, self._coverage(session.coverage, limits)]
+
+    @staticmethod
+    def _device_rate_hz(session: SessionResult) -> float:
+        """The device's own frame rate over the session (sequence numbers per second of
+        device time, frames missed across a reboot included: the host's numbering goes on
+        by one there while its clock goes on by the gap); NaN under a second of it."""
+        run = session.run
+        lost = run.link.dropped_in_resets
+        rate = measured_rate_hz(run.first_seq, None if run.last_seq is None
+                                else run.last_seq + lost, run.first_device_time_s,
+                                run.last_device_time_s)
+        return math.nan if rate is None else rate
 
     def _rate(self, rate_hz: float, what: str, limits: dict[str, Limit]) -> Measurement:
         """``compatibility.rate_mismatch``: 1 when the device's frame rate is not the

@@ -159,7 +159,7 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
 
 
 @click.command("run")
-@click.argument("url", type=DeviceUrl())
+@click.argument("url", type=DeviceUrl(), required=False)
 @click.option("--model", type=InputFile(), default=None,
               help="Estimator checkpoint [default: the bench's, else the reference ENNet].")
 @click.option("--bench", "bench_file", type=InputFile(), default=None,
@@ -188,12 +188,13 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
 @click.option("--out", "out_dir", type=OutputDir(), default=None,
               help="Also write a report folder here (summary, plots, arm pictures with --sink "
                    "mujoco, run.mcap).")
-def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str, ...],
+def run(url: str | None, model: Path | None, bench_file: Path | None, sinks: tuple[str, ...],
         reference: Path | None, record_path: Path | None, duration: float | None,
         rate: float | None, backend: str | None, json_out: Path | None,
         out_dir: Path | None) -> None:
     """Run the pipeline on the device at URL (a serial port such as /dev/ttyACM0, a pty
-    printed by `exohil emulate`, or any pyserial URL such as socket://host:port).
+    printed by `exohil emulate`, or any pyserial URL such as socket://host:port) [default:
+    the bench's; a URL alone keeps the bench's reference].
 
     Exit status 0 when the run ended as asked (its duration, the reference's end or Ctrl-C);
     3 when the device sent nothing for 10 s before that (the report is still written); 1 for
@@ -208,6 +209,14 @@ def run(url: str, model: Path | None, bench_file: Path | None, sinks: tuple[str,
     robots = None
     if sinks:
         robots = tuple(s for s in sinks if s != "none")
+    bench_device = config.device if isinstance(config.device, SerialDevice) else None
+    if url is None:
+        if bench_device is None:
+            raise click.UsageError("give the device's URL, or a --bench file whose [device] "
+                                   "names a serial device (url)")
+        url = bench_device.url
+    if reference is None and bench_device is not None:
+        reference = bench_device.reference
     config = config.with_overrides(
         device=SerialDevice(url, reference), model=model or config.model or
         MODELS_DIR / "ennet.npz", backend=backend, record=record_path, robots=robots,

@@ -50,6 +50,10 @@ class LinkStats:
         sequence_resets: times the device's numbering restarted (e.g. a device reset) and
             the host took the new numbering after consecutive consistent frames; the host's
             numbering continues across it.
+        dropped_in_resets: frames the device's period says it would have sent between the
+            last frame before a sequence reset and the first frame of the new numbering, by
+            host time (a reboot, a re-enumeration gap); not in ``dropped``, which counts by
+            sequence number and cannot see across a restarted numbering.
         crc_errors: packets whose CRC did not match.
         decode_errors: packets that were not valid COBS or had a wrong length/type.
         garbage_bytes: bytes discarded (rejected packets, partial packets at reconnect,
@@ -70,6 +74,7 @@ class LinkStats:
     duplicates: int = 0
     implausible: int = 0
     sequence_resets: int = 0
+    dropped_in_resets: int = 0
     crc_errors: int = 0
     decode_errors: int = 0
     garbage_bytes: int = 0

@@ -26,7 +26,8 @@ alike, arrived late and is ``implausible``. Any other valid-CRC frame is held as
 a new numbering (a device reset restarts both counters): once ``RESYNC_FRAMES`` consecutive
 candidates step consistently with each other, the new numbering is taken (``sequence_resets``)
 and they are delivered, continuing the host's numbering (sequence +1, device time + the host
-time elapsed); candidates that never make such a run are ``implausible`` and discarded.
+time elapsed; the frames that host time holds at the old period, less one, are counted
+``dropped_in_resets``); candidates that never make such a run are ``implausible`` and discarded.
 Delivered sequence numbers and device times therefore always increase strictly.
 """
 
@@ -240,6 +241,8 @@ class StreamDecoder:
         gap_us = max(1, round((first_ns - last.host_ns) / 1000),
                      round(period[0]) if period else 1)
         self._stats.sequence_resets += 1
+        if period:  # the frames the device's period fits in the gap, less the one sent
+            self._stats.dropped_in_resets += max(0, round(gap_us / period[0]) - 1)
         self._origin = (last.seq + 1, last.time_us + gap_us)
         frames = [self._accept(first, first_ns, *self._origin)]
         for wire_k, ns_k in self._candidates[1:]:

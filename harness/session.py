@@ -58,7 +58,7 @@ from exohil.harness.bench import (
     device_rate_hz,
     open_device,
 )
-from exohil.harness.frame_source import Frame
+from exohil.harness.frame_source import Frame, LinkStats
 from exohil.harness.machine import HostLoad, HostLoadMeter
 from exohil.harness.pipeline import (
     FrameRows,
@@ -694,6 +694,9 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
       that sequence number (a CRC that let corruption through), must be 0;
     * ``link.dropped_unexplained``: host-counted drops minus the device's logged losses
       within the received span, must be 0.
+
+    Another device keeps no fault log, so nothing it loses is explained: those three are
+    skipped and what the host can see is judged instead (:func:`device_link_measurements`).
     """
     limits = limits or {}
     run = result.run
@@ -712,11 +715,13 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
     tally = result.link_tally
     if (result.fault_log is None or tally is None or run.first_seq is None
             or run.last_seq is None):
-        why = "no device fault log (not the in-process emulator)"
+        why = ("no device fault log (not the in-process emulator) to reconcile with; "
+               "link.lost, link.rejected, link.sequence_resets and link.disconnects judge "
+               "what the host saw")
         for name in ("link.lost_on_host", "link.bad_frames_delivered",
                      "link.dropped_unexplained"):
             out.append(Measurement.skipped(name, "count", why, limits.get(name)))
-        return out
+        return out + device_link_measurements(link, limits)
     first, last = run.first_seq, run.last_seq
     hidden = unseen_wraps(result.emulator_seq0 or 0)  # the device logs in its numbering
     lost = {r.seq - hidden for r in result.fault_log
@@ -732,6 +737,44 @@ def link_measurements(result: SessionResult, limits: Limits | None = None) -> li
           note=f"host {link.dropped} vs device log {len(lost)} in the received span"),
     ]
     return out
+
+
+def device_link_measurements(link: LinkStats, limits: Limits | None = None) -> list[Measurement]:
+    """What the host sees of a device's link, where no fault log explains any of it (a real
+    device): every frame lost, rejected, every reboot and disconnect is the device's or the
+    link's fault.
+
+    * ``link.lost``: frames missing from the device's stream: sequence gaps (``dropped``,
+      disconnects included) plus the frames missed across sequence resets, by host time at
+      the device's period (``dropped_in_resets``: a reboot restarts the numbering, so
+      sequence numbers alone cannot see them);
+    * ``link.rejected``: packets the host could not use: failed CRC, wrong shape,
+      valid-CRC frames whose header did not fit the stream (``implausible``) or repeated
+      one already taken (``duplicates``: also what a reboot within 1024 frames of the
+      first looks like, its new numbering repeating the first frames');
+    * ``link.sequence_resets``: times the device's numbering restarted (a reboot);
+    * ``link.disconnects``: times the port was lost (e.g. USB re-enumeration).
+    """
+    limits = limits or {}
+
+    def m(name: str, value: float, note: str) -> Measurement:
+        return Measurement.judge(name, value, "count", limits.get(name), note)
+
+    return [
+        m("link.lost", link.dropped + link.dropped_in_resets,
+          f"{link.dropped} by sequence gaps ({link.dropped_in_disconnects} across "
+          f"disconnects), {link.dropped_in_resets} across {link.sequence_resets} sequence "
+          "reset(s) by host time"),
+        m("link.rejected", link.crc_errors + link.decode_errors + link.implausible
+          + link.duplicates,
+          f"{link.crc_errors} failed CRC, {link.decode_errors} of another shape, "
+          f"{link.implausible} implausible headers, {link.duplicates} duplicates"),
+        m("link.sequence_resets", link.sequence_resets,
+          "the device's numbering restarted (a reboot)"),
+        m("link.disconnects", link.disconnects,
+          f"the port was lost; {link.reconnects} reconnect(s), {link.wrong_device} refused "
+          "as another device"),
+    ]
 
 
 def teleop_measurements(result: SessionResult,

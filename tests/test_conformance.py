@@ -107,8 +107,12 @@ def test_the_ci_gate_limits_change_only_with_this_test():
     ci = load_profile("ci")
     assert {check: {name: limit.describe() for name, limit in limits.items()}
             for check, limits in ci.checks.items()} == {
-        "compatibility": {}, "heldout": {}, "link": {}, "conversions": {}, "teleop": {},
+        "compatibility": {}, "heldout": {}, "conversions": {}, "teleop": {},
         "regression": {},
+        # measured only for a real device (no emulator fault log), so the gate's emulator
+        # run judges exactly what it did before they were added
+        "link": {"link.lost": "<= 0 count", "link.rejected": "<= 0 count",
+                 "link.sequence_resets": "<= 0 count", "link.disconnects": "<= 0 count"},
         "accuracy": {"accuracy.rmse.elv_angle": "< 3 deg",
                      "accuracy.rmse.shoulder_elv": "< 2 deg",
                      "accuracy.direction_rmse": "< 3 deg"},
@@ -277,6 +281,9 @@ def test_a_figures_baseline_gates_accuracy_against_an_earlier_run(tmp_path, fast
         assert "vs baseline figures (model " in \
             measured["regression.accuracy.rmse.elv_angle"]["note"]
         assert measured["regression.latency_p99_ratio"]["verdict"] == "skip"
+        if verdict == "pass":  # passed on what it could judge, and says what it could not
+            assert regression["message"].endswith(
+                "; 1 not measurable here: regression.latency_p99_ratio"), regression["message"]
     assert "regression.accuracy.rmse.elv_angle = 0.3 deg" in last_line(output)
 
 
@@ -823,3 +830,38 @@ def test_conform_reads_its_target_and_model_from_a_bench_file(tmp_path, fast_pro
 def test_conform_without_target_or_bench_is_a_usage_error(tmp_path):
     result = CliRunner().invoke(main, ["conform", "--model", str(ENNET), "--out", str(tmp_path)])
     assert result.exit_code == 2 and "--target and --model, or a --bench" in result.output
+
+
+def serial_bench(tmp_path: Path, extra: str = "") -> Path:
+    """A bench file naming a serial device (absent here), its reference and the model."""
+    bench = tmp_path / "bench.toml"
+    bench.write_text(f'[device]\nurl = "{tmp_path / "ttyACM0"}"\nreference = "{HELDOUT}"\n'
+                     f'[model]\ncheckpoint = "{ENNET}"\n{extra}', encoding="utf-8")
+    return bench
+
+
+def test_conform_with_a_target_for_the_bench_device_keeps_its_reference(tmp_path, fast_profile):
+    """After a re-enumeration the port changes, not the ground truth: --target alone replaces
+    the bench's url and keeps its reference."""
+    result = CliRunner().invoke(main, ["conform", "--bench", str(serial_bench(tmp_path)),
+                                       "--target", str(tmp_path / "ttyACM1"), "--profile",
+                                       str(fast_profile), "--out", str(tmp_path / "out"),
+                                       "-k", "heldout"])
+    report = json.loads((tmp_path / "out" / "conformance.json").read_text())
+    assert verdicts(report)["heldout"] == "pass", result.output
+    assert report["reference"] == str(HELDOUT) and report["target"].endswith("ttyACM1")
+
+
+def test_conform_judges_the_bench_files_sensors_against_the_model(tmp_path, fast_profile):
+    """A bench whose [sensors] names and rate are not the model's fails compatibility, before
+    any device is opened."""
+    bench = serial_bench(tmp_path, '[sensors]\nnames = ["A", "B", "C", "D"]\nrate_hz = 100\n')
+    result = CliRunner().invoke(main, ["conform", "--bench", str(bench), "--profile",
+                                       str(fast_profile), "--out", str(tmp_path / "out"),
+                                       "-k", "compatibility"])
+    report = json.loads((tmp_path / "out" / "conformance.json").read_text())
+    assert verdicts(report)["compatibility"] == "fail", result.output
+    got = measurements(report)
+    assert got["compatibility.sensor_mismatch"]["value"] == 1
+    assert "['A', 'B', 'C', 'D']" in got["compatibility.sensor_mismatch"]["note"]
+    assert got["compatibility.rate_mismatch"]["value"] == 1

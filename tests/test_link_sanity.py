@@ -110,6 +110,17 @@ def test_a_device_reset_is_followed_after_consistent_frames() -> None:
     assert all(f.values_mm[0] == pytest.approx(0.07) for f in got[100:])
 
 
+def test_the_frames_a_reboot_missed_are_counted_by_host_time() -> None:
+    """A reboot restarts the numbering, so no sequence gap shows the frames the device did
+    not send meanwhile: the host's clock at the device's period does (2 s at 250 Hz, less
+    the one frame period between any two frames)."""
+    before = stream(range(5000, 5100))
+    after = b"".join(wire(s, t_us=s * PERIOD_US) for s in range(0, 20))
+    _, stats = decode(before, after, host_ns=[0, 2 * 10**9])
+    assert stats.sequence_resets == 1 and stats.dropped == 0
+    assert stats.dropped_in_resets == 499
+
+
 def test_a_reset_mid_frame_costs_the_torn_frame_only() -> None:
     torn = wire(5100)[:9]
     after = b"".join(wire(s, t_us=500_000 + s * PERIOD_US) for s in range(0, 10))
