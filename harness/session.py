@@ -427,9 +427,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     frames; a serial device is read for ``seconds`` of wall time. ``seconds=None`` runs until
     ``stop`` is set (or, for the emulator, to the end of its recording; for a serial device with
     a reference, until the device's clock passes the reference's end: an outage shorter than
-``DEVICE_TIMEOUT_S`` is ridden out, and a device that stops before that end is
-``device_lost``). Setting ``stop`` ends
-    any run early, and the result covers what was processed. ``keep_frames`` = (first, last)
+    ``DEVICE_TIMEOUT_S`` is ridden out, and a device that stops before that end is
+    ``device_lost``). Setting ``stop`` ends any run early, and the result covers what was
+    processed. ``keep_frames`` = (first, last)
     sets how many per-frame rows the run keeps (default: the pipeline's); every figure covers
     every frame regardless. ``reference``: the bench's reference recording when the caller
     has already read it (else it is read here).
