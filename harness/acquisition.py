@@ -175,6 +175,7 @@ class SerialFrameSource:
         self.realtime = realtime
         self.realtime_error: str | None = None
         self._last_frame_ns = time.perf_counter_ns()
+        self._bytes_without_frame = 0  # read since the last frame was delivered
         self._timed_out = False
 
     # ---- FrameSource -----------------------------------------------------------------
@@ -236,7 +237,13 @@ class SerialFrameSource:
         silent_s = self.seconds_since_last_frame()
         if silent_s < self.device_timeout_s:
             return False
-        state = "connected but silent" if self.connected else "not connected"
+        if not self.connected:
+            state = "not connected"
+        elif self._bytes_without_frame:
+            state = (f"connected; {self._bytes_without_frame} bytes arrived since the last "
+                     "frame and none was a wire-protocol v1 frame")
+        else:
+            state = "connected but silent"
         cause = f"; last error: {self.last_error}" if self.last_error else ""
         self.last_error = (f"no frame from {self.url} for {silent_s:.1f} s (device timeout "
                            f"{self.device_timeout_s:g} s, {state}){cause}")
@@ -319,7 +326,10 @@ class SerialFrameSource:
                 self._stats.overflow += self._buffer.put(frames)
             if frames:
                 self._last_frame_ns = host_ns
-            elif self._expired():
+                self._bytes_without_frame = 0
+            else:
+                self._bytes_without_frame += len(data)
+            if not frames and self._expired():
                 return False
         return False
 

@@ -197,7 +197,8 @@ def run(url: str | None, model: Path | None, bench_file: Path | None, sinks: tup
     the bench's; a URL alone keeps the bench's reference].
 
     Exit status 0 when the run ended as asked (its duration, the reference's end or Ctrl-C);
-    3 when the device sent nothing for 10 s before that (the report is still written); 1 for
+    3 when the device was lost before that: no frame for 10 s, or, with a reference, its last
+    frame short of the reference's end (the report is still written); 1 for
     an error (no frame at all, a bad file), 2 for a bad command line."""
     from exohil.harness.bench import BenchError, SerialDevice, load_bench
     from exohil.harness.paths import MODELS_DIR

@@ -232,6 +232,26 @@ def test_a_device_that_never_returns_ends_the_reader_with_a_clear_message() -> N
         assert stats.disconnects == 1 and stats.reconnects == 0
 
 
+def test_a_device_sending_no_frames_is_not_called_silent(tmp_path: Path) -> None:
+    """A device printing text instead of frames timed out as "connected but silent", which
+    contradicted the run's "N bytes arrived and none was a frame"."""
+    device = VirtualSerialPort(tmp_path)
+    device.connect()
+    try:
+        with SerialFrameSource(device.path, device_timeout_s=0.5) as source:
+            assert _until(device.host_attached, timeout_s=5.0)
+            started = time.monotonic()
+            while source.alive and time.monotonic() - started < 10.0:
+                device.send(b"F,SF,SR,R 12.5 13.1 9.8 11.0\r\n", tag=0)
+                time.sleep(0.02)
+        assert source.device_timed_out
+        assert "connected but silent" not in (source.last_error or ""), source.last_error
+        assert "bytes arrived since the last frame and none was a wire-protocol v1 frame" in (
+            source.last_error or "")
+    finally:
+        device.close()
+
+
 def test_a_connected_but_silent_device_times_out(tmp_path: Path) -> None:
     device = VirtualSerialPort(tmp_path)
     device.connect()
