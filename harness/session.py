@@ -143,15 +143,6 @@ def reference_path(config: BenchConfig) -> Path | None:
     return None
 
 
-def streamed_rate_hz(run: PipelineRun) -> float:
-    """The device's frame rate as it streamed, Hz: sequence numbers per second of device
-    time over the run (drops do not lower it); NaN without two frames or with a span of 0."""
-    if run.first_seq is None or run.last_seq is None or run.last_seq <= run.first_seq:
-        return math.nan
-    span = run.last_device_time_s - run.first_device_time_s
-    return (run.last_seq - run.first_seq) / span if span > 0 else math.nan
-
-
 def truth_at(reference: Recording, est: TrainedEstimator, device_time_s: np.ndarray) -> np.ndarray:
     """(N, A) true angles (deg) at the frames' device times, in the estimator's order; NaN
     outside the reference's motion capture."""
