@@ -40,7 +40,6 @@ from exohil.harness.bench import (
     SerialDevice,
     parse_target,
 )
-from exohil.harness.device_rate import measured_rate_hz
 from exohil.harness.machine import HostLoad
 from exohil.harness.pipeline import Status
 from exohil.harness.session import (
@@ -349,14 +348,9 @@ class ConformanceRun:
 
     @staticmethod
     def _device_rate_hz(session: SessionResult) -> float:
-        """The device's own frame rate over the session (sequence numbers per second of
-        device time, frames missed across a reboot included: the host's numbering goes on
-        by one there while its clock goes on by the gap); NaN under a second of it."""
-        run = session.run
-        lost = run.link.dropped_in_resets
-        rate = measured_rate_hz(run.first_seq, None if run.last_seq is None
-                                else run.last_seq + lost, run.first_device_time_s,
-                                run.last_device_time_s)
+        """The device's own frame rate over the session (``PipelineRun.device_rate_hz``);
+        NaN under a second of it."""
+        rate = session.run.device_rate_hz
         return math.nan if rate is None else rate
 
     def _rate(self, rate_hz: float, what: str, limits: dict[str, Limit]) -> Measurement:

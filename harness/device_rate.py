@@ -16,15 +16,19 @@ MIN_SPAN_S = 1.0
 
 
 def measured_rate_hz(first_seq: int | None, last_seq: int | None, first_time_s: float,
-                     last_time_s: float) -> float | None:
+                     last_time_s: float, missed_in_resets: int = 0) -> float | None:
     """Frames per second of device time between two frames, or None when they span less
-    than :data:`MIN_SPAN_S` (or there are none)."""
+    than :data:`MIN_SPAN_S` (or there are none).
+
+    ``missed_in_resets`` (the link's ``dropped_in_resets``) adds the frames a device reboot
+    missed: across a restarted numbering the host's sequence goes on by one while its device
+    time goes on by the gap, so without them a reboot would lower the rate."""
     if first_seq is None or last_seq is None:
         return None
     span_s = last_time_s - first_time_s
     if not span_s >= MIN_SPAN_S or last_seq <= first_seq:
         return None
-    return (last_seq - first_seq) / span_s
+    return (last_seq + missed_in_resets - first_seq) / span_s
 
 
 def device_rate_warning(measured_hz: float | None, configured_hz: float) -> str | None:

@@ -26,6 +26,7 @@ from typing import Protocol
 
 import numpy as np
 
+from exohil.harness.device_rate import measured_rate_hz
 from exohil.harness.frame_source import Frame, FrameSource, LinkStats
 from exohil.harness.robot_stats import LogHistogram
 
@@ -200,6 +201,14 @@ class PipelineRun(FrameRows):
     intervals: dict[tuple[str, str], LogHistogram]
     link: LinkStats
     wall_s: float
+
+    @property
+    def device_rate_hz(self) -> float | None:
+        """The device's own frame rate over the run, Hz: sequence numbers per second of
+        device time, the frames missed across a reboot included; None under
+        :data:`~exohil.harness.device_rate.MIN_SPAN_S` of device time."""
+        return measured_rate_hz(self.first_seq, self.last_seq, self.first_device_time_s,
+                                self.last_device_time_s, self.link.dropped_in_resets)
 
     @property
     def complete(self) -> bool:

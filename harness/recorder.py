@@ -12,19 +12,22 @@ an existing file at ``path`` is only replaced by a complete recording.
 
 The metadata's ``sensor_rate_hz`` is the configured (nominal) rate; the device's rate as its
 frames show it (:mod:`~exohil.harness.device_rate`, over at least 1 s of device time) is written
-beside it at close as ``measured_sensor_rate_hz``.
+beside it at close as ``measured_sensor_rate_hz``; given the link's counters
+(:attr:`RecorderSink.link_stats`), the frames a device reboot missed count in it as in the run
+summary's ``device_rate_hz``.
 """
 
 from __future__ import annotations
 
 import queue
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
 from exohil.formats.recording_writer import RecordingWriter
 from exohil.harness.device_rate import measured_rate_hz
+from exohil.harness.frame_source import LinkStats
 from exohil.harness.pipeline import Sample
 
 _STOP = object()
@@ -52,6 +55,9 @@ class RecorderSink:
         self._first: tuple[int, float] | None = None
         self._last: tuple[int, float] | None = None
         self.error: BaseException | None = None
+        #: the frame source's counters (its ``stats``), read at close for the frames a
+        #: device reboot missed; None: no reboot is counted
+        self.link_stats: Callable[[], LinkStats] | None = None
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
 
@@ -98,7 +104,9 @@ class RecorderSink:
         (:func:`~exohil.harness.device_rate.measured_rate_hz`)."""
         if self._first is None or self._last is None:
             return None
-        return measured_rate_hz(self._first[0], self._last[0], self._first[1], self._last[1])
+        missed = 0 if self.link_stats is None else self.link_stats().dropped_in_resets
+        return measured_rate_hz(self._first[0], self._last[0], self._first[1], self._last[1],
+                                missed)
 
     def __enter__(self) -> RecorderSink:
         return self

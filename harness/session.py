@@ -483,6 +483,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         meter = HostLoadMeter()
         with open_device(config.device, len(est.sensor_names), realtime=realtime,
                          duration_s=seconds, recording=reference) as opened:
+            for sink in sinks:
+                if isinstance(sink, RecorderSink):
+                    sink.link_stats = opened.source.stats
             if opened.emulator is not None:
                 seq0 = opened.emulator.seq0
                 link_tally = LinkTally(opened.emulator.wire_values_mm,

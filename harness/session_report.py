@@ -36,7 +36,7 @@ from typing import Any
 
 from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
 from exohil.formats.measurement import Measurement
-from exohil.harness.device_rate import device_rate_warning, measured_rate_hz
+from exohil.harness.device_rate import device_rate_warning
 from exohil.harness.machine import machine
 from exohil.harness.session import (
     SessionResult,
@@ -85,8 +85,7 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
                                 if m.name.startswith("latency.")))
     counts = result.fault_counts
     run = result.run
-    device_hz = measured_rate_hz(run.first_seq, run.last_seq, run.first_device_time_s,
-                                 run.last_device_time_s)
+    device_hz = run.device_rate_hz
     sent = None
     if counts is not None:
         sent = run.frames + sum(counts.get(k, 0) for k in ("drop", "corrupt", "truncate",

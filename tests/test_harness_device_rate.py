@@ -105,3 +105,28 @@ def test_a_device_sending_text_is_told_apart_from_a_silent_one() -> None:
     assert len(lines) == 1 and "no frame arrived from the serial device" in lines[0]
     assert "bytes arrived and none was a wire-protocol v1 frame" in lines[0]
     assert int(lines[0].split(" bytes arrived")[0].rsplit("(", 1)[1]) > 1000
+
+
+def test_a_reboot_does_not_lower_the_measured_rate(tmp_path: Path) -> None:
+    """A 250 Hz device that reboots (1 s quiet, numbering and clock back at 0): the host's
+    numbering goes on by one across the gap while its device time goes on by the gap, so the
+    run summary and the recording said ~190 Hz and warned of a slow device; conform's rate
+    check already counted the frames the reboot missed."""
+    record, summary = tmp_path / "run.mcap", tmp_path / "summary.json"
+    frame = _frame_at(4000)
+
+    def rebooting(k: int) -> bytes:  # 1.5 s of frames, 1 s quiet, then from 0 again
+        return frame(k) if k < 375 else b"" if k < 625 else frame(k - 625)
+
+    with pty_device(rebooting, 0.004) as port:
+        result = CliRunner().invoke(main, ["run", port, "--duration", "4", "--record",
+                                           str(record), "--json", str(summary)])
+    assert result.exit_code == 0, result.output
+    s = json.loads(summary.read_text())
+    assert s["link"]["sequence_resets"] == 1 and s["link"]["dropped_in_resets"] > 200
+    assert s["device_rate_hz"] == pytest.approx(250.0, rel=0.01)
+    assert s["device_rate_warning"] is None and "frames/s" not in result.output
+    from exohil.formats.recording_reader import read_recording
+
+    measured = float(read_recording(record).metadata["measured_sensor_rate_hz"])
+    assert measured == pytest.approx(250.0, rel=0.01)
