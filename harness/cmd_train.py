@@ -258,7 +258,9 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     RMSE, MAE and max |error| (degrees) over all frames, overall and per movement segment.
     A warning comes first when 1 % or more of the frames lie outside the readings the model
     was trained on (docs/estimator.md; another suit or movement: calibrate first), or when
-    the recordings run at another sensor rate than the model's. Example:
+    the recordings run at another sensor rate than the model's. A recording that shares
+    frames with a calibrated model's calibration recordings (the same file, or a part cut
+    from it at times that meet) is refused: those frames are training data. Example:
 
     \b
         exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
@@ -270,6 +272,9 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     refuse_overwriting_inputs([("--json", json_out)], [checkpoint, *recordings])
     refuse_repeated_inputs(("RECORDING", r) for r in recordings)
     est, data = _model_and_recordings(checkpoint, recordings)
+    # a calibration used every frame of its recordings: no --test-fraction holds any out
+    calibration = [s for s in est.info.get("sources", []) if s.get("role") == "calibration"]
+    _refuse_training_frames(calibration, data.sources, "RECORDING")
     blocks = data.blocks(est.offset_frames)
     if test_fraction > 0:
         blocks = [tail_cut(b, test_fraction)[1] for b in blocks]
@@ -317,9 +322,9 @@ def _angle_limits(items: tuple[tuple[str, float], ...],
     return dict(items)
 
 
-def _refuse_training_frames(train: list[dict], test: list[dict]) -> None:
-    """Refuse (a usage error) a --test recording that may share frames with a --train one:
-    the same recording by another path, or one cut from the other or both from one
+def _refuse_training_frames(train: list[dict], test: list[dict], label: str = "--test") -> None:
+    """Refuse (a usage error) a ``label`` recording that may share frames with a training
+    one: the same recording by another path, or one cut from the other or both from one
     recording at times that meet (the heldout check's rule, formats.recording_metadata)."""
     from exohil.formats.recording_metadata import shared_frames
 
@@ -327,7 +332,7 @@ def _refuse_training_frames(train: list[dict], test: list[dict]) -> None:
         for trained in train:
             overlap, why = shared_frames(scored, trained)
             if overlap:
-                raise click.UsageError(f"--test {scored['file']}: {why}: a model would be "
+                raise click.UsageError(f"{label} {scored['file']}: {why}: a model would be "
                                        "scored on frames it was trained on")
 
 

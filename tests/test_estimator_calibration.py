@@ -165,6 +165,27 @@ def test_calibrate_then_evaluate_from_the_command_line(tmp_path, base):
     assert direction[out] < 0.5 * direction[ckpt]
 
 
+def test_evaluate_refuses_a_calibrated_model_its_calibration_frames(tmp_path, base):
+    """Every frame of a calibration recording trained the calibrated model: evaluate refuses
+    it, and a part cut from it, whatever --test-fraction; the base model still takes it."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal, part = tmp_path / "base.npz", tmp_path / "cal.mcap", tmp_path / "part.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(cal, wearer_b(8.0, seed=5))
+    assert invoke("record", "cut", cal, "--start", "4", "--out", part).exit_code == 0
+    out = tmp_path / "calibrated.npz"
+    result = invoke("calibrate", ckpt, cal, "--out", out, "--steps", "5", "--jitter", "0.1")
+    assert result.exit_code == 0, result.output
+    for scored, extra in ((cal, ()), (part, ()), (cal, ("--test-fraction", "0.3"))):
+        result = invoke("evaluate", out, scored, *extra)
+        assert result.exit_code == 2, result.output
+        assert f"RECORDING {scored.name}: " in result.output
+        assert "scored on frames it was trained on" in result.output
+        assert "accuracy:" not in result.output
+    assert invoke("evaluate", ckpt, cal).exit_code == 0
+
+
 def test_calibration_frames_of_one_pose_are_warned_of(tmp_path, base):
     from exohil.estimator.checkpoint import save_checkpoint
 
