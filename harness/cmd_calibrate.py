@@ -74,6 +74,7 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     refuse_overwriting_inputs([("--out", out)], [checkpoint, *recordings])
     refuse_repeated_inputs(("RECORDING", r) for r in recordings)
     base, data = _model_and_recordings(checkpoint, recordings)
+    _refuse_copies(data.sources)
     other_rate = rate_mismatch(data.rate_hz, base.sensor_rate_hz)
     if other_rate:
         raise click.ClickException(f"{other_rate}; {RATE_REMEDY}")
@@ -83,7 +84,7 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
         click.echo(f"warning: {seconds:.1f} s of calibration frames with ground truth; the "
                    f"calibration protocol takes 60 s and {ADVISED_CALIBRATION_SECONDS:g} s or "
                    "more is advised (docs/calibration.md)", err=True)
-    if blocks:
+    if seconds >= MIN_CALIBRATION_SECONDS:  # less is refused by calibrate(), one line alone
         spans = np.ptp(np.concatenate([b.y for b in blocks]), axis=0)
         if spans.max() < MIN_CALIBRATION_RANGE_DEG:
             click.echo(f"warning: the calibration frames' angles span {spans.max():.1f}° at "
@@ -105,6 +106,17 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     click.echo("on the calibration frames (training data, not a test):")
     click.echo("  before " + _accuracy_line(cal["accuracy_before"]))
     click.echo("  after  " + _accuracy_line(cal["accuracy_after"]))
+
+
+def _refuse_copies(sources: list[dict]) -> None:
+    """Refuse (a usage error naming both) two calibration recordings with the same content
+    (a copy under another name): its frames would count twice."""
+    for i, source in enumerate(sources):
+        for other in sources[:i]:
+            if source["sha256"] == other["sha256"]:
+                raise click.UsageError(
+                    f"RECORDING {other['file']} and RECORDING {source['file']} hold the same "
+                    f"recording (sha256 {source['sha256'][:12]}…): its frames would count twice")
 
 
 COMMANDS: list[click.Command] = [calibrate_command]

@@ -223,6 +223,37 @@ def test_calibrate_bad_input_is_one_line(tmp_path, base, problem):
     assert not (tmp_path / "out.npz").exists()
 
 
+def test_a_copy_of_a_calibration_recording_is_refused(tmp_path, base):
+    """The same recording under two names would weigh its frames twice."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal, copy = tmp_path / "base.npz", tmp_path / "cal.mcap", tmp_path / "copy.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(cal, wearer_b(8.0, seed=5))
+    copy.write_bytes(cal.read_bytes())
+    result = invoke("calibrate", ckpt, cal, copy, "--out", tmp_path / "out.npz", "--steps", "5")
+    assert result.exit_code == 2, result.output
+    assert "RECORDING cal.mcap and RECORDING copy.mcap hold the same recording" in result.output
+    assert not (tmp_path / "out.npz").exists()
+
+
+def test_too_little_data_is_one_line_without_the_one_pose_warning(tmp_path, base):
+    """Too short a recording is refused; that it also holds one pose is not worth a line."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal = tmp_path / "base.npz", tmp_path / "still.mcap"
+    save_checkpoint(ckpt, base)
+    rec = wearer_b(3.0, seed=5)
+    for stream in rec.mocap.values():
+        stream.angles[:] = stream.angles[0]
+    write_recording(cal, rec)
+    result = invoke("calibrate", ckpt, cal, "--out", tmp_path / "out.npz", "--steps", "5")
+    assert result.exit_code != 0
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error: too little calibration data"), \
+        result.output
+
+
 def test_conformance_takes_a_calibrated_model_and_refuses_its_calibration_data(tmp_path):
     """The reference ENNet calibrated on the first 8 s of the held-out fixture: scored on that
     part, the held-out check fails; scored on the rest, it passes and accuracy is measured."""
