@@ -71,6 +71,32 @@ def _inputs(config: BenchConfig) -> list[Path | None]:
     return [config.model, getattr(device, "recording", None), getattr(device, "reference", None)]
 
 
+def _refuse_calibration_frames(config: BenchConfig) -> None:
+    """Refuse (a usage error) to score a calibrated model against ground truth that shares
+    frames with its calibration recordings (evaluate's rule): they are its training data.
+    A model or recording that cannot be read is left to the session to report."""
+    from exohil.estimator.checkpoint import CheckpointError, load_checkpoint
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.recording_metadata import source_entry
+    from exohil.formats.recording_reader import read_recording
+    from exohil.harness.cmd_train import _refuse_training_frames
+
+    device = config.device
+    scored = getattr(device, "recording", None) or getattr(device, "reference", None)
+    if config.model is None or scored is None:
+        return
+    try:
+        sources = load_checkpoint(config.model).info.get("sources", [])
+        calibration = [s for s in sources if s.get("role") == "calibration"]
+        if not calibration:
+            return
+        entry = source_entry(scored, read_recording(scored))
+    except (CheckpointError, RecordingError, OSError):
+        return
+    label = "--reference" if getattr(device, "reference", None) else "--recording"
+    _refuse_training_frames(calibration, [entry], label)
+
+
 def _outputs(config: BenchConfig, json_out: Path | None,
              out_dir: Path | None) -> list[tuple[str, Path | None]]:
     """Every file the run writes, with the option that names it."""
@@ -108,6 +134,7 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
     from exohil.harness.session_report import session_measurements, summary, summary_lines
 
     refuse_overwriting_inputs(_outputs(config, json_out, out_dir), _inputs(config))
+    _refuse_calibration_frames(config)
     # the folders made for the report, outermost first, removed again if the run fails
     made = [] if out_dir is None else [p for p in (*reversed(out_dir.parents), out_dir)
                                        if not p.exists()]

@@ -281,3 +281,30 @@ def test_conformance_takes_a_calibrated_model_and_refuses_its_calibration_data(t
     assert verdicts[cal]["heldout"] == "fail"
     assert verdicts[rest]["heldout"] == "pass"
     assert verdicts[rest]["accuracy"] in ("pass", "fail")  # measured, whatever the limits say
+
+
+def test_demo_and_run_refuse_a_calibrated_model_its_calibration_frames(tmp_path):
+    """demo's --recording and run's --reference are the ground truth a run is scored on:
+    refused when they hold the calibration frames, before any device starts; the base model
+    takes the same files."""
+    from exohil.formats.recording_reader import read_recording
+
+    cal = tmp_path / "cal.mcap"
+    write_recording(cal, cut_recording(read_recording(FIXTURES_DIR / "paper_protocol_heldout.mcap"),
+                                       0.0, 8.0))
+    calibrated = tmp_path / "calibrated.npz"
+    result = invoke("calibrate", MODELS_DIR / "ennet.npz", cal, "--out", calibrated,
+                    "--steps", "2", "--jitter", "0.1")
+    assert result.exit_code == 0, result.output
+    missing = tmp_path / "no-device"
+    commands = {"--recording": ["demo", "--recording", cal, "--seconds", "1", "--sink", "none",
+                                "--no-faults", "--out", tmp_path / "report"],
+                "--reference": ["run", missing, "--reference", cal, "--duration", "1",
+                                "--sink", "none"]}
+    for option, command in commands.items():
+        result = invoke(*command, "--model", calibrated)
+        assert result.exit_code == 2, result.output
+        assert f"{option} cal.mcap: cal.mcap was used to train the model" in result.output
+        assert not (tmp_path / "report").exists()
+    result = invoke(*commands["--reference"], "--model", MODELS_DIR / "ennet.npz")
+    assert result.exit_code == 1 and "no frame arrived" in result.output, result.output
