@@ -70,6 +70,7 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     from exohil.estimator.checkpoint import save_checkpoint
     from exohil.estimator.training import progress_printer
     from exohil.formats.digest import sha256_file
+    from exohil.formats.recording_metadata import shared_frames
 
     refuse_overwriting_inputs([("--out", out)], [checkpoint, *recordings])
     refuse_repeated_inputs(("RECORDING", r) for r in recordings)
@@ -90,6 +91,14 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
             click.echo(f"warning: the calibration frames' angles span {spans.max():.1f}° at "
                        f"most: one pose, which is all the model will be fitted to; calibrate "
                        "on the movements of the protocol (docs/calibration.md)", err=True)
+        for source in data.sources:
+            trained = [why for overlap, why in (shared_frames(source, s)
+                                                for s in base.info.get("sources", [])) if overlap]
+            if trained:
+                click.echo(f"warning: {trained[0]}: it holds frames the model has fitted, so "
+                           "the accuracy before is on training data and the jitter is chosen on "
+                           "frames already seen; calibrate on a new recording of the wearer",
+                           err=True)
     try:
         est = calibrate(base, blocks, CalibrationConfig(steps=steps, jitter=jitter, seed=seed),
                         base_source={"file": checkpoint.name, "sha256": sha256_file(checkpoint)},

@@ -237,6 +237,27 @@ def test_a_copy_of_a_calibration_recording_is_refused(tmp_path, base):
     assert not (tmp_path / "out.npz").exists()
 
 
+def test_calibrating_again_on_the_same_frames_is_warned_of(tmp_path, base):
+    """A calibrated checkpoint calibrated again on its calibration recording, or on a part
+    cut from it: the model has fitted those frames already."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal, part = tmp_path / "base.npz", tmp_path / "cal.mcap", tmp_path / "part.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(cal, wearer_b(8.0, seed=5))
+    assert invoke("record", "cut", cal, "--stop", "6", "--out", part).exit_code == 0
+    fast = ("--steps", "2", "--jitter", "0.1")
+    once = invoke("calibrate", ckpt, cal, "--out", tmp_path / "once.npz", *fast)
+    assert once.exit_code == 0, once.output
+    assert "frames the model has fitted" not in once.output
+    for again, why in ((cal, "cal.mcap was used to train the model (as cal.mcap)"),
+                       (part, "part.mcap was cut from the training recording cal.mcap")):
+        result = invoke("calibrate", tmp_path / "once.npz", again, "--out",
+                        tmp_path / "twice.npz", *fast)
+        assert result.exit_code == 0, result.output
+        assert f"warning: {why}: it holds frames the model has fitted" in result.output
+
+
 def test_too_little_data_is_one_line_without_the_one_pose_warning(tmp_path, base):
     """Too short a recording is refused; that it also holds one pose is not worth a line."""
     from exohil.estimator.checkpoint import save_checkpoint
