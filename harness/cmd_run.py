@@ -72,29 +72,29 @@ def _inputs(config: BenchConfig) -> list[Path | None]:
 
 
 def _refuse_calibration_frames(config: BenchConfig) -> None:
-    """Refuse (a usage error) to score a calibrated model against ground truth that shares
-    frames with its calibration recordings (evaluate's rule): they are its training data.
-    A model or recording that cannot be read is left to the session to report."""
+    """Refuse (a usage error) to score a calibrated model against ground truth that holds
+    its calibration frames (evaluate's rule): they are its training data. A model or
+    recording that cannot be read is left to the session to report."""
     from exohil.estimator.checkpoint import CheckpointError, load_checkpoint
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_metadata import source_entry
     from exohil.formats.recording_reader import read_recording
-    from exohil.harness.cmd_train import _refuse_training_frames
+    from exohil.harness.cmd_train import refuse_calibration_frames
 
     device = config.device
     scored = getattr(device, "recording", None) or getattr(device, "reference", None)
     if config.model is None or scored is None:
         return
     try:
-        sources = load_checkpoint(config.model).info.get("sources", [])
-        calibration = [s for s in sources if s.get("role") == "calibration"]
-        if not calibration:
+        info = load_checkpoint(config.model).info
+        if not any(s.get("role") == "calibration" for s in info.get("sources", [])):
             return
-        entry = source_entry(scored, read_recording(scored))
+        rec = read_recording(scored)
     except (CheckpointError, RecordingError, OSError):
         return
     label = "--reference" if getattr(device, "reference", None) else "--recording"
-    _refuse_training_frames(calibration, [entry], label)
+    # every frame of it, whatever part of it the run reaches
+    refuse_calibration_frames(info, [(source_entry(scored, rec), rec.sensors.t)], label)
 
 
 def _outputs(config: BenchConfig, json_out: Path | None,

@@ -186,6 +186,28 @@ def test_evaluate_refuses_a_calibrated_model_its_calibration_frames(tmp_path, ba
     assert invoke("evaluate", ckpt, cal).exit_code == 0
 
 
+def test_evaluate_scores_the_recording_a_calibration_was_cut_from_only_after_it(tmp_path,
+                                                                                 base):
+    """Calibrated on the first 6 s of a 20 s recording (two 10 s segments): the whole is
+    refused, and so is --test-fraction 0.5 (its tails 5–10 s and 15–20 s meet the first 6 s);
+    --test-fraction 0.3 (7–10 s and 17–20 s) is scored (results.md, the knee's commands)."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, whole, cal = tmp_path / "base.npz", tmp_path / "whole.mcap", tmp_path / "cal.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(whole, wearer_b(20.0, seed=5))
+    assert invoke("record", "cut", whole, "--stop", "6", "--out", cal).exit_code == 0
+    out = tmp_path / "calibrated.npz"
+    result = invoke("calibrate", ckpt, cal, "--out", out, "--steps", "5", "--jitter", "0.1")
+    assert result.exit_code == 0, result.output
+    for extra, refused in (((), True), (("--test-fraction", "0.5"), True),
+                           (("--test-fraction", "0.3"), False)):
+        result = invoke("evaluate", out, whole, *extra)
+        assert result.exit_code == (2 if refused else 0), (extra, result.output)
+        assert ("the training recording cal.mcap was cut from whole.mcap, and frames scored "
+                "here are among its calibration frames" in result.output) == refused
+
+
 def test_calibration_frames_of_one_pose_are_warned_of(tmp_path, base):
     from exohil.estimator.checkpoint import save_checkpoint
 
