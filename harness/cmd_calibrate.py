@@ -70,10 +70,12 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     from exohil.estimator.checkpoint import save_checkpoint
     from exohil.estimator.training import progress_printer
     from exohil.formats.digest import sha256_file
+    from exohil.formats.recording_metadata import shared_frames
 
     refuse_overwriting_inputs([("--out", out)], [checkpoint, *recordings])
     refuse_repeated_inputs(("RECORDING", r) for r in recordings)
     base, data = _model_and_recordings(checkpoint, recordings)
+    _refuse_copies(data.sources)
     other_rate = rate_mismatch(data.rate_hz, base.sensor_rate_hz)
     if other_rate:
         raise click.ClickException(f"{other_rate}; {RATE_REMEDY}")
@@ -83,12 +85,20 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
         click.echo(f"warning: {seconds:.1f} s of calibration frames with ground truth; the "
                    f"calibration protocol takes 60 s and {ADVISED_CALIBRATION_SECONDS:g} s or "
                    "more is advised (docs/calibration.md)", err=True)
-    if blocks:
+    if seconds >= MIN_CALIBRATION_SECONDS:  # less is refused by calibrate(), one line alone
         spans = np.ptp(np.concatenate([b.y for b in blocks]), axis=0)
         if spans.max() < MIN_CALIBRATION_RANGE_DEG:
             click.echo(f"warning: the calibration frames' angles span {spans.max():.1f}° at "
                        f"most: one pose, which is all the model will be fitted to; calibrate "
                        "on the movements of the protocol (docs/calibration.md)", err=True)
+        for source in data.sources:
+            trained = [why for overlap, why in (shared_frames(source, s)
+                                                for s in base.info.get("sources", [])) if overlap]
+            if trained:
+                click.echo(f"warning: {trained[0]}: it holds frames the model has fitted, so "
+                           "the accuracy before is on training data and the jitter is chosen on "
+                           "frames already seen; calibrate on a new recording of the wearer",
+                           err=True)
     try:
         est = calibrate(base, blocks, CalibrationConfig(steps=steps, jitter=jitter, seed=seed),
                         base_source={"file": checkpoint.name, "sha256": sha256_file(checkpoint)},
@@ -105,6 +115,17 @@ def calibrate_command(checkpoint, recordings, out, steps, jitter, seed):
     click.echo("on the calibration frames (training data, not a test):")
     click.echo("  before " + _accuracy_line(cal["accuracy_before"]))
     click.echo("  after  " + _accuracy_line(cal["accuracy_after"]))
+
+
+def _refuse_copies(sources: list[dict]) -> None:
+    """Refuse (a usage error naming both) two calibration recordings with the same content
+    (a copy under another name): its frames would count twice."""
+    for i, source in enumerate(sources):
+        for other in sources[:i]:
+            if source["sha256"] == other["sha256"]:
+                raise click.UsageError(
+                    f"RECORDING {other['file']} and RECORDING {source['file']} hold the same "
+                    f"recording (sha256 {source['sha256'][:12]}…): its frames would count twice")
 
 
 COMMANDS: list[click.Command] = [calibrate_command]

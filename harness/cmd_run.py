@@ -71,6 +71,32 @@ def _inputs(config: BenchConfig) -> list[Path | None]:
     return [config.model, getattr(device, "recording", None), getattr(device, "reference", None)]
 
 
+def _refuse_calibration_frames(config: BenchConfig) -> None:
+    """Refuse (a usage error) to score a calibrated model against ground truth that holds
+    its calibration frames (evaluate's rule): they are its training data. A model or
+    recording that cannot be read is left to the session to report."""
+    from exohil.estimator.checkpoint import CheckpointError, load_checkpoint
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.recording_metadata import source_entry
+    from exohil.formats.recording_reader import read_recording
+    from exohil.harness.cmd_train import refuse_calibration_frames
+
+    device = config.device
+    scored = getattr(device, "recording", None) or getattr(device, "reference", None)
+    if config.model is None or scored is None:
+        return
+    try:
+        info = load_checkpoint(config.model).info
+        if not any(s.get("role") == "calibration" for s in info.get("sources", [])):
+            return
+        rec = read_recording(scored)
+    except (CheckpointError, RecordingError, OSError):
+        return
+    label = "--reference" if getattr(device, "reference", None) else "--recording"
+    # every frame of it, whatever part of it the run reaches
+    refuse_calibration_frames(info, [(source_entry(scored, rec), rec.sensors.t)], label)
+
+
 def _outputs(config: BenchConfig, json_out: Path | None,
              out_dir: Path | None) -> list[tuple[str, Path | None]]:
     """Every file the run writes, with the option that names it."""
@@ -108,6 +134,7 @@ def run_and_report(config: BenchConfig, seconds: float | None, json_out: Path | 
     from exohil.harness.session_report import session_measurements, summary, summary_lines
 
     refuse_overwriting_inputs(_outputs(config, json_out, out_dir), _inputs(config))
+    _refuse_calibration_frames(config)
     # the folders made for the report, outermost first, removed again if the run fails
     made = [] if out_dir is None else [p for p in (*reversed(out_dir.parents), out_dir)
                                        if not p.exists()]

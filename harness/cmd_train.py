@@ -9,6 +9,7 @@ import sys
 from typing import TYPE_CHECKING
 
 import click
+import numpy as np
 
 from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
 from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
@@ -258,7 +259,10 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     RMSE, MAE and max |error| (degrees) over all frames, overall and per movement segment.
     A warning comes first when 1 % or more of the frames lie outside the readings the model
     was trained on (docs/estimator.md; another suit or movement: calibrate first), or when
-    the recordings run at another sensor rate than the model's. Example:
+    the recordings run at another sensor rate than the model's. A calibrated model is not
+    scored on its calibration frames: a recording that would score one (a calibration
+    recording, a part cut from it, or the recording it was cut from at its times, after
+    --test-fraction) is refused. Example:
 
     \b
         exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
@@ -270,10 +274,14 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     refuse_overwriting_inputs([("--json", json_out)], [checkpoint, *recordings])
     refuse_repeated_inputs(("RECORDING", r) for r in recordings)
     est, data = _model_and_recordings(checkpoint, recordings)
-    blocks = data.blocks(est.offset_frames)
+    scored = [[b for b in data.blocks(est.offset_frames, [i]) if len(b)]
+              for i in range(len(data.paths))]
     if test_fraction > 0:
-        blocks = [tail_cut(b, test_fraction)[1] for b in blocks]
-    blocks = [b for b in blocks if len(b)]
+        scored = [[tail_cut(b, test_fraction)[1] for b in part] for part in scored]
+    times = [np.concatenate([b.t for b in part]) if part else np.empty(0) for part in scored]
+    refuse_calibration_frames(est.info, list(zip(data.sources, times, strict=True)),
+                              "RECORDING")
+    blocks = [b for part in scored for b in part if len(b)]
     if not blocks:
         raise click.ClickException("no labelled sensor frames to evaluate")
     limits = _angle_limits(min_angle, est.target.angles)
@@ -329,6 +337,27 @@ def _refuse_training_frames(train: list[dict], test: list[dict]) -> None:
             if overlap:
                 raise click.UsageError(f"--test {scored['file']}: {why}: a model would be "
                                        "scored on frames it was trained on")
+
+
+def refuse_calibration_frames(info: dict, scored: list[tuple[dict, np.ndarray]],
+                              label: str) -> None:
+    """Refuse (a usage error) to score a calibrated model (checkpoint ``info``) on one of its
+    calibration frames: ``scored`` holds each recording's ``info.sources``-style entry and
+    the times of the frames scored on it. A calibration fits every frame of its recordings,
+    so a recording related to one (the heldout check's rule, formats.recording_metadata) is
+    refused where a scored frame lies within that recording's span, on their common clock
+    (``exohil record cut`` keeps times), or where the span is not known."""
+    from exohil.formats.recording_metadata import shared_frames
+
+    calibration = [s for s in info.get("sources", []) if s.get("role") == "calibration"]
+    for entry, t in scored:
+        for source in calibration:
+            overlap, why = shared_frames(entry, source)
+            span = source.get("span_s")
+            if overlap and (not span or np.any((t >= span[0]) & (t <= span[1]))):
+                raise click.UsageError(f"{label} {entry['file']}: {why}, and frames scored "
+                                       "here are among its calibration frames: a model would "
+                                       "be scored on frames it was trained on")
 
 
 @click.command("table")

@@ -165,6 +165,49 @@ def test_calibrate_then_evaluate_from_the_command_line(tmp_path, base):
     assert direction[out] < 0.5 * direction[ckpt]
 
 
+def test_evaluate_refuses_a_calibrated_model_its_calibration_frames(tmp_path, base):
+    """Every frame of a calibration recording trained the calibrated model: evaluate refuses
+    it, and a part cut from it, whatever --test-fraction; the base model still takes it."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal, part = tmp_path / "base.npz", tmp_path / "cal.mcap", tmp_path / "part.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(cal, wearer_b(8.0, seed=5))
+    assert invoke("record", "cut", cal, "--start", "4", "--out", part).exit_code == 0
+    out = tmp_path / "calibrated.npz"
+    result = invoke("calibrate", ckpt, cal, "--out", out, "--steps", "5", "--jitter", "0.1")
+    assert result.exit_code == 0, result.output
+    for scored, extra in ((cal, ()), (part, ()), (cal, ("--test-fraction", "0.3"))):
+        result = invoke("evaluate", out, scored, *extra)
+        assert result.exit_code == 2, result.output
+        assert f"RECORDING {scored.name}: " in result.output
+        assert "scored on frames it was trained on" in result.output
+        assert "accuracy:" not in result.output
+    assert invoke("evaluate", ckpt, cal).exit_code == 0
+
+
+def test_evaluate_scores_the_recording_a_calibration_was_cut_from_only_after_it(tmp_path,
+                                                                                 base):
+    """Calibrated on the first 6 s of a 20 s recording (two 10 s segments): the whole is
+    refused, and so is --test-fraction 0.5 (its tails 5–10 s and 15–20 s meet the first 6 s);
+    --test-fraction 0.3 (7–10 s and 17–20 s) is scored (results.md, the knee's commands)."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, whole, cal = tmp_path / "base.npz", tmp_path / "whole.mcap", tmp_path / "cal.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(whole, wearer_b(20.0, seed=5))
+    assert invoke("record", "cut", whole, "--stop", "6", "--out", cal).exit_code == 0
+    out = tmp_path / "calibrated.npz"
+    result = invoke("calibrate", ckpt, cal, "--out", out, "--steps", "5", "--jitter", "0.1")
+    assert result.exit_code == 0, result.output
+    for extra, refused in (((), True), (("--test-fraction", "0.5"), True),
+                           (("--test-fraction", "0.3"), False)):
+        result = invoke("evaluate", out, whole, *extra)
+        assert result.exit_code == (2 if refused else 0), (extra, result.output)
+        assert ("the training recording cal.mcap was cut from whole.mcap, and frames scored "
+                "here are among its calibration frames" in result.output) == refused
+
+
 def test_calibration_frames_of_one_pose_are_warned_of(tmp_path, base):
     from exohil.estimator.checkpoint import save_checkpoint
 
@@ -202,6 +245,58 @@ def test_calibrate_bad_input_is_one_line(tmp_path, base, problem):
     assert not (tmp_path / "out.npz").exists()
 
 
+def test_a_copy_of_a_calibration_recording_is_refused(tmp_path, base):
+    """The same recording under two names would weigh its frames twice."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal, copy = tmp_path / "base.npz", tmp_path / "cal.mcap", tmp_path / "copy.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(cal, wearer_b(8.0, seed=5))
+    copy.write_bytes(cal.read_bytes())
+    result = invoke("calibrate", ckpt, cal, copy, "--out", tmp_path / "out.npz", "--steps", "5")
+    assert result.exit_code == 2, result.output
+    assert "RECORDING cal.mcap and RECORDING copy.mcap hold the same recording" in result.output
+    assert not (tmp_path / "out.npz").exists()
+
+
+def test_calibrating_again_on_the_same_frames_is_warned_of(tmp_path, base):
+    """A calibrated checkpoint calibrated again on its calibration recording, or on a part
+    cut from it: the model has fitted those frames already."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal, part = tmp_path / "base.npz", tmp_path / "cal.mcap", tmp_path / "part.mcap"
+    save_checkpoint(ckpt, base)
+    write_recording(cal, wearer_b(8.0, seed=5))
+    assert invoke("record", "cut", cal, "--stop", "6", "--out", part).exit_code == 0
+    fast = ("--steps", "2", "--jitter", "0.1")
+    once = invoke("calibrate", ckpt, cal, "--out", tmp_path / "once.npz", *fast)
+    assert once.exit_code == 0, once.output
+    assert "frames the model has fitted" not in once.output
+    for again, why in ((cal, "cal.mcap was used to train the model (as cal.mcap)"),
+                       (part, "part.mcap was cut from the training recording cal.mcap")):
+        result = invoke("calibrate", tmp_path / "once.npz", again, "--out",
+                        tmp_path / "twice.npz", *fast)
+        assert result.exit_code == 0, result.output
+        assert f"warning: {why}: it holds frames the model has fitted" in result.output
+
+
+def test_too_little_data_is_one_line_without_the_one_pose_warning(tmp_path, base):
+    """Too short a recording is refused; that it also holds one pose is not worth a line."""
+    from exohil.estimator.checkpoint import save_checkpoint
+
+    ckpt, cal = tmp_path / "base.npz", tmp_path / "still.mcap"
+    save_checkpoint(ckpt, base)
+    rec = wearer_b(3.0, seed=5)
+    for stream in rec.mocap.values():
+        stream.angles[:] = stream.angles[0]
+    write_recording(cal, rec)
+    result = invoke("calibrate", ckpt, cal, "--out", tmp_path / "out.npz", "--steps", "5")
+    assert result.exit_code != 0
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error: too little calibration data"), \
+        result.output
+
+
 def test_conformance_takes_a_calibrated_model_and_refuses_its_calibration_data(tmp_path):
     """The reference ENNet calibrated on the first 8 s of the held-out fixture: scored on that
     part, the held-out check fails; scored on the rest, it passes and accuracy is measured."""
@@ -229,3 +324,30 @@ def test_conformance_takes_a_calibrated_model_and_refuses_its_calibration_data(t
     assert verdicts[cal]["heldout"] == "fail"
     assert verdicts[rest]["heldout"] == "pass"
     assert verdicts[rest]["accuracy"] in ("pass", "fail")  # measured, whatever the limits say
+
+
+def test_demo_and_run_refuse_a_calibrated_model_its_calibration_frames(tmp_path):
+    """demo's --recording and run's --reference are the ground truth a run is scored on:
+    refused when they hold the calibration frames, before any device starts; the base model
+    takes the same files."""
+    from exohil.formats.recording_reader import read_recording
+
+    cal = tmp_path / "cal.mcap"
+    write_recording(cal, cut_recording(read_recording(FIXTURES_DIR / "paper_protocol_heldout.mcap"),
+                                       0.0, 8.0))
+    calibrated = tmp_path / "calibrated.npz"
+    result = invoke("calibrate", MODELS_DIR / "ennet.npz", cal, "--out", calibrated,
+                    "--steps", "2", "--jitter", "0.1")
+    assert result.exit_code == 0, result.output
+    missing = tmp_path / "no-device"
+    commands = {"--recording": ["demo", "--recording", cal, "--seconds", "1", "--sink", "none",
+                                "--no-faults", "--out", tmp_path / "report"],
+                "--reference": ["run", missing, "--reference", cal, "--duration", "1",
+                                "--sink", "none"]}
+    for option, command in commands.items():
+        result = invoke(*command, "--model", calibrated)
+        assert result.exit_code == 2, result.output
+        assert f"{option} cal.mcap: cal.mcap was used to train the model" in result.output
+        assert not (tmp_path / "report").exists()
+    result = invoke(*commands["--reference"], "--model", MODELS_DIR / "ennet.npz")
+    assert result.exit_code == 1 and "no frame arrived" in result.output, result.output
