@@ -138,6 +138,33 @@ def default_text() -> str:
     (lambda s: s.replace("radius_mm = 55.0", "radius_mm = 55.0\nradius = 1.0"),
      r"\[cap\]: unknown key\(s\) radius"),
     (lambda s: s.replace("[[effect]]", "[[efect]]", 1), r"profile: unknown key\(s\) efect"),
+    # TOML has nan and inf: they turned every reading into NaN (or, through the ADC's
+    # clipping, into garbage) instead of an error naming the parameter
+    (lambda s: s.replace("gain = 0.03", "gain = nan"),
+     r"\[\[effect\]\] #3: creep: gain must be a finite number"),
+    (lambda s: s.replace("tau_build_s = 15.0", "tau_build_s = inf"),
+     "tau_build_s must be a finite"),
+    (lambda s: s.replace("clock_offset_s = 0.012", "clock_offset_s = nan"),
+     "clock_offset_s must be a finite"),
+    (lambda s: s.replace("tau_s = 0.03", "tau_s = inf"), "lag: tau_s must be a finite"),
+    (lambda s: s.replace("sigma_mm = 0.15", "sigma_mm = inf"), "sigma_mm must be a finite"),
+    (lambda s: s.replace("lower_mm = [455.0, 522.0,", "lower_mm = [nan, 522.0,"),
+     "lower_mm must be a finite"),
+    (lambda s: s.replace("zero_mm = 0.0", "zero_mm = -inf"), "zero_mm must be a finite"),
+    (lambda s: s.replace("mean_burst_frames = 2.0", "mean_burst_frames = inf"),
+     "mean_burst_frames must be a finite"),
+    (lambda s: s.replace("rate = 0.002", "rate = 'x'"), "rate must be a number"),
+    (lambda s: s.replace("operators = 4", "operators = true"), "operators must be a number"),
+    # tables and values of the wrong type were "unexpected" tracebacks
+    (lambda s: s.replace("centre_mm = [0.0, 0.0, 0.0]", "centre_mm = 'x'"),
+     r"\[cap\] centre_mm must be"),
+    (lambda s: s.replace("centre_mm = [0.0, 0.0, 0.0]", "centre_mm = [nan, 0.0, 0.0]"),
+     r"\[cap\] centre_mm must be"),
+    (lambda s: s.replace("radius_mm = 55.0", "radius_mm = inf"), "radius_mm must be a positive"),
+    (lambda s: s.replace("[cap]\ncentre_mm = [0.0, 0.0, 0.0]\nradius_mm = 55.0", "cap = 3"),
+     r"\[cap\]: expected a table"),
+    (lambda s: s.replace('description = "', 'tendon = [1]\ndescription = "').split("[[tendon]]")[0],
+     r"\[\[tendon\]\] #1: expected a table"),
 ])
 def test_bad_profiles_give_one_clear_error(tmp_path, edit, message):
     path = write_profile(tmp_path, edit(default_text()))
