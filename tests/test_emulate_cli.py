@@ -195,6 +195,21 @@ def test_emulate_rejects_bad_input_with_one_line(tmp_path: Path) -> None:
         assert len(lines) == 1, (args, result.output)
 
 
+def test_emulate_refuses_a_fault_log_that_is_its_fault_file(tmp_path: Path) -> None:
+    """`--faults f.toml --fault-log f.toml` streamed, then replaced the fault file with the
+    log: the user's fault schedule was lost."""
+    recording = _synthetic_recording(tmp_path / "ok.mcap")
+    faults = tmp_path / "faults.toml"
+    text = '[[fault]]\nkind = "drop"\nrate = 0.01\n'
+    faults.write_text(text, encoding="utf-8")
+    result = CliRunner().invoke(main, ["emulate", str(recording), "--duration", "0.1",
+                                       "--faults", str(faults), "--fault-log", str(faults)])
+    assert result.exit_code == 2, result.output
+    assert "--fault-log" in result.output and "refusing to overwrite" in result.output
+    assert "/dev/" not in result.output and "ttyEXOHIL" not in result.output
+    assert faults.read_text(encoding="utf-8") == text
+
+
 @pytest.mark.parametrize(("spec", "problem"), [
     ("noise:sigma_mm=1/1", "noise: sigma_mm lists 2 values for 4 sensors"),
     ("drift:rate_mm_per_s=1/2/3/4/5", "drift: rate_mm_per_s lists 5 values for 4 sensors"),
