@@ -218,6 +218,14 @@ class Saturation:
     lower_mm: PerSensor | None = None
     upper_mm: PerSensor | None = None
 
+    def __post_init__(self) -> None:
+        if self.lower_mm is None or self.upper_mm is None:
+            return
+        lo, hi = np.asarray(self.lower_mm, dtype=np.float64), np.asarray(self.upper_mm,
+                                                                          dtype=np.float64)
+        if lo.ndim == 0 or hi.ndim == 0 or lo.shape == hi.shape:  # else: apply names the length
+            _check(not np.any(lo > hi), "saturation: lower_mm must not exceed upper_mm")
+
     def apply(self, signal: Signal, rng: np.random.Generator) -> Signal:
         s = signal.n_sensors
         lo = np.full(s, -np.inf) if self.lower_mm is None else per_sensor(
@@ -461,8 +469,11 @@ def effect_from_dict(d: dict) -> Effect:
     if unknown:
         raise ValueError(f"{kind}: unknown parameter(s) {', '.join(unknown)}; "
                          f"allowed: {', '.join(allowed)}")
+    per_sensor_fields = {f.name for f in dataclasses.fields(cls) if "PerSensor" in str(f.type)}
     for name, value in params.items():
         check_parameter(kind, name, value)
+        if isinstance(value, list) and name not in per_sensor_fields:
+            raise ValueError(f"{kind}: {name} takes one number, got {value!r}")
     return cls(**params)
 
 

@@ -337,6 +337,12 @@ def test_every_registered_kind_has_defaults_and_round_trips():
     ({"kind": "creep", "gain": float("nan")}, "creep: gain must be a finite number"),
     ({"kind": "drift", "rate_mm_per_s": float("inf")}, "rate_mm_per_s must be a finite number"),
     ({"kind": "lag", "clock_offset_s": True}, "clock_offset_s must be a number"),
+    # a list where one number is taken was Python's own text ("'<=' not supported ...")
+    ({"kind": "dropout", "rate": [0.1, 0.1]}, "dropout: rate takes one number"),
+    ({"kind": "hysteresis", "operators": [4, 4]}, "hysteresis: operators takes one number"),
+    # crossed stops were refused only when applied, after the emulator had been set up
+    ({"kind": "saturation", "lower_mm": 500.0, "upper_mm": 400.0}, "must not exceed"),
+    ({"kind": "saturation", "lower_mm": [1.0, 500.0], "upper_mm": 400.0}, "must not exceed"),
 ])
 def test_bad_effect_dicts_are_rejected_clearly(d, message):
     with pytest.raises(ValueError, match=message):
