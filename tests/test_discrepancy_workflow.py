@@ -2096,13 +2096,16 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     (r"angle_lo_deg = \[[^,\]]+", "angle_lo_deg = [nan", "angle_lo_deg must be finite"),
     (r"rate_hz = [^\n]+", "rate_hz = -250.0", "rate_hz must be a positive number"),
     (r"rate_hz = [^\n]+", "rate_hz = 0.0", "rate_hz must be a positive number"),
+    (r"\nlag_s = [^\n]+", "\nlag_s = -0.03", "lag_s must be times >= 0 s"),
+    (r"creep_tau_s = \[\]", "creep_tau_s = [nan]", "creep_tau_s must be times >= 0 s"),
 ])
 def test_a_calibrated_profile_with_numbers_it_cannot_simulate_is_refused_at_load(
         hysteresis_outcome, tmp_path, pattern, replacement, problem):
     """A hand-edited calibrated profile loaded and then failed in `exohil simulate`: an
-    'unexpected ValueError' (noise_sigma < 0), an 'unexpected IndexError' (rate_hz <= 0) or
-    'cannot write ...: sensor values must be finite' (a nan coefficient); one ProfileError
-    line naming the key instead, and nothing written."""
+    'unexpected ValueError' (noise_sigma < 0), an 'unexpected IndexError' (rate_hz <= 0),
+    'cannot write ...: sensor values must be finite' (a nan coefficient) or, with a negative
+    lag time constant, a recording; one ProfileError line naming the key instead, and
+    nothing written."""
     from exohil.emulators.discrepancy.profile import write_calibrated_profile
 
     write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(hysteresis_outcome[1], "t"))

@@ -352,6 +352,13 @@ def _check_numbers(suit: CalibratedSuit) -> None:
             raise ValueError(f"{key} must be finite numbers")
     if (suit.noise < 0).any():
         raise ValueError(f"noise_sigma must be >= 0, not {suit.noise.tolist()}")
+    spec = suit.spec
+    for key, times in (("lag_s", (spec.lag_s,)), ("lag_delay_s", (spec.lag_delay_s,)),
+                       ("creep_tau_s", spec.creep_tau_s),
+                       ("creep_build_recover_s", spec.creep_asym_s),
+                       ("creep_hold_grow_recover_s", spec.creep_hold_s)):
+        if not all(0 <= v < math.inf for v in times):
+            raise ValueError(f"{key} must be times >= 0 s, not {list(times)}")
 
 
 def _check_coef_counts(suit: CalibratedSuit) -> None:
