@@ -198,6 +198,29 @@ def test_profile_with_any_number_of_tendons(tmp_path):
     assert rec.sensors.values.shape[1] == 1
 
 
+def test_simulate_warns_when_the_suit_has_more_sensors_than_the_wire_carries(tmp_path):
+    """A 17-tendon suit was simulated without a word, and then `exohil emulate` refused the
+    recording ("values must be (N>0, 1..16) mm")."""
+    text = default_text()
+    start, end = text.index("[[tendon]]"), text.index("# Effect chain")
+    tendons = text[start:end].split("[[tendon]]")[1:]
+    extra = "".join("[[tendon]]" + tendons[i % 4].replace('name = "', f'name = "{i}', 1)
+                    for i in range(17))
+    noise = '[[effect]]\nkind = "noise"\nsigma_mm = 0.1\n'
+    results = {}
+    for count, body in ((4, text[start:end]), (17, extra)):
+        path = tmp_path / f"suit{count}.toml"
+        path.write_text(text[:start] + body + noise, encoding="utf-8")
+        results[count] = CliRunner().invoke(main, [
+            "simulate", "--protocol", "calibration", "--profile", str(path),
+            "--out", str(tmp_path / f"suit{count}.mcap")])
+        assert results[count].exit_code == 0, results[count].output
+    assert "a wire protocol v1 frame carries at most 16" in results[17].stderr
+    assert "17 sensors" in results[17].stderr
+    assert "carries at most" not in results[4].stderr
+    assert read_recording(tmp_path / "suit17.mcap").sensors.values.shape[1] == 17
+
+
 DONNING_B = PROFILES_DIR / "donning-b.toml"
 
 
