@@ -90,6 +90,12 @@ class ArduinoEmulator:
         spin_s: float = SPIN_S,
         realtime: bool = False,
     ) -> None:
+        if not math.isfinite(rate_hz) or rate_hz <= 0:
+            raise ValueError("rate_hz must be a positive number")
+        if duration_s is not None and not 0 < duration_s < math.inf:
+            raise ValueError(f"duration_s must be a finite number of seconds > 0, got "
+                             f"{duration_s!r}")
+        self.rate_hz = float(rate_hz)
         present = None
         if isinstance(values_mm, Recording):
             recording = values_mm
@@ -98,23 +104,20 @@ class ArduinoEmulator:
                                  "protocol carries mm")
             if recording.sensors.values.shape[0] == 0:
                 raise ValueError("the recording has no sensor frames")
-            values_mm, present = _on_sequence_grid(recording.sensors.seq,
-                                                   recording.sensors.values)
+            # not looping, with a duration: only the frames streamed, so a recording whose
+            # sequence jumps by 10**12 needs no grid of 10**12 rows to stream its first second
+            values_mm, present = _on_sequence_grid(
+                recording.sensors.seq, recording.sensors.values,
+                None if loop or duration_s is None else max(1, round(duration_s * rate_hz)))
             seq0 = int(recording.sensors.seq[0]) if seq0 is None else seq0
             t_us0 = round(float(recording.sensors.t[0]) * 1e6) if t_us0 is None else t_us0
         values = np.asarray(values_mm, dtype=np.float64)
         if values.ndim != 2 or values.shape[0] == 0 or not 1 <= values.shape[1] <= 16:
             raise ValueError(f"values must be (N>0, 1..16) mm, got shape {values.shape}")
-        if not math.isfinite(rate_hz) or rate_hz <= 0:
-            raise ValueError("rate_hz must be a positive number")
-        if duration_s is not None and not 0 < duration_s < math.inf:
-            raise ValueError(f"duration_s must be a finite number of seconds > 0, got "
-                             f"{duration_s!r}")
         bad = first_non_finite(values)
         if bad is not None:  # the wire has no NaN: it would go out as 0 mm
             raise ValueError(f"values must be finite: frame {bad[0]}, sensor {bad[1]} is "
                              f"{values[bad]}")
-        self.rate_hz = float(rate_hz)
         self.plan = faults if isinstance(faults, FaultPlan) else fault_plan(faults)
         check_sensor_count(self.plan, int(values.shape[1]))
         self.seed = int(seed)
@@ -397,14 +400,21 @@ class ArduinoEmulator:
             self.send_times.append((seq, time.perf_counter_ns()))
 
 
-def _on_sequence_grid(seq: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A recording's sensor rows spread over every sequence number from its first to its last:
-    ((P, S) values, (P,) present). Rows the recording lacks are interpolated (so value effects
-    such as filters see a smooth signal) and marked absent; they are never sent."""
+def _on_sequence_grid(seq: np.ndarray, values: np.ndarray,
+                      limit: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A recording's sensor rows spread over every sequence number from its first to its last
+    (or over its first ``limit`` sequence numbers, when fewer): ((P, S) values, (P,) present).
+    Rows the recording lacks are interpolated (so value effects such as filters see a smooth
+    signal) and marked absent; they are never sent."""
     offsets = np.asarray(seq, dtype=np.int64) - int(seq[0])
-    grid = np.arange(int(offsets[-1]) + 1)
-    present = np.zeros(grid.shape[0], dtype=bool)
-    present[offsets] = True
+    size = int(offsets[-1]) + 1
+    if limit is not None and limit < size:
+        # the rows up to the first at or past the limit interpolate every row before it
+        end = int(np.searchsorted(offsets, limit)) + 1
+        offsets, values, size = offsets[:end], values[:end], limit
+    grid = np.arange(size)
+    present = np.zeros(size, dtype=bool)
+    present[offsets[offsets < size]] = True
     filled = np.column_stack([np.interp(grid, offsets, values[:, i])
                               for i in range(values.shape[1])])
     return filled, present

@@ -218,6 +218,14 @@ class Saturation:
     lower_mm: PerSensor | None = None
     upper_mm: PerSensor | None = None
 
+    def __post_init__(self) -> None:
+        if self.lower_mm is None or self.upper_mm is None:
+            return
+        lo, hi = np.asarray(self.lower_mm, dtype=np.float64), np.asarray(self.upper_mm,
+                                                                          dtype=np.float64)
+        if lo.ndim == 0 or hi.ndim == 0 or lo.shape == hi.shape:  # else: apply names the length
+            _check(not np.any(lo > hi), "saturation: lower_mm must not exceed upper_mm")
+
     def apply(self, signal: Signal, rng: np.random.Generator) -> Signal:
         s = signal.n_sensors
         lo = np.full(s, -np.inf) if self.lower_mm is None else per_sensor(
@@ -424,10 +432,30 @@ EFFECT_TYPES: dict[str, type] = {
 }
 
 
+#: The largest magnitude of an effect's (or a frame fault's) parameter: far beyond any
+#: meaningful rate, duration (s, ms), width (mm) or count, small enough that no arithmetic on
+#: it overflows.
+MAX_PARAMETER = 1e9
+
+
+def check_parameter(kind: str, name: str, value: Any) -> None:
+    """ValueError unless ``value`` is a finite number (or a list of them) within
+    ±:data:`MAX_PARAMETER`; a bool is not a number."""
+    for item in value if isinstance(value, list) and value else [value]:
+        if isinstance(item, bool) or not isinstance(item, int | float):
+            raise ValueError(f"{kind}: {name} must be a number (or a list of numbers), "
+                             f"got {value!r}")
+        if not (math.isfinite(item) and abs(item) <= MAX_PARAMETER):
+            raise ValueError(f"{kind}: {name} must be a finite number within "
+                             f"±{MAX_PARAMETER:g}, got {item!r}")
+
+
 def effect_from_dict(d: dict) -> Effect:
     """Build an effect from ``{"kind": <registry key>, <parameter>: <value>, ...}``.
 
-    Raises ValueError naming the kind or parameter that is wrong.
+    Every parameter must be a finite number, or a list of them, within ±:data:`MAX_PARAMETER`
+    (a suit profile's ``nan`` or ``inf`` would otherwise turn whole recordings into NaN or
+    clipped garbage). Raises ValueError naming the kind or parameter that is wrong.
     """
     if not isinstance(d, dict) or "kind" not in d:
         raise ValueError(f"an effect needs a 'kind' (one of {', '.join(EFFECT_TYPES)}); got {d!r}")
@@ -441,6 +469,11 @@ def effect_from_dict(d: dict) -> Effect:
     if unknown:
         raise ValueError(f"{kind}: unknown parameter(s) {', '.join(unknown)}; "
                          f"allowed: {', '.join(allowed)}")
+    per_sensor_fields = {f.name for f in dataclasses.fields(cls) if "PerSensor" in str(f.type)}
+    for name, value in params.items():
+        check_parameter(kind, name, value)
+        if isinstance(value, list) and name not in per_sensor_fields:
+            raise ValueError(f"{kind}: {name} takes one number, got {value!r}")
     return cls(**params)
 
 

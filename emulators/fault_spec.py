@@ -19,13 +19,17 @@ separated by ``/`` in a spec string (``noise:sigma_mm=0.5/0.5/1/1``).
 
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from exohil.emulators.effects import Effect, EffectChain, effect_from_dict
+from exohil.emulators.effects import (
+    Effect,
+    EffectChain,
+    check_parameter,
+    effect_from_dict,
+)
 from exohil.emulators.faults import (
     FRAME_FAULT_TYPES,
     Corrupt,
@@ -70,26 +74,10 @@ def _value(text: str) -> Any:
     return [_scalar(part) for part in text.split("/")] if "/" in text else _scalar(text)
 
 
-#: The largest magnitude of a fault parameter: far beyond any meaningful rate, duration (s,
-#: ms), width (mm) or count, small enough that no arithmetic on it overflows.
-MAX_PARAMETER = 1e9
-
-
-def _check_number(kind: str, name: str, value: Any) -> None:
-    """ValueError unless ``value`` is a finite number (or a list of them) within
-    ±:data:`MAX_PARAMETER`."""
-    for item in value if isinstance(value, list) and value else [value]:
-        if isinstance(item, bool) or not isinstance(item, int | float):
-            raise ValueError(f"{kind}: {name} must be a number (or a list of numbers), "
-                             f"got {value!r}")
-        if not (math.isfinite(item) and abs(item) <= MAX_PARAMETER):
-            raise ValueError(f"{kind}: {name} must be a finite number within "
-                             f"±{MAX_PARAMETER:g}, got {item!r}")
-
-
 def fault_from_dict(entry: dict[str, Any]) -> FrameFault | Effect:
     """One fault from ``{"kind": ..., <param>: <value>}``; ValueError names what is wrong
-    (parameters must be finite numbers within ±:data:`MAX_PARAMETER`)."""
+    (parameters must be finite numbers within
+    ±:data:`~exohil.emulators.effects.MAX_PARAMETER`)."""
     if "kind" not in entry:
         raise ValueError(f"fault without a 'kind': {entry!r}")
     params = dict(entry)
@@ -97,7 +85,7 @@ def fault_from_dict(entry: dict[str, Any]) -> FrameFault | Effect:
     if not isinstance(kind, str):
         raise ValueError(f"a fault's kind is a name, got {kind!r}")
     for name, value in params.items():
-        _check_number(kind, name, value)
+        check_parameter(kind, name, value)
     cls = FRAME_FAULT_TYPES.get(kind)
     if cls is None:
         try:

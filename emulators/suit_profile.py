@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -114,6 +115,13 @@ def _require(table: dict, key: str, where: str) -> Any:
     return table[key]
 
 
+def _table(value: Any, where: str) -> dict[str, Any]:
+    """``value`` when it is a TOML table (``cap = 3`` or ``tendon = [1]`` are not)."""
+    if not isinstance(value, dict):
+        raise ProfileError(f"{where}: expected a table, got {value!r}")
+    return value
+
+
 def _reject_unknown(table: dict[str, Any], allowed: set[str], where: str) -> None:
     """A misspelt key (e.g. ``[[efect]]``) must not silently drop part of the suit."""
     unknown = set(table) - allowed
@@ -133,21 +141,25 @@ def profile_from_dict(data: dict[str, Any]) -> SuitProfile:
     name = _require(data, "name", "profile")
     if not isinstance(name, str) or not name:
         raise ProfileError("'name' must be a non-empty string")
-    cap = _require(data, "cap", "profile")
+    cap = _table(_require(data, "cap", "profile"), "[cap]")
     _reject_unknown(cap, {"centre_mm", "radius_mm"}, "[cap]")
-    centre = np.asarray(_require(cap, "centre_mm", "[cap]"), dtype=np.float64)
-    if centre.shape != (3,):
+    try:
+        centre = np.asarray(_require(cap, "centre_mm", "[cap]"), dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ProfileError("[cap] centre_mm must be [x, y, z] in mm") from exc
+    if centre.shape != (3,) or not np.isfinite(centre).all():
         raise ProfileError("[cap] centre_mm must be [x, y, z] in mm")
     radius = _require(cap, "radius_mm", "[cap]")
-    if not isinstance(radius, int | float) or radius <= 0:
-        raise ProfileError("[cap] radius_mm must be a positive number (mm)")
+    if (isinstance(radius, bool) or not isinstance(radius, int | float)
+            or not 0 < radius < math.inf):
+        raise ProfileError("[cap] radius_mm must be a positive finite number (mm)")
     tendon_tables = data.get("tendon")
     if not isinstance(tendon_tables, list) or not tendon_tables:
         raise ProfileError("at least one [[tendon]] table is required")
     tendons = []
     for i, table in enumerate(tendon_tables):
         where = f"[[tendon]] #{i + 1}"
-        tname = _require(table, "name", where)
+        tname = _require(_table(table, where), "name", where)
         where = f"[[tendon]] {tname!r}"
         _reject_unknown(table, {"name", "thorax_points_mm", "humerus_points_mm"}, where)
         tendons.append(Tendon(

@@ -92,7 +92,9 @@ def emulate_command(recording: Path, rate: float | None, loop: bool, faults: str
     from exohil.emulators.arduino import ArduinoEmulator
     from exohil.emulators.fault_spec import check_sensor_count, fault_plan
 
-    refuse_overwriting_inputs([("--fault-log", fault_log)], [recording])
+    # a --faults FILE.toml is an input too: the fault log must not replace it
+    refuse_overwriting_inputs([("--fault-log", fault_log)],
+                              [recording, *([Path(faults)] if faults else [])])
     source = _load_recording(recording)
     try:
         plan = fault_plan(faults)

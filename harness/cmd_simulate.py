@@ -124,9 +124,14 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
 
 def _warn_beyond_the_wire(recording: Recording) -> None:
     """A warning line naming each sensor with readings outside the wire's 0..655.35 mm: the
-    emulator (and so demo, run and conform) clips them; evaluate, train and calibrate do not."""
-    from exohil.formats.wire import MAX_VALUE_MM
+    emulator (and so demo, run and conform) clips them; evaluate, train and calibrate do not.
+    Another when the recording has more sensors than a wire frame carries."""
+    from exohil.formats.wire import MAX_SENSORS, MAX_VALUE_MM
 
+    if len(recording.sensor_names) > MAX_SENSORS:
+        click.echo(f"warning: {len(recording.sensor_names)} sensors; a wire protocol v1 frame "
+                   f"carries at most {MAX_SENSORS}, so the emulator (demo, run, conform) "
+                   "refuses this recording; evaluate, train and calibrate read it", err=True)
     values = recording.sensors.values
     if not len(values):
         return

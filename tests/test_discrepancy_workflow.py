@@ -2089,6 +2089,38 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     assert second["gap_before"] < 1.05 * summary["gap_after"]  # its effects fitted again
 
 
+@pytest.mark.parametrize(("pattern", "replacement", "problem"), [
+    (r"noise_sigma = [^\n]+", "noise_sigma = -0.2", "noise_sigma must be >= 0"),
+    (r"noise_sigma = [^\n]+", "noise_sigma = nan", "noise_sigma must be finite"),
+    (r"\ncoef = \[[^,\]]+", "\ncoef = [nan", "coef must be finite"),
+    (r"angle_lo_deg = \[[^,\]]+", "angle_lo_deg = [nan", "angle_lo_deg must be finite"),
+    (r"rate_hz = [^\n]+", "rate_hz = -250.0", "rate_hz must be a positive number"),
+    (r"rate_hz = [^\n]+", "rate_hz = 0.0", "rate_hz must be a positive number"),
+    (r"\nlag_s = [^\n]+", "\nlag_s = -0.03", "lag_s must be times >= 0 s"),
+    (r"creep_tau_s = \[\]", "creep_tau_s = [nan]", "creep_tau_s must be times >= 0 s"),
+])
+def test_a_calibrated_profile_with_numbers_it_cannot_simulate_is_refused_at_load(
+        hysteresis_outcome, tmp_path, pattern, replacement, problem):
+    """A hand-edited calibrated profile loaded and then failed in `exohil simulate`: an
+    'unexpected ValueError' (noise_sigma < 0), an 'unexpected IndexError' (rate_hz <= 0),
+    'cannot write ...: sensor values must be finite' (a nan coefficient) or, with a negative
+    lag time constant, a recording; one ProfileError line naming the key instead, and
+    nothing written."""
+    from exohil.emulators.discrepancy.profile import write_calibrated_profile
+
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(hysteresis_outcome[1], "t"))
+    text, count = re.subn(pattern, replacement, (tmp_path / "p.toml").read_text(), count=1)
+    assert count == 1
+    (tmp_path / "bad.toml").write_text(text)
+    with pytest.raises(ProfileError, match=problem):
+        load_calibrated_profile(tmp_path / "bad.toml")
+    result = CliRunner().invoke(main, ["simulate", "--protocol", "calibration", "--profile",
+                                       str(tmp_path / "bad.toml"), "--out",
+                                       str(tmp_path / "x.mcap")])
+    assert result.exit_code == 1 and problem in result.output, result.output
+    assert "unexpected" not in result.output and not (tmp_path / "x.mcap").exists()
+
+
 def test_simulate_takes_the_calibrated_profile_the_workflow_writes(hysteresis_outcome, tmp_path):
     """`exohil simulate --profile DIR/suit_profile.toml` runs the calibrated suit: its sensors,
     units and rate, the model's prediction (with --without noise, exactly) and its noise."""

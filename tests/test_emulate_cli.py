@@ -172,6 +172,29 @@ def test_emulate_streams_at_the_recordings_own_rate_by_default(tmp_path: Path) -
     assert len(frames) > 100 and set(steps.tolist()) == {10_000}  # 100 Hz, in µs
 
 
+def test_emulate_a_recording_whose_sequence_jumps_far_streams_its_start(tmp_path: Path) -> None:
+    """The sequence grid spanned the whole recording whatever --duration said: a recording
+    (format v1 allows it) whose seq jumps by 10**12 was an 'unexpected MemoryError' (and by
+    10**9, 7.45 GiB per column allocated) before its first second could be streamed."""
+    from exohil.emulators.arduino import _on_sequence_grid
+
+    k = np.arange(400)
+    seq = np.where(k < 200, k, k + 10**12)
+    values = 300.0 + 50.0 * np.sin(k[:, None] / 20.0 + np.arange(4)[None, :])
+    path = tmp_path / "jump.mcap"
+    write_recording(path, Recording(("F", "SF", "SR", "R"), SensorStream(seq, k / 250.0, values)))
+    result = CliRunner().invoke(main, ["emulate", str(path), "--duration", "0.2"])
+    assert result.exit_code == 0, result.output
+    assert "done: 50 frames generated" in result.stderr
+    # the grid cut at a limit is the start of the whole grid, interpolated alike
+    small = np.where(k < 200, k, k + 100)[::3]
+    whole, present = _on_sequence_grid(small, values[::3])
+    for limit in (1, 150, 199, 250, 300, 301, 1000):
+        cut, cut_present = _on_sequence_grid(small, values[::3], limit)
+        np.testing.assert_array_equal(cut, whole[:limit])
+        np.testing.assert_array_equal(cut_present, present[:limit])
+
+
 # ---- bad input -------------------------------------------------------------------------------
 
 
@@ -193,6 +216,21 @@ def test_emulate_rejects_bad_input_with_one_line(tmp_path: Path) -> None:
         assert result.exception is None or isinstance(result.exception, SystemExit), args
         lines = [line for line in result.output.splitlines() if line.startswith("Error")]
         assert len(lines) == 1, (args, result.output)
+
+
+def test_emulate_refuses_a_fault_log_that_is_its_fault_file(tmp_path: Path) -> None:
+    """`--faults f.toml --fault-log f.toml` streamed, then replaced the fault file with the
+    log: the user's fault schedule was lost."""
+    recording = _synthetic_recording(tmp_path / "ok.mcap")
+    faults = tmp_path / "faults.toml"
+    text = '[[fault]]\nkind = "drop"\nrate = 0.01\n'
+    faults.write_text(text, encoding="utf-8")
+    result = CliRunner().invoke(main, ["emulate", str(recording), "--duration", "0.1",
+                                       "--faults", str(faults), "--fault-log", str(faults)])
+    assert result.exit_code == 2, result.output
+    assert "--fault-log" in result.output and "refusing to overwrite" in result.output
+    assert "/dev/" not in result.output and "ttyEXOHIL" not in result.output
+    assert faults.read_text(encoding="utf-8") == text
 
 
 @pytest.mark.parametrize(("spec", "problem"), [

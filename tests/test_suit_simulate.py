@@ -138,6 +138,33 @@ def default_text() -> str:
     (lambda s: s.replace("radius_mm = 55.0", "radius_mm = 55.0\nradius = 1.0"),
      r"\[cap\]: unknown key\(s\) radius"),
     (lambda s: s.replace("[[effect]]", "[[efect]]", 1), r"profile: unknown key\(s\) efect"),
+    # TOML has nan and inf: they turned every reading into NaN (or, through the ADC's
+    # clipping, into garbage) instead of an error naming the parameter
+    (lambda s: s.replace("gain = 0.03", "gain = nan"),
+     r"\[\[effect\]\] #3: creep: gain must be a finite number"),
+    (lambda s: s.replace("tau_build_s = 15.0", "tau_build_s = inf"),
+     "tau_build_s must be a finite"),
+    (lambda s: s.replace("clock_offset_s = 0.012", "clock_offset_s = nan"),
+     "clock_offset_s must be a finite"),
+    (lambda s: s.replace("tau_s = 0.03", "tau_s = inf"), "lag: tau_s must be a finite"),
+    (lambda s: s.replace("sigma_mm = 0.15", "sigma_mm = inf"), "sigma_mm must be a finite"),
+    (lambda s: s.replace("lower_mm = [455.0, 522.0,", "lower_mm = [nan, 522.0,"),
+     "lower_mm must be a finite"),
+    (lambda s: s.replace("zero_mm = 0.0", "zero_mm = -inf"), "zero_mm must be a finite"),
+    (lambda s: s.replace("mean_burst_frames = 2.0", "mean_burst_frames = inf"),
+     "mean_burst_frames must be a finite"),
+    (lambda s: s.replace("rate = 0.002", "rate = 'x'"), "rate must be a number"),
+    (lambda s: s.replace("operators = 4", "operators = true"), "operators must be a number"),
+    # tables and values of the wrong type were "unexpected" tracebacks
+    (lambda s: s.replace("centre_mm = [0.0, 0.0, 0.0]", "centre_mm = 'x'"),
+     r"\[cap\] centre_mm must be"),
+    (lambda s: s.replace("centre_mm = [0.0, 0.0, 0.0]", "centre_mm = [nan, 0.0, 0.0]"),
+     r"\[cap\] centre_mm must be"),
+    (lambda s: s.replace("radius_mm = 55.0", "radius_mm = inf"), "radius_mm must be a positive"),
+    (lambda s: s.replace("[cap]\ncentre_mm = [0.0, 0.0, 0.0]\nradius_mm = 55.0", "cap = 3"),
+     r"\[cap\]: expected a table"),
+    (lambda s: s.replace('description = "', 'tendon = [1]\ndescription = "').split("[[tendon]]")[0],
+     r"\[\[tendon\]\] #1: expected a table"),
 ])
 def test_bad_profiles_give_one_clear_error(tmp_path, edit, message):
     path = write_profile(tmp_path, edit(default_text()))
@@ -169,6 +196,29 @@ def test_profile_with_any_number_of_tendons(tmp_path):
     assert profile.sensor_names == ("F",)
     rec = simulate(paper_protocol(1), profile, seed=1)
     assert rec.sensors.values.shape[1] == 1
+
+
+def test_simulate_warns_when_the_suit_has_more_sensors_than_the_wire_carries(tmp_path):
+    """A 17-tendon suit was simulated without a word, and then `exohil emulate` refused the
+    recording ("values must be (N>0, 1..16) mm")."""
+    text = default_text()
+    start, end = text.index("[[tendon]]"), text.index("# Effect chain")
+    tendons = text[start:end].split("[[tendon]]")[1:]
+    extra = "".join("[[tendon]]" + tendons[i % 4].replace('name = "', f'name = "{i}', 1)
+                    for i in range(17))
+    noise = '[[effect]]\nkind = "noise"\nsigma_mm = 0.1\n'
+    results = {}
+    for count, body in ((4, text[start:end]), (17, extra)):
+        path = tmp_path / f"suit{count}.toml"
+        path.write_text(text[:start] + body + noise, encoding="utf-8")
+        results[count] = CliRunner().invoke(main, [
+            "simulate", "--protocol", "calibration", "--profile", str(path),
+            "--out", str(tmp_path / f"suit{count}.mcap")])
+        assert results[count].exit_code == 0, results[count].output
+    assert "a wire protocol v1 frame carries at most 16" in results[17].stderr
+    assert "17 sensors" in results[17].stderr
+    assert "carries at most" not in results[4].stderr
+    assert read_recording(tmp_path / "suit17.mcap").sensors.values.shape[1] == 17
 
 
 DONNING_B = PROFILES_DIR / "donning-b.toml"

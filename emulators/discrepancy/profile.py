@@ -297,6 +297,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
             coef=np.asarray([s["coef"] for s in sensors], dtype=np.float64),
             stops=tuple(_stops(s) for s in sensors),
             noise=np.asarray([s["noise_sigma"] for s in sensors], dtype=np.float64))
+        _check_numbers(suit)
         _check_coef_counts(suit)
         return suit
     except KeyError as exc:
@@ -334,6 +335,30 @@ def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inpu
                                  inputs.centres if inputs.static_local else None
                                  ) @ inputs.static_coef
     return inputs
+
+
+def _check_numbers(suit: CalibratedSuit) -> None:
+    """ValueError naming the first number the suit cannot be simulated with: a rate that is
+    not a positive finite number, a nan or inf among the map's numbers (every reading would
+    be NaN, found only when the recording is written), a noise sigma below 0."""
+    if not (math.isfinite(suit.rate_hz) and suit.rate_hz > 0):
+        raise ValueError(f"rate_hz must be a positive number, not {suit.rate_hz!r}")
+    numbers = {"coef": suit.coef, "input_coef": suit.inputs.static_coef,
+               "play_thresholds": suit.inputs.thresholds, "static_centre": suit.inputs.centre,
+               "angle_lo_deg": suit.inputs.angle_lo, "angle_hi_deg": suit.inputs.angle_hi,
+               "time_span_s": np.asarray(suit.inputs.t_span), "noise_sigma": suit.noise}
+    for key, values in numbers.items():
+        if not np.isfinite(values).all():
+            raise ValueError(f"{key} must be finite numbers")
+    if (suit.noise < 0).any():
+        raise ValueError(f"noise_sigma must be >= 0, not {suit.noise.tolist()}")
+    spec = suit.spec
+    for key, times in (("lag_s", (spec.lag_s,)), ("lag_delay_s", (spec.lag_delay_s,)),
+                       ("creep_tau_s", spec.creep_tau_s),
+                       ("creep_build_recover_s", spec.creep_asym_s),
+                       ("creep_hold_grow_recover_s", spec.creep_hold_s)):
+        if not all(0 <= v < math.inf for v in times):
+            raise ValueError(f"{key} must be times >= 0 s, not {list(times)}")
 
 
 def _check_coef_counts(suit: CalibratedSuit) -> None:
