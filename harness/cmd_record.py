@@ -160,7 +160,6 @@ def recover_command(file: Path, out: Path) -> None:
     at most the last second of a durable recording)."""
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import scan_recording
-    from exohil.formats.recording_writer import write_recording
 
     refuse_overwriting_inputs([("--out", out)], [file])
     try:
@@ -176,7 +175,7 @@ def recover_command(file: Path, out: Path) -> None:
             "keeps its records in chunks of up to 1 MiB, and one cut inside its first chunk "
             "loses them all; the durable NAME.partial of run/demo --record closes a chunk "
             "every second)")
-    write_recording(out, rec)
+    _write_as_read(out, rec)
     span = (f", {rec.sensors.t[0]:.3f} → {rec.sensors.t[-1]:.3f} s" if len(rec.sensors)
             else "")
     click.echo(f"recovered {len(rec.sensors)} sensor frames{span} and {mocap} mocap samples "
@@ -214,7 +213,6 @@ def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> 
     from exohil.formats.recording import cut_recording
     from exohil.formats.recording_metadata import cut_lineage
     from exohil.formats.recording_reader import read_recording
-    from exohil.formats.recording_writer import write_recording
 
     refuse_overwriting_inputs([("--out", out)], [file])
     try:
@@ -229,10 +227,20 @@ def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> 
     part.metadata.update({"cut.source": file.name, "cut.source_sha256": sha256_file(file),
                           "cut.start_s": f"{start_s:g}",
                           "cut.stop_s": "end" if stop_s is None else f"{stop_s:g}"})
-    write_recording(out, part)
+    _write_as_read(out, part)
     click.echo(f"wrote {out}: {len(part.sensors)} of {len(rec.sensors)} sensor frames, "
                f"{part.sensors.t[0] - rec.sensors.t[0]:.3f} → "
                f"{part.sensors.t[-1] - rec.sensors.t[0]:.3f} s after the first frame")
+
+
+def _write_as_read(out: Path, rec: Any) -> None:
+    """Write ``rec`` with the decimal places its values were read with, so that rewriting a
+    recording (cut, recover) rounds nothing away: one imported with 6 places keeps them."""
+    from exohil.formats.recording_messages import stored_decimals
+    from exohil.formats.recording_writer import write_recording
+
+    arrays = [rec.sensors.values, *(stream.angles for stream in rec.mocap.values())]
+    write_recording(out, rec, decimals=stored_decimals(arrays))
 
 
 COMMANDS: list[click.Command] = [record_group]

@@ -376,3 +376,22 @@ def test_import_csv_columns_of_ones_own_take_the_header_not_the_presets_names(
     assert result.exit_code == 0, result.output
     rec = read_recording(out)
     assert rec.sensor_names == ("c1", "c2") and rec.mocap["knee"].names == ("knee_flexion",)
+
+
+@pytest.mark.parametrize("command", [["record", "cut", "--start", "0"], ["record", "recover"]])
+def test_cut_and_recover_keep_the_decimals_a_recording_was_imported_with(
+        tmp_path: Path, command: list[str]) -> None:
+    """An import keeps 6 places (`import csv --decimals`); cut and recover rewrote the
+    recording with the writer's default of 4 and rounded the angles (and sensor values of a
+    wide range) away without a word."""
+    rows = [f"{k * 0.731234:.6f},{k * 1.234567 + 100:.6f}" for k in range(50)]
+    source = _write_csv(tmp_path, "\n".join(rows) + "\n")
+    imported, rewritten = tmp_path / "imported.mcap", tmp_path / "rewritten.mcap"
+    assert run("import", "csv", source, "--out", imported, "--rate", "100", "--sensor-cols",
+               "1", "--angle-cols", "0").exit_code == 0
+    result = run(*command[:2], imported, *command[2:], "--out", rewritten)
+    assert result.exit_code == 0, result.output
+    before, after = read_recording(imported), read_recording(rewritten)
+    assert after.sensors.values.tolist() == before.sensors.values.tolist()
+    assert after.mocap["joint"].angles.tolist() == before.mocap["joint"].angles.tolist()
+    assert before.mocap["joint"].angles[1, 0] == 0.731234  # the CSV's 6 places, as imported
