@@ -138,7 +138,8 @@ def _as_text(summary: dict[str, Any]) -> str:
         )
     lines.append("metadata")
     for key, value in summary["metadata"].items():
-        shown = value if len(value) <= 100 else value[:97] + "..."
+        shown = value.replace("\r", "\\r").replace("\n", "\\n")  # one line per key
+        shown = shown if len(shown) <= 100 else shown[:97] + "..."
         lines.append(f"  {key} = {shown}")
     if summary["segments"]:
         lines.append(f"segments  {len(summary['segments'])}")

@@ -395,3 +395,36 @@ def test_cut_and_recover_keep_the_decimals_a_recording_was_imported_with(
     assert after.sensors.values.tolist() == before.sensors.values.tolist()
     assert after.mocap["joint"].angles.tolist() == before.mocap["joint"].angles.tolist()
     assert before.mocap["joint"].angles[1, 0] == 0.731234  # the CSV's 6 places, as imported
+
+
+def test_import_carries_the_license_and_source_notes_beside_its_input(tmp_path: Path) -> None:
+    """A recording imported from licensed data (../shared/realdata keeps LICENSE and SOURCE.md
+    beside the files, whose terms ask to keep them with anything derived) named no license
+    unless --license was typed: `import mot` of shoulder-ik, `import csv` without --preset."""
+    (tmp_path / "trial.mot").write_text(MOT_TEXT)
+    (tmp_path / "LICENSE_data").write_text("CC BY 4.0\nCopyright (c) the authors\n")
+    (tmp_path / "SOURCE.md").write_text("# Where it comes from\n")
+    (tmp_path / "SOURCES.csv").write_text("1,2\n")  # data, not a notice
+    (tmp_path / "SOURCE.mcap").write_bytes(b"\x89MCAP0\r\n")  # an earlier import, not one
+    out = tmp_path / "out" / "trial.mcap"
+    out.parent.mkdir()
+    result = CliRunner().invoke(main, ["import", "mot", str(tmp_path / "trial.mot"), "--out",
+                                       str(out)])
+    assert result.exit_code == 0 and "warning" not in result.output, result.output
+    notices = {k: v for k, v in read_recording(out).metadata.items() if k.startswith("notice.")}
+    assert notices == {"notice.LICENSE_data": "CC BY 4.0\nCopyright (c) the authors\n",
+                       "notice.SOURCE.md": "# Where it comes from\n"}
+    shown = run("record", "info", out).output.splitlines()
+    assert "  notice.LICENSE_data = CC BY 4.0\\nCopyright (c) the authors\\n" in shown
+    assert "Copyright (c) the authors" not in shown  # no line of its own
+
+
+def test_import_without_a_known_license_says_so(tmp_path: Path) -> None:
+    source = _write_csv(tmp_path, "1,2\n3,4\n")
+    result = run("import", "csv", source, "--out", tmp_path / "o.mcap", "--rate", "10",
+                 "--sensor-cols", "0-1")
+    assert result.exit_code == 0
+    assert "warning: no license known for table.csv" in result.output
+    licensed = run("import", "csv", source, "--out", tmp_path / "p.mcap", "--rate", "10",
+                   "--sensor-cols", "0-1", "--license", "CC0")
+    assert "warning" not in licensed.output
