@@ -428,3 +428,15 @@ def test_import_without_a_known_license_says_so(tmp_path: Path) -> None:
     licensed = run("import", "csv", source, "--out", tmp_path / "p.mcap", "--rate", "10",
                    "--sensor-cols", "0-1", "--license", "CC0")
     assert "warning" not in licensed.output
+
+
+@pytest.mark.skipif(not SHOULDER_MOT.exists(), reason="shared/realdata/shoulder-ik absent")
+def test_the_real_motion_fixture_carries_the_license_of_its_motion() -> None:
+    """real_motion_abd_flx.mcap derives from shoulder-ik (CC BY 4.0), whose terms go with
+    anything derived; the license sat beside it in fixtures/ but the recording named none,
+    so a copy of the file alone had lost it."""
+    fixture = Path(__file__).resolve().parents[1] / "fixtures" / "real_motion_abd_flx.mcap"
+    metadata = read_recording(fixture).metadata
+    assert metadata["license"].startswith("CC BY 4.0")
+    for name in ("LICENSE_data", "SOURCE.md"):
+        assert metadata[f"notice.{name}"] == (SHOULDER_MOT.parent / name).read_text("utf-8")
