@@ -157,8 +157,9 @@ def _as_text(summary: dict[str, Any]) -> str:
               help="The clean copy (must not be FILE).")
 def recover_command(file: Path, out: Path) -> None:
     """Rewrite FILE, e.g. a recording left as NAME.mcap.partial by a killed run, as a clean,
-    indexed recording OUT, and say what was lost (what followed the last complete record:
-    at most the last second of a durable recording)."""
+    indexed recording OUT, and say what was lost (what its writer had not written out: at
+    most the last second of a durable recording; and the metadata written at close, such as
+    segments and the measured rate)."""
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import scan_recording
 
@@ -183,10 +184,13 @@ def recover_command(file: Path, out: Path) -> None:
                f"into {out}")
     if scan.lost_bytes is None:
         click.echo("lost: nothing (the file was complete)")
-    else:
-        click.echo(f"lost: the {scan.lost_bytes} bytes after the last complete record (the file "
-                   "was never closed; the durable recording of run/demo --record loses at most "
-                   "its last second, a file written whole the rest of its chunk)")
+    else:  # a durable file killed between its syncs ends after a complete record: 0 bytes
+        cut = (f"the {scan.lost_bytes} bytes after the last complete record" if scan.lost_bytes
+               else "no partial record (the file ends after a complete one)")
+        click.echo(f"lost: {cut}; the file was never closed, so what its writer had not yet "
+                   "written out (the durable recording of run/demo --record: at most its last "
+                   "second; a file written whole: the rest of its chunk) and the metadata it "
+                   "writes at close (segments, the measured rate) are not in it")
 
 
 @record_group.command("cut")
