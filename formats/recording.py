@@ -112,7 +112,8 @@ def cut_recording(rec: Recording, start_s: float, stop_s: float) -> Recording:
     keep = (rec.sensors.t >= lo) & (rec.sensors.t < hi)
     if not keep.any():
         duration = float(rec.sensors.t[-1]) - t0
-        raise ValueError(f"no sensor frames from {start_s:g} s to {stop_s:g} s (the recording "
+        stop = "the end" if stop_s == float("inf") else f"{stop_s:g} s"
+        raise ValueError(f"no sensor frames from {start_s:g} s to {stop} (the recording "
                          f"spans {duration:.3f} s after its first frame)")
     mocap = {}
     for joint, stream in rec.mocap.items():
