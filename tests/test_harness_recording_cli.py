@@ -441,3 +441,20 @@ def test_the_real_motion_fixture_carries_the_license_of_its_motion() -> None:
     assert metadata["license"].startswith("CC BY 4.0")
     for name in ("LICENSE_data", "SOURCE.md"):
         assert metadata[f"notice.{name}"] == (SHOULDER_MOT.parent / name).read_text("utf-8")
+
+
+@pytest.mark.parametrize("kind", ["hysteresis", "timeseries"])
+def test_plot_of_an_empty_window_says_where_the_recording_lies(tmp_path: Path,
+                                                               kind: str) -> None:
+    """--t0/--t1 are on the recording's clock: a part cut from 10 s on keeps its times, and
+    `plot --t0 0 --t1 5` of it only said the window was empty, not where the data are."""
+    part = tmp_path / "part.mcap"
+    t = 10 + np.arange(1000) / 250.0
+    mt = 10 + np.arange(480) / 120.0
+    write_recording(part, Recording(("F", "SF"), SensorStream(np.arange(1000), t,
+                                                              np.ones((1000, 2))),
+                                    {"shoulder": AngleStream(mt, ("shoulder_elv",), mt[:, None])}))
+    line = assert_one_line_error(run("plot", part, "--kind", kind, "--t0", "0", "--t1", "5",
+                                     "--out", tmp_path / "p.png"))
+    assert "on the recording's clock: sensor frames 10.000 → 13.996 s, /mocap/shoulder " \
+           "10.000 → 13.992 s" in line
