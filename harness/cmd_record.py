@@ -196,7 +196,8 @@ def recover_command(file: Path, out: Path) -> None:
 @record_group.command("cut")
 @click.argument("file", type=InputFile())
 @click.option("--start", "start_s", type=Finite(0.0, MAX_DURATION_S), default=0.0,
-              show_default=True, help="Start of the part, seconds after the first sensor frame.")
+              show_default=True, help="Start of the part, seconds after the first sensor "
+              "frame (the first mocap sample without sensors).")
 @click.option("--stop", "stop_s", type=Finite(0.0, MAX_DURATION_S),
               help="End of the part (excluded), seconds after the first sensor frame; "
               "default: the end of the recording.")
@@ -205,14 +206,17 @@ def recover_command(file: Path, out: Path) -> None:
 def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> None:
     """Write the part of FILE from --start to --stop as recording OUT: its sensor frames, the
     motion capture of the same span and the segments clipped to it, with times and sequence
-    numbers as they were. OUT's metadata names FILE, its sha256 (and those of the recordings
-    FILE was cut from, if it was) and the span. Example, the
-    first 12 s of a session for calibration and the rest to test on:
+    numbers as they were (a recording without sensors, such as an imported .mot, is cut by
+    its motion capture, times after its first sample). OUT's metadata names FILE, its
+    sha256 (and those of the recordings FILE was cut from, if it was) and the span. Example,
+    the first 12 s of a session for calibration and the rest to test on:
 
     \b
         exohil record cut session.mcap --stop 12 --out calib.mcap
         exohil record cut session.mcap --start 12 --out test.mcap
     """
+    import numpy as np
+
     from exohil.formats.digest import sha256_file
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording import cut_recording
@@ -233,9 +237,14 @@ def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> 
                           "cut.start_s": f"{start_s:g}",
                           "cut.stop_s": "end" if stop_s is None else f"{stop_s:g}"})
     _write_as_read(out, part)
-    click.echo(f"wrote {out}: {len(part.sensors)} of {len(rec.sensors)} sensor frames, "
-               f"{part.sensors.t[0] - rec.sensors.t[0]:.3f} → "
-               f"{part.sensors.t[-1] - rec.sensors.t[0]:.3f} s after the first frame")
+    if len(rec.sensors):
+        kept, whole, what = part.sensors.t, rec.sensors.t, "sensor frames"
+    else:  # a mocap-only recording: times after its first sample
+        kept = np.concatenate([stream.t for stream in part.mocap.values()])
+        whole = np.concatenate([stream.t for stream in rec.mocap.values()])
+        what = "mocap samples"
+    click.echo(f"wrote {out}: {len(kept)} of {len(whole)} {what}, {kept.min() - whole.min():.3f}"
+               f" → {kept.max() - whole.min():.3f} s after the first {what[:-1]}")
 
 
 def _write_as_read(out: Path, rec: Any) -> None:

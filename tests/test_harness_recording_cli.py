@@ -458,3 +458,13 @@ def test_plot_of_an_empty_window_says_where_the_recording_lies(tmp_path: Path,
                                      "--out", tmp_path / "p.png"))
     assert "on the recording's clock: sensor frames 10.000 → 13.996 s, /mocap/shoulder " \
            "10.000 → 13.992 s" in line
+
+
+def test_record_cut_of_an_imported_mot_cuts_its_motion_capture(tmp_path: Path) -> None:
+    source, whole, part = tmp_path / "t.mot", tmp_path / "whole.mcap", tmp_path / "part.mcap"
+    source.write_text(MOT_TEXT)
+    assert run("import", "mot", source, "--out", whole, "--license", "CC0").exit_code == 0
+    result = run("record", "cut", whole, "--start", "0.01", "--out", part)
+    assert result.exit_code == 0, result.output
+    assert "2 of 3 mocap samples, 0.010 → 0.020 s after the first mocap sample" in result.output
+    assert read_recording(part).mocap["shoulder"].t.tolist() == [0.01, 0.02]
