@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +71,18 @@ def sensor_decimals(values: np.ndarray, decimals: int = VALUE_DECIMALS) -> int:
         return decimals
     needed = math.ceil(-math.log10(float(spans.min()) * RANGE_PRECISION))
     return int(min(max(decimals, needed), MAX_DECIMALS))
+
+
+def stored_decimals(arrays: Sequence[np.ndarray], decimals: int = VALUE_DECIMALS) -> int:
+    """The decimal places that write ``arrays`` (sensor values, angles) back as they were read:
+    ``decimals``, or the fewest more (at most :data:`MAX_DECIMALS`) that rounding leaves every
+    value unchanged at. For commands that rewrite a recording (``record cut``, ``record
+    recover``): a recording imported with 6 places, or another tool's, loses none of them."""
+    for places in range(decimals, MAX_DECIMALS + 1):
+        if all(np.array_equal(np.round(values, places), values) for values in arrays
+               if np.size(values)):
+            return places
+    return MAX_DECIMALS
 
 
 def rounded_values(

@@ -94,9 +94,12 @@ def scan_recording(path: str | Path) -> RecordingScan:
             raise RecordingError(f"{path}: truncated MCAP file (cut at byte {len(data)}, last "
                                  f"complete record at {raw.cut_at}) before any "
                                  f"'{METADATA_NAME}' metadata; nothing to recover")
-        notes.append(f"cut short: a recording that was never closed (no footer); "
-                     f"{len(data) - raw.cut_at} bytes after the last complete record at byte "
-                     f"{raw.cut_at} are lost; `exohil record recover` writes a clean copy")
+        what = (f"{len(data) - raw.cut_at} bytes after the last complete record at byte "
+                f"{raw.cut_at} are lost" if len(data) > raw.cut_at else
+                f"it ends after a complete record (byte {raw.cut_at}), but what its writer "
+                "had not yet written out is not in it")
+        notes.append(f"cut short: a recording that was never closed (no footer); {what}; "
+                     "`exohil record recover` writes a clean copy")
     metadata = merged_metadata(path, raw.metadata, notes)
     channels: list[ChannelSummary] = []
     sensor_messages: list[tuple[int, bytes]] = []

@@ -59,6 +59,9 @@ def build_command(check: bool, fixtures_dir: Path, shoulder_ik_dir: Path) -> Non
                 built = build_fixture(spec, out_dir, shoulder_ik_dir)
             except MotError as exc:
                 raise click.ClickException(f"{spec.filename}: {exc} (see --shoulder-ik)") from None
+            except OSError as exc:  # its licence notice, stored in the recording
+                raise click.ClickException(f"{spec.filename}: cannot read the shoulder-ik "
+                                           f"licence notice: {exc} (see --shoulder-ik)") from None
             hashes[spec.filename] = sha256_file(built)
         if not check:
             try:

@@ -1,7 +1,8 @@
 """``exohil import csv|mot``: bring other tools' data into recording format v1.
 
 Every imported recording carries provenance metadata: ``source`` (file name),
-``source_sha256``, ``license`` (when known), ``generator`` and ``command``.
+``source_sha256``, ``license`` (when known), ``generator``, ``command`` and, for each license
+or source note beside the input (``LICENSE*``, ``SOURCE*``, ...), ``notice.<name>``: its text.
 """
 
 from __future__ import annotations
@@ -95,6 +96,16 @@ def _names(text: str | None) -> tuple[str, ...] | None:
     return tuple(name.strip() for name in text.split(",")) if text else None
 
 
+#: Files beside an input whose text an imported recording carries (``notice.<name>``): the
+#: data's license and source note, which its terms ask to keep with anything derived from it.
+#: A name counts when what precedes its first dot (any case) starts with one of
+#: ``LICENSE_PREFIXES`` (``LICENSE_data``) or is one of ``NOTICE_STEMS`` (``SOURCE.md``), and
+#: what follows it is a text suffix (not a recording written beside its input as SOURCE.mcap).
+LICENSE_PREFIXES = ("LICENSE", "LICENCE", "COPYING")
+NOTICE_STEMS = ("NOTICE", "SOURCE")
+NOTICE_SUFFIXES = ("", "md", "txt", "rst")
+
+
 def _provenance(path: Path, license_note: str | None) -> dict[str, str]:
     metadata = {
         "source": path.name,
@@ -103,6 +114,16 @@ def _provenance(path: Path, license_note: str | None) -> dict[str, str]:
     }
     if license_note:
         metadata["license"] = license_note
+    for notice in sorted(path.parent.iterdir()):
+        stem, _, suffix = notice.name.partition(".")
+        if (stem.upper().startswith(LICENSE_PREFIXES) or stem.upper() in NOTICE_STEMS) \
+                and suffix.lower() in NOTICE_SUFFIXES and notice.is_file() \
+                and notice.resolve() != path.resolve():
+            metadata[f"notice.{notice.name}"] = notice.read_text(encoding="utf-8",
+                                                                 errors="replace")
+    if not license_note and not any(key.startswith("notice.") for key in metadata):
+        click.echo(f"warning: no license known for {path.name} (no --license, no LICENSE file "
+                   "beside it): the recording names none", err=True)
     return metadata
 
 
@@ -150,7 +171,8 @@ def _command_line() -> str:
               help="Decimal places kept for sensor values and angles; a sensor whose "
               "range needs more to keep 10⁻⁵ of it keeps more.")
 @click.option("--license", "license_note", type=Name(),
-              help="License note stored in the metadata.")
+              help="License note stored in the metadata (the text of LICENSE*, SOURCE* "
+              "files beside the input is stored as well).")
 def import_csv(
     input_file: Path,
     out: Path,
@@ -255,7 +277,8 @@ def import_csv(
 @click.option("--out", "out", required=True, type=OutputFile(),
               help="Output recording (.mcap).")
 @click.option("--license", "license_note", type=Name(),
-              help="License note stored in the metadata.")
+              help="License note stored in the metadata (the text of LICENSE*, SOURCE* "
+              "files beside the input is stored as well).")
 def import_mot(input_file: Path, out: Path, license_note: str | None) -> None:
     """Import an OpenSim .mot (e.g. inverse kinematics) as a mocap-only recording:
     /mocap/shoulder with plane_elv → elv_angle, shoulder_elv → shoulder_elv,

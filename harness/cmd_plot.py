@@ -30,8 +30,11 @@ from exohil.harness.cli_types import (
               help="Mocap angle on the x axis (hysteresis; default: shoulder_elv, or the "
                    "joint's only angle).")
 @click.option("--segment", type=Name(), help="Keep only the spans of this labelled segment.")
-@click.option("--t0", type=Finite(-MAX_TIME_S, MAX_TIME_S), help="Start of the time window, s.")
-@click.option("--t1", type=Finite(-MAX_TIME_S, MAX_TIME_S), help="End of the time window, s.")
+@click.option("--t0", type=Finite(-MAX_TIME_S, MAX_TIME_S),
+              help="Start of the time window, s on the recording's clock (the times `record "
+              "info` shows; a part from `record cut` keeps its times).")
+@click.option("--t1", type=Finite(-MAX_TIME_S, MAX_TIME_S),
+              help="End of the time window, s on the recording's clock.")
 @click.option("--out", required=True, type=OutputFile(),
               help="Output image: .png, or .svg or .pdf for a vector copy.")
 def plot_command(

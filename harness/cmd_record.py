@@ -138,7 +138,8 @@ def _as_text(summary: dict[str, Any]) -> str:
         )
     lines.append("metadata")
     for key, value in summary["metadata"].items():
-        shown = value if len(value) <= 100 else value[:97] + "..."
+        shown = value.replace("\r", "\\r").replace("\n", "\\n")  # one line per key
+        shown = shown if len(shown) <= 100 else shown[:97] + "..."
         lines.append(f"  {key} = {shown}")
     if summary["segments"]:
         lines.append(f"segments  {len(summary['segments'])}")
@@ -156,11 +157,11 @@ def _as_text(summary: dict[str, Any]) -> str:
               help="The clean copy (must not be FILE).")
 def recover_command(file: Path, out: Path) -> None:
     """Rewrite FILE, e.g. a recording left as NAME.mcap.partial by a killed run, as a clean,
-    indexed recording OUT, and say what was lost (what followed the last complete record:
-    at most the last second of a durable recording)."""
+    indexed recording OUT, and say what was lost (what its writer had not written out: at
+    most the last second of a durable recording; and the metadata written at close, such as
+    segments and the measured rate)."""
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import scan_recording
-    from exohil.formats.recording_writer import write_recording
 
     refuse_overwriting_inputs([("--out", out)], [file])
     try:
@@ -176,23 +177,27 @@ def recover_command(file: Path, out: Path) -> None:
             "keeps its records in chunks of up to 1 MiB, and one cut inside its first chunk "
             "loses them all; the durable NAME.partial of run/demo --record closes a chunk "
             "every second)")
-    write_recording(out, rec)
+    _write_as_read(out, rec)
     span = (f", {rec.sensors.t[0]:.3f} → {rec.sensors.t[-1]:.3f} s" if len(rec.sensors)
             else "")
     click.echo(f"recovered {len(rec.sensors)} sensor frames{span} and {mocap} mocap samples "
                f"into {out}")
     if scan.lost_bytes is None:
         click.echo("lost: nothing (the file was complete)")
-    else:
-        click.echo(f"lost: the {scan.lost_bytes} bytes after the last complete record (the file "
-                   "was never closed; the durable recording of run/demo --record loses at most "
-                   "its last second, a file written whole the rest of its chunk)")
+    else:  # a durable file killed between its syncs ends after a complete record: 0 bytes
+        cut = (f"the {scan.lost_bytes} bytes after the last complete record" if scan.lost_bytes
+               else "no partial record (the file ends after a complete one)")
+        click.echo(f"lost: {cut}; the file was never closed, so what its writer had not yet "
+                   "written out (the durable recording of run/demo --record: at most its last "
+                   "second; a file written whole: the rest of its chunk) and the metadata it "
+                   "writes at close (segments, the measured rate) are not in it")
 
 
 @record_group.command("cut")
 @click.argument("file", type=InputFile())
 @click.option("--start", "start_s", type=Finite(0.0, MAX_DURATION_S), default=0.0,
-              show_default=True, help="Start of the part, seconds after the first sensor frame.")
+              show_default=True, help="Start of the part, seconds after the first sensor "
+              "frame (the first mocap sample without sensors).")
 @click.option("--stop", "stop_s", type=Finite(0.0, MAX_DURATION_S),
               help="End of the part (excluded), seconds after the first sensor frame; "
               "default: the end of the recording.")
@@ -201,20 +206,22 @@ def recover_command(file: Path, out: Path) -> None:
 def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> None:
     """Write the part of FILE from --start to --stop as recording OUT: its sensor frames, the
     motion capture of the same span and the segments clipped to it, with times and sequence
-    numbers as they were. OUT's metadata names FILE, its sha256 (and those of the recordings
-    FILE was cut from, if it was) and the span. Example, the
-    first 12 s of a session for calibration and the rest to test on:
+    numbers as they were (a recording without sensors, such as an imported .mot, is cut by
+    its motion capture, times after its first sample). OUT's metadata names FILE, its
+    sha256 (and those of the recordings FILE was cut from, if it was) and the span. Example,
+    the first 12 s of a session for calibration and the rest to test on:
 
     \b
         exohil record cut session.mcap --stop 12 --out calib.mcap
         exohil record cut session.mcap --start 12 --out test.mcap
     """
+    import numpy as np
+
     from exohil.formats.digest import sha256_file
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording import cut_recording
     from exohil.formats.recording_metadata import cut_lineage
     from exohil.formats.recording_reader import read_recording
-    from exohil.formats.recording_writer import write_recording
 
     refuse_overwriting_inputs([("--out", out)], [file])
     try:
@@ -229,10 +236,25 @@ def cut_command(file: Path, start_s: float, stop_s: float | None, out: Path) -> 
     part.metadata.update({"cut.source": file.name, "cut.source_sha256": sha256_file(file),
                           "cut.start_s": f"{start_s:g}",
                           "cut.stop_s": "end" if stop_s is None else f"{stop_s:g}"})
-    write_recording(out, part)
-    click.echo(f"wrote {out}: {len(part.sensors)} of {len(rec.sensors)} sensor frames, "
-               f"{part.sensors.t[0] - rec.sensors.t[0]:.3f} → "
-               f"{part.sensors.t[-1] - rec.sensors.t[0]:.3f} s after the first frame")
+    _write_as_read(out, part)
+    if len(rec.sensors):
+        kept, whole, what = part.sensors.t, rec.sensors.t, "sensor frames"
+    else:  # a mocap-only recording: times after its first sample
+        kept = np.concatenate([stream.t for stream in part.mocap.values()])
+        whole = np.concatenate([stream.t for stream in rec.mocap.values()])
+        what = "mocap samples"
+    click.echo(f"wrote {out}: {len(kept)} of {len(whole)} {what}, {kept.min() - whole.min():.3f}"
+               f" → {kept.max() - whole.min():.3f} s after the first {what[:-1]}")
+
+
+def _write_as_read(out: Path, rec: Any) -> None:
+    """Write ``rec`` with the decimal places its values were read with, so that rewriting a
+    recording (cut, recover) rounds nothing away: one imported with 6 places keeps them."""
+    from exohil.formats.recording_messages import stored_decimals
+    from exohil.formats.recording_writer import write_recording
+
+    arrays = [rec.sensors.values, *(stream.angles for stream in rec.mocap.values())]
+    write_recording(out, rec, decimals=stored_decimals(arrays))
 
 
 COMMANDS: list[click.Command] = [record_group]

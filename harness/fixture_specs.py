@@ -28,6 +28,9 @@ REAL_MOTION_TRIALS = ("ABD01.mot", "FLX01.mot", "ABD21.mot", "FLX21.mot")
 #: files copied verbatim from the shoulder-ik folder next to the fixtures derived from it
 SHOULDER_IK_NOTICES = {"LICENSE_data": "LICENSE_shoulder-ik_data",
                        "SOURCE.md": "SOURCE_shoulder-ik.md"}
+#: the ``license`` metadata of a fixture derived from them (docs/recording-format.md)
+SHOULDER_IK_LICENSE = ("CC BY 4.0, Seth et al. thoracoscapular data, IK by Belli et al. "
+                       "(rmr-solver)")
 SUMS_FILE = "SHA256SUMS"
 
 
@@ -85,6 +88,10 @@ def build_fixture(spec: FixtureSpec, out_dir: Path, shoulder_ik_dir: Path) -> Pa
     if spec.needs_shoulder_ik and not shoulder_ik_dir.is_dir():
         raise FileNotFoundError(f"{spec.filename} needs the shoulder-ik data at {shoulder_ik_dir}")
     recording = simulate(spec.trajectory(shoulder_ik_dir), load_default_profile(), spec.seed)
+    if spec.needs_shoulder_ik:  # the data's terms go with what derives from it (as on import)
+        recording.metadata["license"] = SHOULDER_IK_LICENSE
+        recording.metadata.update({f"notice.{name}": (shoulder_ik_dir / name).read_text("utf-8")
+                                   for name in SHOULDER_IK_NOTICES})
     path = out_dir / spec.filename
     write_recording(path, recording)
     return path

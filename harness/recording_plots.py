@@ -98,7 +98,9 @@ def plot_hysteresis(
     window = window or TimeWindow()
     keep = window.mask(rec.sensors.t) & np.isfinite(angles)
     if not np.any(keep):
-        raise RecordingError("no sensor frames with mocap in the chosen time window")
+        raise RecordingError("no sensor frames with mocap in the chosen time window"
+                             + _spans_text({"sensor frames": rec.sensors.t,
+                                            f"/mocap/{joint}": rec.mocap[joint].t}))
     t, x, y = rec.sensors.t[keep], angles[keep], rec.sensors.values[keep, column]
     direction = motion_direction(t, x)
     figure = Figure(figsize=(7.0, 5.0), dpi=120, layout="constrained")
@@ -135,7 +137,9 @@ def plot_timeseries(
     window = window or TimeWindow()
     keep = window.mask(rec.sensors.t)
     if not keep.any() and not any(window.mask(s.t).any() for s in rec.mocap.values()):
-        raise RecordingError("no sensor frame or mocap sample in the chosen time window")
+        raise RecordingError("no sensor frame or mocap sample in the chosen time window"
+                             + _spans_text({"sensor frames": rec.sensors.t,
+                                            **{f"/mocap/{j}": s.t for j, s in rec.mocap.items()}}))
     figure = Figure(figsize=(10.0, 6.0), dpi=120, layout="constrained")
     top, bottom = figure.subplots(2, 1, sharex=True)
     for name in sensors or rec.sensor_names:
@@ -163,3 +167,10 @@ def _sensor_column(rec: Recording, sensor: str) -> int:
     if sensor not in rec.sensor_names:
         raise RecordingError(f"no sensor {sensor!r} (sensors: {','.join(rec.sensor_names)})")
     return rec.sensor_names.index(sensor)
+
+
+def _spans_text(streams: dict[str, np.ndarray]) -> str:
+    """Where each stream's times lie, for an empty window: the window is on the recording's
+    own clock (a part cut from 10 s on starts at 10 s, not at 0)."""
+    spans = [f"{name} {t[0]:.3f} → {t[-1]:.3f} s" for name, t in streams.items() if len(t)]
+    return f" (the window is on the recording's clock: {', '.join(spans)})" if spans else ""

@@ -195,3 +195,18 @@ def test_cut_recording_keeps_one_span_of_every_stream() -> None:
     for start, stop, problem in [(2.0, 2.0, "empty span"), (10.0, 20.0, "no sensor frames")]:
         with pytest.raises(ValueError, match=problem):
             cut_recording(rec, start, stop)
+
+
+def test_cut_recording_cuts_a_recording_without_sensors_by_its_motion_capture() -> None:
+    """An imported .mot has no sensor frames; cutting it was refused ("no sensor frames to
+    cut"), so the only way to trim one was to re-import a trimmed file."""
+    from exohil.formats.recording import cut_recording
+
+    mt = 5.0 + np.arange(480) / 120.0  # 4 s of mocap starting at 5 s on the clock
+    rec = _recording(np.empty(0), mt, np.column_stack([mt, -mt]))
+    rec.sensor_names, rec.sensors.values = (), np.empty((0, 0))
+    part = cut_recording(rec, 1.0, 2.0)
+    assert len(part.sensors) == 0 and len(part.mocap["shoulder"]) == 120
+    assert part.mocap["shoulder"].t[0] == mt[120]
+    with pytest.raises(ValueError, match="no mocap samples from 10 s to the end"):
+        cut_recording(rec, 10.0, float("inf"))

@@ -323,8 +323,9 @@ def test_record_cut_splits_a_recording_in_two(tmp_path: Path) -> None:
     assert [(s.t0, s.t1) for s in b.segments] == [(4.0, 10.0)]
     assert "refusing to overwrite" in assert_one_line_error(
         run("record", "cut", src, "--stop", "1", "--out", src))
-    assert "no sensor frames from 20 s" in assert_one_line_error(
-        run("record", "cut", src, "--start", "20", "--out", tmp_path / "x.mcap"))
+    assert "no sensor frames from 20 s to the end (the recording spans 9.996 s" in \
+        assert_one_line_error(run("record", "cut", src, "--start", "20", "--out",
+                                  tmp_path / "x.mcap"))  # was "to inf s"
 
 
 def test_motion_direction_reads_frames_that_share_a_time() -> None:
@@ -376,3 +377,94 @@ def test_import_csv_columns_of_ones_own_take_the_header_not_the_presets_names(
     assert result.exit_code == 0, result.output
     rec = read_recording(out)
     assert rec.sensor_names == ("c1", "c2") and rec.mocap["knee"].names == ("knee_flexion",)
+
+
+@pytest.mark.parametrize("command", [["record", "cut", "--start", "0"], ["record", "recover"]])
+def test_cut_and_recover_keep_the_decimals_a_recording_was_imported_with(
+        tmp_path: Path, command: list[str]) -> None:
+    """An import keeps 6 places (`import csv --decimals`); cut and recover rewrote the
+    recording with the writer's default of 4 and rounded the angles (and sensor values of a
+    wide range) away without a word."""
+    rows = [f"{k * 0.731234:.6f},{k * 1.234567 + 100:.6f}" for k in range(50)]
+    source = _write_csv(tmp_path, "\n".join(rows) + "\n")
+    imported, rewritten = tmp_path / "imported.mcap", tmp_path / "rewritten.mcap"
+    assert run("import", "csv", source, "--out", imported, "--rate", "100", "--sensor-cols",
+               "1", "--angle-cols", "0").exit_code == 0
+    result = run(*command[:2], imported, *command[2:], "--out", rewritten)
+    assert result.exit_code == 0, result.output
+    before, after = read_recording(imported), read_recording(rewritten)
+    assert after.sensors.values.tolist() == before.sensors.values.tolist()
+    assert after.mocap["joint"].angles.tolist() == before.mocap["joint"].angles.tolist()
+    assert before.mocap["joint"].angles[1, 0] == 0.731234  # the CSV's 6 places, as imported
+
+
+def test_import_carries_the_license_and_source_notes_beside_its_input(tmp_path: Path) -> None:
+    """A recording imported from licensed data (../shared/realdata keeps LICENSE and SOURCE.md
+    beside the files, whose terms ask to keep them with anything derived) named no license
+    unless --license was typed: `import mot` of shoulder-ik, `import csv` without --preset."""
+    (tmp_path / "trial.mot").write_text(MOT_TEXT)
+    (tmp_path / "LICENSE_data").write_text("CC BY 4.0\nCopyright (c) the authors\n")
+    (tmp_path / "SOURCE.md").write_text("# Where it comes from\n")
+    (tmp_path / "SOURCES.csv").write_text("1,2\n")  # data, not a notice
+    (tmp_path / "SOURCE.mcap").write_bytes(b"\x89MCAP0\r\n")  # an earlier import, not one
+    out = tmp_path / "out" / "trial.mcap"
+    out.parent.mkdir()
+    result = CliRunner().invoke(main, ["import", "mot", str(tmp_path / "trial.mot"), "--out",
+                                       str(out)])
+    assert result.exit_code == 0 and "warning" not in result.output, result.output
+    notices = {k: v for k, v in read_recording(out).metadata.items() if k.startswith("notice.")}
+    assert notices == {"notice.LICENSE_data": "CC BY 4.0\nCopyright (c) the authors\n",
+                       "notice.SOURCE.md": "# Where it comes from\n"}
+    shown = run("record", "info", out).output.splitlines()
+    assert "  notice.LICENSE_data = CC BY 4.0\\nCopyright (c) the authors\\n" in shown
+    assert "Copyright (c) the authors" not in shown  # no line of its own
+
+
+def test_import_without_a_known_license_says_so(tmp_path: Path) -> None:
+    source = _write_csv(tmp_path, "1,2\n3,4\n")
+    result = run("import", "csv", source, "--out", tmp_path / "o.mcap", "--rate", "10",
+                 "--sensor-cols", "0-1")
+    assert result.exit_code == 0
+    assert "warning: no license known for table.csv" in result.output
+    licensed = run("import", "csv", source, "--out", tmp_path / "p.mcap", "--rate", "10",
+                   "--sensor-cols", "0-1", "--license", "CC0")
+    assert "warning" not in licensed.output
+
+
+@pytest.mark.skipif(not SHOULDER_MOT.exists(), reason="shared/realdata/shoulder-ik absent")
+def test_the_real_motion_fixture_carries_the_license_of_its_motion() -> None:
+    """real_motion_abd_flx.mcap derives from shoulder-ik (CC BY 4.0), whose terms go with
+    anything derived; the license sat beside it in fixtures/ but the recording named none,
+    so a copy of the file alone had lost it."""
+    fixture = Path(__file__).resolve().parents[1] / "fixtures" / "real_motion_abd_flx.mcap"
+    metadata = read_recording(fixture).metadata
+    assert metadata["license"].startswith("CC BY 4.0")
+    for name in ("LICENSE_data", "SOURCE.md"):
+        assert metadata[f"notice.{name}"] == (SHOULDER_MOT.parent / name).read_text("utf-8")
+
+
+@pytest.mark.parametrize("kind", ["hysteresis", "timeseries"])
+def test_plot_of_an_empty_window_says_where_the_recording_lies(tmp_path: Path,
+                                                               kind: str) -> None:
+    """--t0/--t1 are on the recording's clock: a part cut from 10 s on keeps its times, and
+    `plot --t0 0 --t1 5` of it only said the window was empty, not where the data are."""
+    part = tmp_path / "part.mcap"
+    t = 10 + np.arange(1000) / 250.0
+    mt = 10 + np.arange(480) / 120.0
+    write_recording(part, Recording(("F", "SF"), SensorStream(np.arange(1000), t,
+                                                              np.ones((1000, 2))),
+                                    {"shoulder": AngleStream(mt, ("shoulder_elv",), mt[:, None])}))
+    line = assert_one_line_error(run("plot", part, "--kind", kind, "--t0", "0", "--t1", "5",
+                                     "--out", tmp_path / "p.png"))
+    assert "on the recording's clock: sensor frames 10.000 → 13.996 s, /mocap/shoulder " \
+           "10.000 → 13.992 s" in line
+
+
+def test_record_cut_of_an_imported_mot_cuts_its_motion_capture(tmp_path: Path) -> None:
+    source, whole, part = tmp_path / "t.mot", tmp_path / "whole.mcap", tmp_path / "part.mcap"
+    source.write_text(MOT_TEXT)
+    assert run("import", "mot", source, "--out", whole, "--license", "CC0").exit_code == 0
+    result = run("record", "cut", whole, "--start", "0.01", "--out", part)
+    assert result.exit_code == 0, result.output
+    assert "2 of 3 mocap samples, 0.010 → 0.020 s after the first mocap sample" in result.output
+    assert read_recording(part).mocap["shoulder"].t.tolist() == [0.01, 0.02]

@@ -65,7 +65,7 @@ def test_recover_writes_a_clean_copy_and_says_what_was_lost(tmp_path):
     out = tmp_path / "clean.mcap"
     result = CliRunner().invoke(main, ["record", "recover", str(path), "--out", str(out)])
     assert result.exit_code == 0, result.output
-    assert f"recovered {kept} sensor frames" in result.output and "lost: the" in result.output
+    assert f"recovered {kept} sensor frames" in result.output and "never closed" in result.output
     clean = scan_recording(out)
     assert clean.lost_bytes is None and len(clean.recording.sensors) == kept
     again = CliRunner().invoke(main, ["record", "recover", str(out), "--out",
@@ -137,3 +137,26 @@ def test_a_run_that_records_no_frame_leaves_an_existing_recording_as_it_was(tmp_
     assert old.read_bytes() == before
     assert sorted(p.name for p in tmp_path.glob("old.mcap*")) == ["old.mcap"]
     assert not (tmp_path / "report").exists()  # nor the report folders it made for nothing
+
+
+def test_recover_of_a_file_cut_after_a_complete_record_does_not_say_nothing_was_lost(
+        tmp_path, monkeypatch):
+    """A durable writer killed between two syncs leaves a file that ends after a complete
+    record, and recover said "lost: the 0 bytes after the last complete record", which reads
+    as nothing lost, while up to a second of frames and the metadata written at close were."""
+    import exohil.formats.recording_writer as recording_writer
+
+    monkeypatch.setattr(recording_writer, "DURABLE_FLUSH_S", 0.0)  # a sync after each frame
+    live, copy = tmp_path / "live.mcap", tmp_path / "killed.mcap"
+    with RecordingWriter(live, SENSORS, durable=True) as writer:
+        writer.add_sensor_frames(np.arange(50), np.arange(50) / RATE_HZ, np.ones((50, 4)))
+        copy.write_bytes(live.read_bytes())  # the file as a kill now would leave it
+    scan = scan_recording(copy)
+    assert scan.lost_bytes == 0
+    assert "but what its writer had not yet written out is not in it" in scan.notes[0]
+    result = CliRunner().invoke(main, ["record", "recover", str(copy), "--out",
+                                       str(tmp_path / "clean.mcap")])
+    assert result.exit_code == 0, result.output
+    assert "recovered 50 sensor frames" in result.output
+    assert "lost: no partial record" in result.output and "at most its last second" in \
+        result.output and "0 bytes" not in result.output
