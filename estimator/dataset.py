@@ -73,8 +73,17 @@ class Block:
         )
 
 
+def _require_mocap(rec: Recording) -> None:
+    """DatasetError for a recording without motion capture: there is no truth to learn."""
+    if not rec.mocap:
+        raise DatasetError("the recording has no motion capture (no /mocap/<joint> stream), "
+                           "and training, evaluating or calibrating a model needs the true "
+                           "angles: record the trial with motion capture (or a goniometer)")
+
+
 def default_target(rec: Recording) -> TargetSpec:
     """The shoulder θ/φ pair when present, else every angle of the recording's only joint."""
+    _require_mocap(rec)
     shoulder = rec.mocap.get(SHOULDER_JOINT)
     if shoulder is not None and all(a in shoulder.names for a in SHOULDER_ANGLES):
         return TargetSpec(SHOULDER_JOINT, SHOULDER_ANGLES)
@@ -89,6 +98,7 @@ def default_target(rec: Recording) -> TargetSpec:
 
 def resolve_target(rec: Recording, joint: str | None, angles: tuple[str, ...] | None) -> TargetSpec:
     """Target from explicit ``joint``/``angles`` (either may be None → defaults)."""
+    _require_mocap(rec)
     if joint is None and not angles:
         return default_target(rec)
     if joint is None:

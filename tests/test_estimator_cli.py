@@ -278,6 +278,22 @@ def test_a_recording_without_the_models_joint_is_named_in_the_error(files):
     assert str(knee) in line and "joint 'shoulder' not in recording" in line
 
 
+@pytest.mark.parametrize("command", ["train", "evaluate", "calibrate"])
+def test_a_recording_without_motion_capture_says_so(files, command):
+    """It said "joint 'shoulder' not in recording (has [])", or for train "pass --joint",
+    which no option can help: the recording holds no truth at all."""
+    rec = shoulder_recording(seconds=1.0)
+    rec.mocap = {}
+    bare = files["dir"] / "bare.mcap"
+    write_recording(bare, rec)
+    out = str(files["dir"] / f"bare-{command}.npz")
+    args = {"train": ["train", "--model", "ann", str(bare), "--out", out],
+            "evaluate": ["evaluate", str(files["ckpt"]), str(bare)],
+            "calibrate": ["calibrate", str(files["ckpt"]), str(bare), "--out", out]}[command]
+    line = _one_line_error(CliRunner().invoke(main, args))
+    assert str(bare) in line and "has no motion capture" in line
+
+
 def test_accuracy_on_no_frame_at_20_degrees_is_not_measured_and_null(files):
     rec = shoulder_recording(seconds=1.0)
     rec.mocap["shoulder"].angles[:, 1] = 10.0  # the arm never reaches 20° of elevation
