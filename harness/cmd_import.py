@@ -114,17 +114,25 @@ def _provenance(path: Path, license_note: str | None) -> dict[str, str]:
     }
     if license_note:
         metadata["license"] = license_note
+    metadata.update(notices_beside(path))
+    if not license_note and not any(key.startswith("notice.") for key in metadata):
+        click.echo(f"warning: no license known for {path.name} (no --license, no LICENSE file "
+                   "beside it): the recording names none", err=True)
+    return metadata
+
+
+def notices_beside(path: Path) -> dict[str, str]:
+    """``notice.<name>`` → text of each license or source note beside the data file ``path``
+    (``LICENSE_PREFIXES``, ``NOTICE_STEMS``): what a recording derived from it carries."""
+    notices = {}
     for notice in sorted(path.parent.iterdir()):
         stem, _, suffix = notice.name.partition(".")
         if (stem.upper().startswith(LICENSE_PREFIXES) or stem.upper() in NOTICE_STEMS) \
                 and suffix.lower() in NOTICE_SUFFIXES and notice.is_file() \
                 and notice.resolve() != path.resolve():
-            metadata[f"notice.{notice.name}"] = notice.read_text(encoding="utf-8",
-                                                                 errors="replace")
-    if not license_note and not any(key.startswith("notice.") for key in metadata):
-        click.echo(f"warning: no license known for {path.name} (no --license, no LICENSE file "
-                   "beside it): the recording names none", err=True)
-    return metadata
+            notices[f"notice.{notice.name}"] = notice.read_text(encoding="utf-8",
+                                                                errors="replace")
+    return notices
 
 
 def _command_line() -> str:

@@ -117,9 +117,26 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
         click.echo(f"simulating {trajectory.duration_s:.1f} s of {trajectory.source} on suit "
                    f"profile '{profile.name}'", err=True)
         recording = simulate(trajectory, profile, seed, effects=profile.effects.without(*without))
+    _carry_notices(recording, _mot_files(protocol))
     if recording.sensor_units == "mm":
         _warn_beyond_the_wire(recording)
     _write(out_path, recording)
+
+
+def _carry_notices(recording: Recording, mot_files: list[Path]) -> None:
+    """Store the license and source notes beside the real motion's .mot files in the
+    recording's metadata (their terms go with what derives from them, as on import), with a
+    warning line where none is found."""
+    from exohil.harness.cmd_import import notices_beside
+
+    for mot in mot_files:
+        notices = notices_beside(mot)
+        if not notices:
+            click.echo(f"warning: no LICENSE or SOURCE file beside {mot.name}: the recording "
+                       "names no license for its real motion", err=True)
+        for key, text in notices.items():
+            if recording.metadata.setdefault(key, text) != text:  # same name, other folder
+                recording.metadata[f"{key}@{mot.parent.name}"] = text
 
 
 def _warn_beyond_the_wire(recording: Recording) -> None:

@@ -468,3 +468,27 @@ def test_record_cut_of_an_imported_mot_cuts_its_motion_capture(tmp_path: Path) -
     assert result.exit_code == 0, result.output
     assert "2 of 3 mocap samples, 0.010 → 0.020 s after the first mocap sample" in result.output
     assert read_recording(part).mocap["shoulder"].t.tolist() == [0.01, 0.02]
+
+
+def test_simulated_real_motion_carries_the_notes_beside_its_mot(tmp_path: Path) -> None:
+    """`simulate --protocol mot:` derives a recording from licensed motion as `import mot`
+    does, but carried no license or source note (only `fixtures build` added them)."""
+    rows = "".join(f"{k / 100:.2f}\t0.1\t{0.2 + 0.3 * k / 200:.4f}\t0.3\n" for k in range(201))
+    motion = (MOT_TEXT.split("time\t")[0].replace("nRows=3", "nRows=201")
+              + "time\tplane_elv\tshoulder_elv\taxial_rot\n" + rows)
+    licensed, bare = tmp_path / "licensed", tmp_path / "bare"
+    for folder in (licensed, bare):
+        folder.mkdir()
+        (folder / "trial.mot").write_text(motion)
+    (licensed / "LICENSE_data").write_text("CC BY 4.0\n")
+    (licensed / "SOURCE.md").write_text("# Where it comes from\n")
+    result = run("simulate", "--protocol", f"mot:{licensed / 'trial.mot'}", "--out",
+                 tmp_path / "a.mcap")
+    assert result.exit_code == 0 and "warning: no LICENSE" not in result.output, result.output
+    metadata = read_recording(tmp_path / "a.mcap").metadata
+    assert metadata["notice.LICENSE_data"] == "CC BY 4.0\n"
+    assert metadata["notice.SOURCE.md"] == "# Where it comes from\n"
+    result = run("simulate", "--protocol", f"mot:{bare / 'trial.mot'}", "--out",
+                 tmp_path / "b.mcap")
+    assert result.exit_code == 0, result.output
+    assert "warning: no LICENSE or SOURCE file beside trial.mot" in result.output
