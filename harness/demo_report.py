@@ -1,7 +1,8 @@
 """The report folder of a bench session (``exohil demo --out``, ``exohil run --out``).
 
 * ``summary.json``: :func:`~exohil.harness.session_report.summary`;
-* ``summary.md``: every measurement as a table, and the list of files;
+* ``summary.md``: the session (machine, device log, why it ended early, warnings), every
+  measurement as a table, and the list of files;
 * ``angles.png``: estimated and true angles (deg) over device time (s), shaded where the true
   elevation is below 20° (θ undefined with the arm hanging), as in the paper's figure;
 * ``latency.png``: per-stage latency histograms (ms, log scale) on one monotonic clock, of
@@ -207,6 +208,13 @@ def plot_session_hysteresis(result: SessionResult) -> Figure | None:
     return figure
 
 
+#: The summary's notes on what its figures cover, with the label summary.md gives each.
+_NOTES = (("device_lost", "device lost (the run ended before its time)"),
+          ("ended_early", "ended early"),
+          ("training_coverage_warning", "warning"), ("device_rate_warning", "warning"),
+          ("sensor_rate_warning", "warning"))
+
+
 def summary_markdown(s: dict[str, Any], files: Files) -> str:
     """``summary.md``: the session, every measurement, and where each file is."""
     lines = [f"# exohil session report ({s['finished_at']})", "",
@@ -214,7 +222,13 @@ def summary_markdown(s: dict[str, Any], files: Files) -> str:
              f"{s['backend']})", "- frames: " + ", ".join(f"{k.replace('_', ' ')} {v}"
                                               for k, v in s["frames"].items()),
              f"- wall time: {s['wall_s']} s",
-             "", "| measurement | value | unit | verdict | note |", "|---|---|---|---|---|"]
+             f"- machine (every time measured on it): {s['machine']}"]
+    if s["device_log"] is not None:
+        lines.append("- device log: " + (", ".join(f"{k} {v}" for k, v in
+                                                  sorted(s["device_log"].items()))
+                                        or "nothing injected or lost"))
+    lines += [f"- {label}: {s[key]}" for key, label in _NOTES if s.get(key)]
+    lines += ["", "| measurement | value | unit | verdict | note |", "|---|---|---|---|---|"]
     for m in s["measurements"]:
         value = "–" if m["value"] is None else f"{m['value']:.4g}"
         lines.append(f"| {m['name']} | {value} | {m['unit']} | {m['verdict']} | "

@@ -427,3 +427,31 @@ def test_a_run_stopped_with_ctrl_c_writes_a_report_that_says_it_ended_early(tmp_
     assert s["ended_early"].startswith("stopped on request (Ctrl-C or SIGTERM)"), s
     assert f"{s['frames']['received']} frames" in s["ended_early"]
     assert f"note        {s['ended_early']}" in stdout
+    assert s["ended_early"] in (out / "summary.md").read_text()
+
+
+def test_summary_md_says_what_summary_json_says_about_the_session():
+    """summary.md gave the measurements without the machine they were timed on, the device's
+    fault log, a device lost, a run that ended early or the warnings: a reader of it alone
+    took a cut-short run on a loaded laptop for a whole one on the bench."""
+    from exohil.harness.demo_report import summary_markdown
+
+    s = {"finished_at": "2026-12-03T18:00:00+0000", "target": "t", "model": "m",
+         "model_kind": "ennet", "backend": "numpy", "wall_s": 4.8, "measurements": [],
+         "frames": {"sent": 10, "received": 9, "dropped": 1, "crc_errors": 0},
+         "machine": "Linux; AMD EPYC; 2 cores; python 3.11.7",
+         "device_log": {"drop": 1, "not_read": 3},
+         "device_lost": "the device stopped sending", "ended_early": "stopped on request",
+         "training_coverage_warning": "readings outside training", "device_rate_warning": None,
+         "sensor_rate_warning": "another rate"}
+    md = summary_markdown(s, [])
+    for said in ("Linux; AMD EPYC; 2 cores; python 3.11.7", "drop 1, not_read 3",
+                 "the device stopped sending", "ended early: stopped on request",
+                 "warning: readings outside training", "warning: another rate"):
+        assert said in md, said
+    assert "None" not in md
+    s.update(device_log={}, device_lost=None, ended_early=None, training_coverage_warning=None,
+             sensor_rate_warning=None)
+    md = summary_markdown(s, [])
+    assert "nothing injected or lost" in md
+    assert "ended early" not in md and "warning" not in md and "device lost" not in md
