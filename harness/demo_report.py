@@ -23,8 +23,9 @@ A run keeps per-frame rows only for its first and last frames (about a minute ea
 ``latency.png`` cover every frame. ``exohil demo --record`` writes every frame as it goes.
 
 Every file is written under a temporary name and renamed when complete. A report written
-into a folder that holds an earlier one never mixes the two: the pictures this run does not
-draw (``hysteresis.png``, ``arm.gif``, ``arm_NNNNN.png`` by those exact names) are removed;
+into a folder that holds an earlier one never mixes the two: the earlier report's files
+(:func:`report_files_in`: the names above, ``arm_NNNNN.png`` included) are removed before
+this run writes any, so one cut short (killed while drawing) leaves only this run's files;
 nothing else in the folder is touched. Matplotlib draws with the Agg backend (files only).
 """
 
@@ -245,6 +246,10 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
 
     Returns (label, path) of every file written, in order, and notes on what was left out."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    # an earlier report's files, first: one left beside this run's would pass for this run's,
+    # and a report cut short (killed while drawing) would mix the two
+    for earlier in report_files_in(out_dir):
+        earlier.unlink()
     est = result.model.estimator
     files: Files = []
     notes: list[str] = []
@@ -270,11 +275,6 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     md = out_dir / "summary.md"
     js = out_dir / "summary.json"
     listed = [*files, ("summary table", md), ("summary JSON", js)]
-    # an earlier report's pictures that this run did not draw would pass for this run's
-    written = {path.name for _, path in listed}
-    for stale in report_files_in(out_dir):
-        if stale.name not in written:
-            stale.unlink()
     write_text(md, summary_markdown(s, listed))
     write_text(js, strict_json.dumps(s, indent=2) + "\n")
     return listed, notes

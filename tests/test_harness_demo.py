@@ -132,6 +132,30 @@ def test_a_report_into_an_earlier_reports_folder_leaves_none_of_its_pictures(tmp
     assert "arm.gif" not in listed and "arm_0" not in listed
 
 
+def test_a_report_cut_short_leaves_no_file_of_an_earlier_one(tmp_path, monkeypatch):
+    """A report that stopped while drawing (killed, a full disk) left its new run.mcap beside
+    the earlier report's summary.json, summary.md and pictures, which then described a run
+    that was not the one in the folder."""
+    from exohil.harness import demo_report
+
+    def full_disk(result):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(demo_report, "plot_latency", full_disk)
+    out = tmp_path / "report"
+    out.mkdir()
+    earlier = ["summary.json", "summary.md", "latency.png", "hysteresis.png", "arm.gif",
+               "arm_00000.png"]
+    for name in [*earlier, "notes.txt"]:
+        (out / name).write_bytes(b"earlier")
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--no-faults", "--sink",
+                                       "none", "--out", str(out)])
+    assert result.exit_code == 1 and "No space left on device" in result.output, result.output
+    left = {p.name for p in out.iterdir()}
+    assert not left & set(earlier), left
+    assert (out / "notes.txt").read_bytes() == b"earlier"
+
+
 def test_every_robot_target_keeps_its_statistics_in_the_summary(tmp_path):
     """`--sink` is repeatable; two targets of one class used to share one key of
     teleop.robots, so the summary kept only the last one's statistics."""
