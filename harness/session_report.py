@@ -21,7 +21,8 @@ module lays them out as the summary JSON and the lines a person reads.
      one (seq span / device-time span, harness/device_rate.py; null under 1 s of frames),
      "device_rate_warning": text or null (they differ by more than 1 %),
      "measurements": [Measurement.to_dict(), ...],
-     "model", "model_sha256", "backend", "target", "machine", "finished_at"}
+     "model", "model_sha256", "backend", "target", "machine",
+     "finished_at": local time with its UTC offset (ISO 8601)}
 
 ``teleop.robots`` holds every robot target's ``summary()`` (:func:`robot_summaries`), named by
 its class (``MujocoNao``, ``UdpJointTarget``, ...); when several targets share a class (``--sink
@@ -31,7 +32,7 @@ udp:A --sink udp:B``) each is named ``Class[k]``, k from 0 in the order the sink
 from __future__ import annotations
 
 import math
-import time
+from datetime import datetime
 from typing import Any
 
 from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
@@ -128,7 +129,7 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
         "wall_s": round(run.wall_s, 3),
         "measurements": [m.to_dict() for m in measurements],
         "machine": machine(),
-        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "finished_at": datetime.now().astimezone().isoformat(timespec="seconds"),
     }
 
 

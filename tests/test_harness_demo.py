@@ -479,3 +479,17 @@ def test_summary_md_says_what_summary_json_says_about_the_session():
     md = summary_markdown(s, [])
     assert "nothing injected or lost" in md
     assert "ended early" not in md and "warning" not in md and "device lost" not in md
+
+
+def test_the_report_says_when_it_finished_with_its_time_zone(tmp_path):
+    """finished_at was local time without an offset: the same text for runs hours apart on
+    machines in other zones."""
+    from datetime import datetime
+
+    out = tmp_path / "report"
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--sink", "none",
+                                       "--no-faults", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    finished = json.loads((out / "summary.json").read_text())["finished_at"]
+    assert datetime.fromisoformat(finished).utcoffset() is not None, finished
+    assert f"# exohil session report ({finished})" in (out / "summary.md").read_text()
