@@ -220,8 +220,9 @@ def summary_markdown(s: dict[str, Any], files: Files) -> str:
     """``summary.md``: the session, every measurement, and where each file is."""
     lines = [f"# exohil session report ({s['finished_at']})", "",
              f"- target: {s['target']}", f"- model: {s['model']} ({s['model_kind']}, "
-             f"{s['backend']})", "- frames: " + ", ".join(f"{k.replace('_', ' ')} {v}"
-                                              for k, v in s["frames"].items()),
+             f"{s['backend']})", "- frames: " + ", ".join(
+                 f"{k.replace('_', ' ')} {'unknown (no device log)' if v is None else v}"
+                 for k, v in s["frames"].items()),
              f"- wall time: {s['wall_s']} s",
              f"- machine (every time measured on it): {s['machine']}"]
     if s["device_log"] is not None:

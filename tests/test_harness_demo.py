@@ -478,6 +478,9 @@ def test_summary_md_says_what_summary_json_says_about_the_session():
              sensor_rate_warning=None)
     md = summary_markdown(s, [])
     assert "nothing injected or lost" in md
+    s.update(frames={**s["frames"], "sent": None}, device_log=None)  # a device without a log
+    md = summary_markdown(s, [])
+    assert "sent unknown (no device log)" in md and "None" not in md
     assert "ended early" not in md and "warning" not in md and "device lost" not in md
 
 
