@@ -6,7 +6,7 @@
 * ``angles.png``: estimated and true angles (deg) over device time (s), shaded where the true
   elevation is below 20° (θ undefined with the arm hanging), as in the paper's figure;
 * ``latency.png``: per-stage latency histograms (ms, log scale) on one monotonic clock, of
-  every frame (the run's own fixed-size histograms);
+  every frame (the run's own fixed-size histograms), titled with the machine they ran on;
 * ``hysteresis.png``: the sensor most correlated with the true elevation against it (mm vs
   deg), coloured by the elevation's direction of motion;
 * ``arm.gif``, ``arm_0000k.png``: the simulated NAO (MuJoCo) beside the true human upper arm,
@@ -40,6 +40,7 @@ import numpy as np
 
 from exohil.formats import strict_json
 from exohil.formats.atomic import write_text, write_with
+from exohil.harness.machine import machine
 from exohil.harness.pipeline import PipelineRun
 from exohil.harness.recording_plots import motion_direction
 from exohil.harness.robot_stats import LogHistogram
@@ -170,7 +171,8 @@ def plot_latency(result: SessionResult) -> Figure:
         ax.tick_params(labelsize=7)
     for ax in axes[panels:]:
         ax.set_visible(False)
-    figure.suptitle("per-stage latency, one monotonic clock (perf_counter)", fontsize=9)
+    figure.suptitle(f"per-stage latency, one monotonic clock (perf_counter)\non {machine()}",
+                    fontsize=9)
     return figure
 
 

@@ -496,3 +496,24 @@ def test_the_report_says_when_it_finished_with_its_time_zone(tmp_path):
     finished = json.loads((out / "summary.json").read_text())["finished_at"]
     assert datetime.fromisoformat(finished).utcoffset() is not None, finished
     assert f"# exohil session report ({finished})" in (out / "summary.md").read_text()
+
+
+def test_the_latency_picture_names_the_machine_it_timed(tmp_path, monkeypatch):
+    """latency.png gave milliseconds with no word of the machine that took them; summary.json
+    alone named it."""
+    from exohil.harness import demo_report
+
+    titles = {}
+    save = demo_report._save
+
+    def keep_title(figure, path):
+        titles[path.name] = figure.get_suptitle()
+        return save(figure, path)
+
+    monkeypatch.setattr(demo_report, "_save", keep_title)
+    out = tmp_path / "report"
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--sink", "none",
+                                       "--no-faults", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    machine = json.loads((out / "summary.json").read_text())["machine"]
+    assert f"on {machine}" in titles["latency.png"], titles
