@@ -49,6 +49,9 @@ from exohil.harness.session import (
     teleop_measurements,
 )
 
+#: The link measurements that reconcile the host's frames with an emulator's fault log.
+RECONCILED = ("link.lost_on_host", "link.bad_frames_delivered", "link.dropped_unexplained")
+
 
 def session_measurements(result: SessionResult) -> list[Measurement]:
     """Every measurement of a session, without limits (the demo and ``run`` report them)."""
@@ -152,6 +155,12 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
     if s["device_log"] is not None:
         log = ", ".join(f"{k} {v}" for k, v in sorted(s["device_log"].items()))
         lines.append(f"device log  {log or 'nothing injected or lost'}")
+    reconciled = {m["name"].removeprefix("link."): m["value"] for m in s["measurements"]
+                  if m["name"] in RECONCILED and m["value"] is not None}
+    if reconciled:
+        lines.append("reconciled  with the device log: " + ", ".join(
+            f"{name.replace('_', ' ')} {value:g}" for name, value in reconciled.items())
+            + " (each 0 when every frame is accounted for)")
     for stage, stats in s["latency_ms"].items():
         if stats["p50"] is None:
             continue

@@ -82,6 +82,9 @@ def test_demo_streams_the_fixture_through_the_whole_chain(tmp_path):
     # the arm follows the true pose: half the time within 10° (out-of-reach poses aside)
     assert s["teleop"]["robot_axis_error_deg"]["p50"] < 10
     assert "accuracy" in result.output and "end_to_end" in result.output
+    # the console reconciles the host's frames with the device's log, as the README says
+    assert ("reconciled  with the device log: lost on host 0, bad frames delivered 0, "
+            "dropped unexplained 0") in result.output
 
     from exohil.formats.recording_reader import read_recording
 
