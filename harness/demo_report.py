@@ -46,6 +46,7 @@ from exohil.harness.recording_plots import motion_direction
 from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.run_recording import write_run_recording
 from exohil.harness.session import SessionResult, latency_histograms
+from exohil.harness.session_report import host_load_text
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -226,7 +227,7 @@ def summary_markdown(s: dict[str, Any], files: Files) -> str:
                  f"{k.replace('_', ' ')} {'unknown (no device log)' if v is None else v}"
                  for k, v in s["frames"].items()),
              f"- wall time: {s['wall_s']} s",
-             f"- machine (every time measured on it): {s['machine']}"]
+             f"- machine (every time measured on it): {host_load_text(s)}"]
     if s["device_log"] is not None:
         lines.append("- device log: " + (", ".join(f"{k} {v}" for k, v in
                                                   sorted(s["device_log"].items()))

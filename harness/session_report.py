@@ -21,6 +21,8 @@ module lays them out as the summary JSON and the lines a person reads.
      one (seq span / device-time span, harness/device_rate.py; null under 1 s of frames),
      "device_rate_warning": text or null (they differ by more than 1 %),
      "measurements": [Measurement.to_dict(), ...],
+     "host_load": {"cpu_pressure", "cpu_steal"} (shares 0..1, null where the kernel does not
+     say, while the session streamed: harness/machine.py ``HostLoad``),
      "model", "model_sha256", "backend", "target", "machine",
      "finished_at": local time with its UTC offset (ISO 8601)}
 
@@ -38,7 +40,7 @@ from typing import Any
 from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
 from exohil.formats.measurement import Measurement
 from exohil.harness.device_rate import device_rate_warning
-from exohil.harness.machine import machine
+from exohil.harness.machine import HostLoad, machine
 from exohil.harness.session import (
     SessionResult,
     latency_measurements,
@@ -130,10 +132,16 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
             "robots": robot_summaries(result.robots),
         },
         "wall_s": round(run.wall_s, 3),
+        "host_load": vars(result.host_load),
         "measurements": [m.to_dict() for m in measurements],
         "machine": machine(),
         "finished_at": datetime.now().astimezone().isoformat(timespec="seconds"),
     }
+
+
+def host_load_text(s: dict[str, Any]) -> str:
+    """The machine's load while the session streamed, which its latencies depend on."""
+    return f"{HostLoad(**s['host_load']).describe()} while streaming, on {s['machine']}"
 
 
 def summary_lines(s: dict[str, Any]) -> list[str]:
@@ -161,6 +169,7 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
         lines.append("reconciled  with the device log: " + ", ".join(
             f"{name.replace('_', ' ')} {value:g}" for name, value in reconciled.items())
             + " (each 0 when every frame is accounted for)")
+    lines.append(f"host        {host_load_text(s)}")
     for stage, stats in s["latency_ms"].items():
         if stats["p50"] is None:
             continue

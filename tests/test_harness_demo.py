@@ -82,6 +82,9 @@ def test_demo_streams_the_fixture_through_the_whole_chain(tmp_path):
     # the arm follows the true pose: half the time within 10° (out-of-reach poses aside)
     assert s["teleop"]["robot_axis_error_deg"]["p50"] < 10
     assert "accuracy" in result.output and "end_to_end" in result.output
+    # the latencies come with the machine and how loaded it was while they were taken
+    assert set(s["host_load"]) == {"cpu_pressure", "cpu_steal"}
+    assert f"while streaming, on {s['machine']}" in result.output
     # the console reconciles the host's frames with the device's log, as the README says
     assert ("reconciled  with the device log: lost on host 0, bad frames delivered 0, "
             "dropped unexplained 0") in result.output
@@ -467,12 +470,14 @@ def test_summary_md_says_what_summary_json_says_about_the_session():
          "model_kind": "ennet", "backend": "numpy", "wall_s": 4.8, "measurements": [],
          "frames": {"sent": 10, "received": 9, "dropped": 1, "crc_errors": 0},
          "machine": "Linux; AMD EPYC; 2 cores; python 3.11.7",
+         "host_load": {"cpu_pressure": 0.42, "cpu_steal": None},
          "device_log": {"drop": 1, "not_read": 3},
          "device_lost": "the device stopped sending", "ended_early": "stopped on request",
          "training_coverage_warning": "readings outside training", "device_rate_warning": None,
          "sensor_rate_warning": "another rate"}
     md = summary_markdown(s, [])
-    for said in ("Linux; AMD EPYC; 2 cores; python 3.11.7", "drop 1, not_read 3",
+    for said in ("CPU pressure 42 %, steal unknown while streaming, on Linux; AMD EPYC; 2 "
+                 "cores; python 3.11.7", "drop 1, not_read 3",
                  "the device stopped sending", "ended early: stopped on request",
                  "warning: readings outside training", "warning: another rate"):
         assert said in md, said
