@@ -63,8 +63,8 @@ DEFAULT_ROBOTS = ("mujoco",)
               help="Also write the summary (summary.json layout) here.")
 @click.option("--out", "out_dir", type=OutputDir(), default=DEFAULT_OUT, show_default=True,
               help="Report folder: summary.json, summary.md, angles/latency/hysteresis PNGs, "
-                   "arm.gif and arm_NNNNN.png, run.mcap; those pictures left by an earlier "
-                   "report that this run does not draw are removed.")
+                   "arm.gif and arm_NNNNN.png, run.mcap; an earlier report's files there are "
+                   "removed first, so the two never mix.")
 @click.option("--sink", "sinks", type=Robot(), multiple=True,
               help="Robot the commands go to (repeatable): mujoco (NAO's arms in MuJoCo), "
                    "simulated, udp:HOST:PORT or none [default: the bench's robots with "

@@ -1,11 +1,12 @@
 """The report folder of a bench session (``exohil demo --out``, ``exohil run --out``).
 
 * ``summary.json``: :func:`~exohil.harness.session_report.summary`;
-* ``summary.md``: every measurement as a table, and the list of files;
+* ``summary.md``: the session (machine, device log, why it ended early, warnings), every
+  measurement as a table, and the list of files;
 * ``angles.png``: estimated and true angles (deg) over device time (s), shaded where the true
   elevation is below 20° (θ undefined with the arm hanging), as in the paper's figure;
 * ``latency.png``: per-stage latency histograms (ms, log scale) on one monotonic clock, of
-  every frame (the run's own fixed-size histograms);
+  every frame (the run's own fixed-size histograms), titled with the machine they ran on;
 * ``hysteresis.png``: the sensor most correlated with the true elevation against it (mm vs
   deg), coloured by the elevation's direction of motion;
 * ``arm.gif``, ``arm_0000k.png``: the simulated NAO (MuJoCo) beside the true human upper arm,
@@ -22,8 +23,9 @@ A run keeps per-frame rows only for its first and last frames (about a minute ea
 ``latency.png`` cover every frame. ``exohil demo --record`` writes every frame as it goes.
 
 Every file is written under a temporary name and renamed when complete. A report written
-into a folder that holds an earlier one never mixes the two: the pictures this run does not
-draw (``hysteresis.png``, ``arm.gif``, ``arm_NNNNN.png`` by those exact names) are removed;
+into a folder that holds an earlier one never mixes the two: the earlier report's files
+(:func:`report_files_in`: the names above, ``arm_NNNNN.png`` included) are removed before
+this run writes any, so one cut short (killed while drawing) leaves only this run's files;
 nothing else in the folder is touched. Matplotlib draws with the Agg backend (files only).
 """
 
@@ -38,11 +40,13 @@ import numpy as np
 
 from exohil.formats import strict_json
 from exohil.formats.atomic import write_text, write_with
+from exohil.harness.machine import machine
 from exohil.harness.pipeline import PipelineRun
 from exohil.harness.recording_plots import motion_direction
 from exohil.harness.robot_stats import LogHistogram
 from exohil.harness.run_recording import write_run_recording
 from exohil.harness.session import SessionResult, latency_histograms
+from exohil.harness.session_report import host_load_text
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -168,7 +172,8 @@ def plot_latency(result: SessionResult) -> Figure:
         ax.tick_params(labelsize=7)
     for ax in axes[panels:]:
         ax.set_visible(False)
-    figure.suptitle("per-stage latency, one monotonic clock (perf_counter)", fontsize=9)
+    figure.suptitle(f"per-stage latency, one monotonic clock (perf_counter)\non {machine()}",
+                    fontsize=9)
     return figure
 
 
@@ -207,14 +212,28 @@ def plot_session_hysteresis(result: SessionResult) -> Figure | None:
     return figure
 
 
+#: The summary's notes on what its figures cover, with the label summary.md gives each.
+_NOTES = (("device_lost", "device lost (the run ended before its time)"),
+          ("ended_early", "ended early"),
+          ("training_coverage_warning", "warning"), ("device_rate_warning", "warning"),
+          ("sensor_rate_warning", "warning"))
+
+
 def summary_markdown(s: dict[str, Any], files: Files) -> str:
     """``summary.md``: the session, every measurement, and where each file is."""
     lines = [f"# exohil session report ({s['finished_at']})", "",
              f"- target: {s['target']}", f"- model: {s['model']} ({s['model_kind']}, "
-             f"{s['backend']})", "- frames: " + ", ".join(f"{k.replace('_', ' ')} {v}"
-                                              for k, v in s["frames"].items()),
+             f"{s['backend']})", "- frames: " + ", ".join(
+                 f"{k.replace('_', ' ')} {'unknown (no device log)' if v is None else v}"
+                 for k, v in s["frames"].items()),
              f"- wall time: {s['wall_s']} s",
-             "", "| measurement | value | unit | verdict | note |", "|---|---|---|---|---|"]
+             f"- machine (every time measured on it): {host_load_text(s)}"]
+    if s["device_log"] is not None:
+        lines.append("- device log: " + (", ".join(f"{k} {v}" for k, v in
+                                                  sorted(s["device_log"].items()))
+                                        or "nothing injected or lost"))
+    lines += [f"- {label}: {s[key]}" for key, label in _NOTES if s.get(key)]
+    lines += ["", "| measurement | value | unit | verdict | note |", "|---|---|---|---|---|"]
     for m in s["measurements"]:
         value = "–" if m["value"] is None else f"{m['value']:.4g}"
         lines.append(f"| {m['name']} | {value} | {m['unit']} | {m['verdict']} | "
@@ -231,6 +250,10 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
 
     Returns (label, path) of every file written, in order, and notes on what was left out."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    # an earlier report's files, first: one left beside this run's would pass for this run's,
+    # and a report cut short (killed while drawing) would mix the two
+    for earlier in report_files_in(out_dir):
+        earlier.unlink()
     est = result.model.estimator
     files: Files = []
     notes: list[str] = []
@@ -256,11 +279,6 @@ def write_report(result: SessionResult, s: dict[str, Any], out_dir: Path) -> tup
     md = out_dir / "summary.md"
     js = out_dir / "summary.json"
     listed = [*files, ("summary table", md), ("summary JSON", js)]
-    # an earlier report's pictures that this run did not draw would pass for this run's
-    written = {path.name for _, path in listed}
-    for stale in report_files_in(out_dir):
-        if stale.name not in written:
-            stale.unlink()
     write_text(md, summary_markdown(s, listed))
     write_text(js, strict_json.dumps(s, indent=2) + "\n")
     return listed, notes

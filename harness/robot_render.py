@@ -96,11 +96,13 @@ class _Figure:
     def __init__(self, dpi: int) -> None:
         from matplotlib.figure import Figure
 
-        self.fig = Figure(figsize=(6.4, 3.6), dpi=dpi)
+        self.fig = Figure(figsize=(6.4, 3.6), dpi=dpi, layout="constrained")
         self.axes = self.fig.subplots(1, 2)
         self.lines = []
-        for ax, (title, _, _) in zip(self.axes, _VIEWS, strict=True):
+        for ax, (title, i, j) in zip(self.axes, _VIEWS, strict=True):
             ax.set_title(title, fontsize=9)
+            ax.set_xlabel(f"{'XYZ'[i]} (m)", fontsize=7)
+            ax.set_ylabel(f"{'XYZ'[j]} (m)", fontsize=7)
             ax.set_xlim(-_LIMIT_M, _LIMIT_M)
             ax.set_ylim(-_LIMIT_M, _LIMIT_M)
             ax.set_aspect("equal")
@@ -132,7 +134,7 @@ class _Figure:
             body.set_data(stick[:, i], stick[:, j])
             robot.set_data(arm[:, i], arm[:, j])
             line.set_data(human[:, i], human[:, j])
-        text = f"t = {sample.t:.2f} s, {sample.side} arm"
+        text = f"device time {sample.t:.2f} s, {sample.side} arm"
         if sample.robot_axis is not None:
             a = np.asarray(sample.robot_axis, dtype=float)
             error = math.degrees(math.atan2(np.linalg.norm(np.cross(a, humerus)),

@@ -396,7 +396,8 @@ class SessionResult:
     coverage: CoverageTally | None = None
     #: the device's nominal frame rate (:func:`~exohil.harness.bench.device_rate_hz`), Hz
     sensor_rate_hz: float = DEFAULT_SENSOR_RATE_HZ
-    #: why an emulator streamed less than the seconds asked for (its recording ended), or None
+    #: why the run streamed less than it was asked to: stopped on request (``stop``, e.g.
+    #: Ctrl-C), or an emulator's recording that ended before the seconds asked for; or None
     ended_early: str | None = None
 
     @property
@@ -420,7 +421,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     a reference, until the device's clock passes the reference's end: an outage shorter than
     ``DEVICE_TIMEOUT_S`` is ridden out, and a device that stops before that end is
     ``device_lost``). Setting ``stop`` ends any run early, and the result covers what was
-    processed. ``keep_frames`` = (first, last)
+    processed; its ``ended_early`` says so. ``keep_frames`` = (first, last)
     sets how many per-frame rows the run keeps (default: the pipeline's); every figure covers
     every frame regardless. ``reference``: the bench's reference recording when the caller
     has already read it (else it is read here).
@@ -502,6 +503,7 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 emulator = opened.emulator
                 run = pipeline.run(duration_s=limit, stop=stop, progress=progress,
                                    source_done=lambda: emulator.finished)
+                stopped = stop is not None and stop.is_set()
             else:
                 end, wall = None, seconds
                 if seconds is None and reference is not None and len(reference.sensors):
@@ -514,8 +516,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 run = pipeline.run(duration_s=wall, stop=stop, progress=progress,
                                    until_device_time_s=end,
                                    source_done=lambda: not source.alive)
-                short = _short_of_reference(run, end,
-                                            stopped=stop is not None and stop.is_set())
+                stopped = stop is not None and stop.is_set()
+                short = _short_of_reference(run, end, stopped=stopped)
             device_lost = short
             if opened.source.device_timed_out:
                 device_lost = "; ".join(why for why in (
@@ -546,9 +548,20 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         angles = truth_at(reference, est, trace.device_time_s)
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
+    ended_early = "; ".join(why for why in (_stopped_early(run, stopped),
+                                            _recording_ended(config, reference, seconds)) if why)
     return SessionResult(config, model, run, truth, fault_log, seq0, clipped, host_load, robots,
                          trace, device_lost, scoring, link_tally, coverage, rate_hz,
-                         _recording_ended(config, reference, seconds))
+                         ended_early or None)
+
+
+def _stopped_early(run: PipelineRun, stopped: bool) -> str | None:
+    """What a run stopped on request (``stop`` set while it streamed) covers, or None."""
+    if not stopped:
+        return None
+    return (f"stopped on request (Ctrl-C or SIGTERM) at device time "
+            f"{run.last_device_time_s:.3f} s, after {run.frames} frames: every figure covers "
+            "only those")
 
 
 def _short_of_reference(run: PipelineRun, end: float | None, stopped: bool) -> str | None:

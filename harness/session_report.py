@@ -10,8 +10,8 @@ module lays them out as the summary JSON and the lines a person reads.
      "teleop": {"rmse_deg": {joint: deg}, "clamped_share",
                 "robot_tracking_deg": {"p50", "p99", "max"}, "robot_axis_error_deg": {...},
                 "robots": {name: summary}},
-     "device_lost": text or null, "ended_early": text or null (an emulator's recording
-     shorter than the seconds asked for),
+     "device_lost": text or null, "ended_early": text or null (a run stopped on request,
+     e.g. Ctrl-C, or an emulator's recording shorter than the seconds asked for),
      "device_log": {kind: count}, "values_clipped_to_wire_range": count,
      "training_coverage": {"frames", "outside_percent", "outside_bound_sigmas",
                            "extremes_sigmas": {sensor: [low, high]}},
@@ -21,7 +21,10 @@ module lays them out as the summary JSON and the lines a person reads.
      one (seq span / device-time span, harness/device_rate.py; null under 1 s of frames),
      "device_rate_warning": text or null (they differ by more than 1 %),
      "measurements": [Measurement.to_dict(), ...],
-     "model", "model_sha256", "backend", "target", "machine", "finished_at"}
+     "host_load": {"cpu_pressure", "cpu_steal"} (shares 0..1, null where the kernel does not
+     say, while the session streamed: harness/machine.py ``HostLoad``),
+     "model", "model_sha256", "backend", "target", "machine",
+     "finished_at": local time with its UTC offset (ISO 8601)}
 
 ``teleop.robots`` holds every robot target's ``summary()`` (:func:`robot_summaries`), named by
 its class (``MujocoNao``, ``UdpJointTarget``, ...); when several targets share a class (``--sink
@@ -31,13 +34,13 @@ udp:A --sink udp:B``) each is named ``Class[k]``, k from 0 in the order the sink
 from __future__ import annotations
 
 import math
-import time
+from datetime import datetime
 from typing import Any
 
 from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
 from exohil.formats.measurement import Measurement
 from exohil.harness.device_rate import device_rate_warning
-from exohil.harness.machine import machine
+from exohil.harness.machine import HostLoad, machine
 from exohil.harness.session import (
     SessionResult,
     latency_measurements,
@@ -47,6 +50,9 @@ from exohil.harness.session import (
     session_coverage,
     teleop_measurements,
 )
+
+#: The link measurements that reconcile the host's frames with an emulator's fault log.
+RECONCILED = ("link.lost_on_host", "link.bad_frames_delivered", "link.dropped_unexplained")
 
 
 def session_measurements(result: SessionResult) -> list[Measurement]:
@@ -126,10 +132,16 @@ def summary(result: SessionResult, measurements: list[Measurement]) -> dict[str,
             "robots": robot_summaries(result.robots),
         },
         "wall_s": round(run.wall_s, 3),
+        "host_load": vars(result.host_load),
         "measurements": [m.to_dict() for m in measurements],
         "machine": machine(),
-        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "finished_at": datetime.now().astimezone().isoformat(timespec="seconds"),
     }
+
+
+def host_load_text(s: dict[str, Any]) -> str:
+    """The machine's load while the session streamed, which its latencies depend on."""
+    return f"{HostLoad(**s['host_load']).describe()} while streaming, on {s['machine']}"
 
 
 def summary_lines(s: dict[str, Any]) -> list[str]:
@@ -151,6 +163,13 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
     if s["device_log"] is not None:
         log = ", ".join(f"{k} {v}" for k, v in sorted(s["device_log"].items()))
         lines.append(f"device log  {log or 'nothing injected or lost'}")
+    reconciled = {m["name"].removeprefix("link."): m["value"] for m in s["measurements"]
+                  if m["name"] in RECONCILED and m["value"] is not None}
+    if reconciled:
+        lines.append("reconciled  with the device log: " + ", ".join(
+            f"{name.replace('_', ' ')} {value:g}" for name, value in reconciled.items())
+            + " (each 0 when every frame is accounted for)")
+    lines.append(f"host        {host_load_text(s)}")
     for stage, stats in s["latency_ms"].items():
         if stats["p50"] is None:
             continue

@@ -3,6 +3,7 @@ and its report folder; `exohil run --out` against a separately started `exohil e
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from collections import Counter
@@ -81,6 +82,12 @@ def test_demo_streams_the_fixture_through_the_whole_chain(tmp_path):
     # the arm follows the true pose: half the time within 10° (out-of-reach poses aside)
     assert s["teleop"]["robot_axis_error_deg"]["p50"] < 10
     assert "accuracy" in result.output and "end_to_end" in result.output
+    # the latencies come with the machine and how loaded it was while they were taken
+    assert set(s["host_load"]) == {"cpu_pressure", "cpu_steal"}
+    assert f"while streaming, on {s['machine']}" in result.output
+    # the console reconciles the host's frames with the device's log, as the README says
+    assert ("reconciled  with the device log: lost on host 0, bad frames delivered 0, "
+            "dropped unexplained 0") in result.output
 
     from exohil.formats.recording_reader import read_recording
 
@@ -129,6 +136,30 @@ def test_a_report_into_an_earlier_reports_folder_leaves_none_of_its_pictures(tmp
     assert all((out / name).read_bytes() == b"earlier" for name in theirs)
     listed = (out / "summary.md").read_text()
     assert "arm.gif" not in listed and "arm_0" not in listed
+
+
+def test_a_report_cut_short_leaves_no_file_of_an_earlier_one(tmp_path, monkeypatch):
+    """A report that stopped while drawing (killed, a full disk) left its new run.mcap beside
+    the earlier report's summary.json, summary.md and pictures, which then described a run
+    that was not the one in the folder."""
+    from exohil.harness import demo_report
+
+    def full_disk(result):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(demo_report, "plot_latency", full_disk)
+    out = tmp_path / "report"
+    out.mkdir()
+    earlier = ["summary.json", "summary.md", "latency.png", "hysteresis.png", "arm.gif",
+               "arm_00000.png"]
+    for name in [*earlier, "notes.txt"]:
+        (out / name).write_bytes(b"earlier")
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--no-faults", "--sink",
+                                       "none", "--out", str(out)])
+    assert result.exit_code == 1 and "No space left on device" in result.output, result.output
+    left = {p.name for p in out.iterdir()}
+    assert not left & set(earlier), left
+    assert (out / "notes.txt").read_bytes() == b"earlier"
 
 
 def test_every_robot_target_keeps_its_statistics_in_the_summary(tmp_path):
@@ -401,3 +432,96 @@ def test_a_refused_connection_is_named(tmp_path):
     assert result.exit_code == 1, result.output
     assert "no frame arrived from the serial device" in result.output
     assert "Connection refused" in result.output
+
+
+def test_a_run_stopped_with_ctrl_c_writes_a_report_that_says_it_ended_early(tmp_path):
+    """A demo or run stopped with Ctrl-C (SIGINT) mid-stream wrote a report whose summary,
+    console and summary.md read as those of a whole run: nothing said it ended early."""
+    out = tmp_path / "report"
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "exohil"), "demo", "--seconds",
+                             "30", "--sink", "none", "--no-faults", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stderr:  # the first status line: frames are streaming
+            if " frames " in line:
+                break
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert 0 < s["frames"]["received"] < 30 * 250
+    assert s["ended_early"].startswith("stopped on request (Ctrl-C or SIGTERM)"), s
+    assert f"{s['frames']['received']} frames" in s["ended_early"]
+    assert f"note        {s['ended_early']}" in stdout
+    assert s["ended_early"] in (out / "summary.md").read_text()
+
+
+def test_summary_md_says_what_summary_json_says_about_the_session():
+    """summary.md gave the measurements without the machine they were timed on, the device's
+    fault log, a device lost, a run that ended early or the warnings: a reader of it alone
+    took a cut-short run on a loaded laptop for a whole one on the bench."""
+    from exohil.harness.demo_report import summary_markdown
+
+    s = {"finished_at": "2026-12-03T18:00:00+0000", "target": "t", "model": "m",
+         "model_kind": "ennet", "backend": "numpy", "wall_s": 4.8, "measurements": [],
+         "frames": {"sent": 10, "received": 9, "dropped": 1, "crc_errors": 0},
+         "machine": "Linux; AMD EPYC; 2 cores; python 3.11.7",
+         "host_load": {"cpu_pressure": 0.42, "cpu_steal": None},
+         "device_log": {"drop": 1, "not_read": 3},
+         "device_lost": "the device stopped sending", "ended_early": "stopped on request",
+         "training_coverage_warning": "readings outside training", "device_rate_warning": None,
+         "sensor_rate_warning": "another rate"}
+    md = summary_markdown(s, [])
+    for said in ("CPU pressure 42 %, steal unknown while streaming, on Linux; AMD EPYC; 2 "
+                 "cores; python 3.11.7", "drop 1, not_read 3",
+                 "the device stopped sending", "ended early: stopped on request",
+                 "warning: readings outside training", "warning: another rate"):
+        assert said in md, said
+    assert "None" not in md
+    s.update(device_log={}, device_lost=None, ended_early=None, training_coverage_warning=None,
+             sensor_rate_warning=None)
+    md = summary_markdown(s, [])
+    assert "nothing injected or lost" in md
+    s.update(frames={**s["frames"], "sent": None}, device_log=None)  # a device without a log
+    md = summary_markdown(s, [])
+    assert "sent unknown (no device log)" in md and "None" not in md
+    assert "ended early" not in md and "warning" not in md and "device lost" not in md
+
+
+def test_the_report_says_when_it_finished_with_its_time_zone(tmp_path):
+    """finished_at was local time without an offset: the same text for runs hours apart on
+    machines in other zones."""
+    from datetime import datetime
+
+    out = tmp_path / "report"
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--sink", "none",
+                                       "--no-faults", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    finished = json.loads((out / "summary.json").read_text())["finished_at"]
+    assert datetime.fromisoformat(finished).utcoffset() is not None, finished
+    assert f"# exohil session report ({finished})" in (out / "summary.md").read_text()
+
+
+def test_the_latency_picture_names_the_machine_it_timed(tmp_path, monkeypatch):
+    """latency.png gave milliseconds with no word of the machine that took them; summary.json
+    alone named it."""
+    from exohil.harness import demo_report
+
+    titles = {}
+    save = demo_report._save
+
+    def keep_title(figure, path):
+        titles[path.name] = figure.get_suptitle()
+        return save(figure, path)
+
+    monkeypatch.setattr(demo_report, "_save", keep_title)
+    out = tmp_path / "report"
+    result = CliRunner().invoke(main, ["demo", "--seconds", "1", "--sink", "none",
+                                       "--no-faults", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    machine = json.loads((out / "summary.json").read_text())["machine"]
+    assert f"on {machine}" in titles["latency.png"], titles

@@ -95,3 +95,15 @@ def test_bad_input_is_a_clear_error(samples, tmp_path):
         render_arm_frames([not_unit], tmp_path)
     with pytest.raises(ValueError, match="side"):
         human_upper_arm_direction(0.0, 0.0, side="up")
+
+
+def test_the_pictures_state_their_units(samples):
+    """The stick figures had metre ticks with no unit, and 't = 0.10 s' with no clock."""
+    from exohil.harness.robot_render import _Figure
+
+    figure = _Figure(dpi=40)
+    figure.draw(samples[1])
+    front, side = figure.axes
+    assert (front.get_xlabel(), front.get_ylabel()) == ("Y (m)", "Z (m)")
+    assert (side.get_xlabel(), side.get_ylabel()) == ("X (m)", "Z (m)")
+    assert figure.title.get_text().startswith("device time 0.10 s, right arm")
