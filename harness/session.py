@@ -504,6 +504,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 run = pipeline.run(duration_s=limit, stop=stop, progress=progress,
                                    source_done=lambda: emulator.finished)
                 stopped = stop is not None and stop.is_set()
+                # a looped replay without seconds streams until stopped: that is its end
+                looped = isinstance(config.device, EmulatorDevice) and config.device.loop
+                early = stopped and (seconds is not None or not looped)
             else:
                 end, wall = None, seconds
                 if seconds is None and reference is not None and len(reference.sensors):
@@ -518,6 +521,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                                    source_done=lambda: not source.alive)
                 stopped = stop is not None and stop.is_set()
                 short = _short_of_reference(run, end, stopped=stopped)
+                # without seconds or a reference the run lasts until stopped: no early end
+                early = stopped and (seconds is not None or end is not None)
             device_lost = short
             if opened.source.device_timed_out:
                 device_lost = "; ".join(why for why in (
@@ -548,16 +553,17 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         angles = truth_at(reference, est, trace.device_time_s)
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
-    ended_early = "; ".join(why for why in (_stopped_early(run, stopped),
+    ended_early = "; ".join(why for why in (_stopped_early(run, early),
                                             _recording_ended(config, reference, seconds)) if why)
     return SessionResult(config, model, run, truth, fault_log, seq0, clipped, host_load, robots,
                          trace, device_lost, scoring, link_tally, coverage, rate_hz,
                          ended_early or None)
 
 
-def _stopped_early(run: PipelineRun, stopped: bool) -> str | None:
-    """What a run stopped on request (``stop`` set while it streamed) covers, or None."""
-    if not stopped:
+def _stopped_early(run: PipelineRun, early: bool) -> str | None:
+    """What a run stopped on request (``stop`` set while it streamed) before the end it was
+    given (seconds, a reference's end, an emulator's recording) covers, or None."""
+    if not early:
         return None
     return (f"stopped on request (Ctrl-C or SIGTERM) at device time "
             f"{run.last_device_time_s:.3f} s, after {run.frames} frames: every figure covers "

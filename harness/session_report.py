@@ -11,7 +11,8 @@ module lays them out as the summary JSON and the lines a person reads.
                 "robot_tracking_deg": {"p50", "p99", "max"}, "robot_axis_error_deg": {...},
                 "robots": {name: summary}},
      "device_lost": text or null, "ended_early": text or null (a run stopped on request,
-     e.g. Ctrl-C, or an emulator's recording shorter than the seconds asked for),
+     e.g. Ctrl-C, before the end it was given: its seconds, its reference's end or its
+     emulator's recording; or an emulator's recording shorter than the seconds asked for),
      "device_log": {kind: count}, "values_clipped_to_wire_range": count,
      "training_coverage": {"frames", "outside_percent", "outside_bound_sigmas",
                            "extremes_sigmas": {sensor: [low, high]}},
