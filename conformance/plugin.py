@@ -149,6 +149,19 @@ def _with_checks_not_run(run, results: list[CheckResult]) -> list[CheckResult]:
     return out + list(ran.values())
 
 
+def unmatched_limits(profile, check: str, measurements: list[Measurement]) -> list[str]:
+    """The profile's limits on members of ``check``'s families (``accuracy.rmse.*``: the
+    model's angles; ``latency.end_to_end.*``: p50, p99, max) that name none of
+    ``measurements``. A profile is loaded before the model is, so ``accuracy.rmse.elv_anlge``
+    or ``latency.end_to_end.p95`` pass the profile's vocabulary and would judge nothing,
+    leaving the measurement they meant without its limit."""
+    from exohil.conformance.profile import CHECKS
+
+    measured = {m.name for m in measurements}
+    return [limit for limit in profile.checks.get(check, {})
+            if limit not in CHECKS[check] and limit not in measured]
+
+
 @pytest.fixture(scope="session")
 def conformance_run(request: pytest.FixtureRequest):
     """The run under test (:class:`exohil.conformance.context.ConformanceRun`)."""
@@ -193,6 +206,13 @@ def check(request: pytest.FixtureRequest, conformance_run, record_property):
         for m in measurements:
             for key, value in m.junit_properties():
                 record_property(key, value)
+        unmatched = unmatched_limits(profile, name, measurements)
+        if unmatched:
+            message = (f"profile {profile.name} limits {', '.join(unmatched)}, which this check "
+                       f"did not measure (it measured {', '.join(m.name for m in measurements)}"
+                       "): a misspelt limit judges nothing")
+            done(Verdict.FAIL, message, measurements)
+            pytest.fail(f"{name}: {message}", pytrace=False)
         failed = [m for m in measurements if m.failed]
         judged = [m for m in measurements if m.limit is not None]
         if failed:  # a note the measurement before gave (the frames scored) is not repeated

@@ -70,7 +70,9 @@ CHECKS: dict[str, dict[str, str]] = {
                     "conversions.max_error": "deg"},
     "teleop": {"teleop.rmse.*": "deg", "teleop.clamped_share": "ratio",
                "teleop.mapping_error": "deg"},
-    "regression": {"regression.accuracy.*": "deg", "regression.latency_p99_ratio": "x"},
+    "regression": {"regression.accuracy.rmse.*": "deg",
+                   "regression.accuracy.direction_rmse": "deg",
+                   "regression.latency_p99_ratio": "x"},
 }
 #: Tolerance of ``teleop.mapping_error``, deg: float round-off only (see BUILTIN_LIMITS).
 TELEOP_MAPPING_TOLERANCE_DEG = 1e-6

@@ -141,12 +141,26 @@ def test_the_ci_gate_limits_change_only_with_this_test():
     ('checks = "accuracy"\n', r"checks must be a table \(\[checks\]\), got str"),
     ('settings = 3\n', r"settings must be a table"),
     ('[checks.conversions]\n"conversions.failures" = "5 .. 1 count"\n', "above its high end"),
+    # regression compares the accuracy figures in degrees only: never frames_scored
+    ('[checks.regression]\n"regression.accuracy.frames_scored" = "< 1 count"\n',
+     "has no measurement"),
 ])
 def test_bad_profiles_are_clear_errors(tmp_path, text, message):
     path = tmp_path / "p.toml"
     path.write_text(text, encoding="utf-8")
     with pytest.raises(ProfileError, match=message):
         load_profile(str(path))
+
+
+def test_a_profile_may_limit_each_regression_figure_by_its_name(tmp_path):
+    """The regression check measures ``regression.accuracy.rmse.<angle>``; the profile
+    refused that name (its family had one dot fewer)."""
+    path = tmp_path / "p.toml"
+    path.write_text('[checks.regression]\n"regression.accuracy.rmse.elv_angle" = "<= 0.1 deg"\n'
+                    '"regression.accuracy.direction_rmse" = "<= 0.2 deg"\n', encoding="utf-8")
+    limits = load_profile(str(path)).limits("regression")
+    assert limits["regression.accuracy.rmse.elv_angle"].high == 0.1
+    assert limits["regression.accuracy.direction_rmse"].high == 0.2
 
 
 def test_limits_parse():
@@ -234,6 +248,26 @@ def test_a_subset_of_the_checks_never_passes_the_profile(tmp_path, fast_profile)
                                  f"{', '.join(left_out)}; the 1 that ran passed")
     assert "| accuracy | skip | — | — | — | not run: left out" in \
         (tmp_path / "summary.md").read_text()
+
+
+def test_a_misspelt_family_limit_fails_its_check(tmp_path):
+    """``accuracy.rmse.elv_anlge`` and ``latency.end_to_end.p95`` pass the profile's
+    vocabulary (the model's angles are not known when it loads; p95 fell in the family) and
+    judged nothing: the accuracy check passed with θ unlimited."""
+    profile = tmp_path / "typo.toml"
+    profile.write_text(FAST_PROFILE.replace('"accuracy.rmse.elv_angle"',
+                                            '"accuracy.rmse.elv_anlge"')
+                       .replace("realtime_seconds = 3", "realtime_seconds = 1")
+                       .replace("[checks.latency]",
+                                '[checks.latency]\n"latency.end_to_end.p95" = "< 12 ms"'),
+                       encoding="utf-8")
+    code, output, report = conform(tmp_path / "out", profile, "-k", "accuracy or latency")
+    checks = {c["name"]: c for c in report["checks"]}
+    assert code == 1 and checks["accuracy"]["verdict"] == checks["latency"]["verdict"] == "fail"
+    assert "limits accuracy.rmse.elv_anlge, which this check did not measure" in \
+        checks["accuracy"]["message"]
+    assert "limits latency.end_to_end.p95, which" in checks["latency"]["message"]
+    assert "accuracy.rmse.elv_anlge" in last_line(output)
 
 
 def test_a_baseline_enables_the_regression_check(tmp_path, fast_profile):
