@@ -55,13 +55,15 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--exohil-profile", default="default",
                     help="Profile name (default, bench, ci) or a .toml file.")
     group.addoption("--exohil-baseline", default=None,
-                    help="Baseline checkpoint for the regression check.")
+                    help="Baseline for the regression check: a checkpoint or an earlier "
+                         "run's conformance.json.")
     group.addoption("--exohil-reference", default=None,
                     help="Ground truth recording for a serial device (aligned by device time).")
     group.addoption("--exohil-backend", default=None,
                     help="Streaming inference backend [the bench's, else auto].")
     group.addoption("--exohil-out", default=None,
-                    help="Folder for conformance.json, summary.md and run.mcap.")
+                    help="Folder for conformance.json, summary.md and run.mcap (an earlier "
+                         "run's are removed first; one that is an input is refused).")
 
 
 def _is_check(item: pytest.Item) -> bool:
@@ -101,8 +103,36 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
                              rate_hz=bench.rate_hz)
     except (ProfileError, BenchError) as err:
         raise pytest.UsageError(str(err)) from None
+    out = config.getoption("exohil_out")
+    if out:
+        _clear_earlier_reports(Path(out), run, bench_file)
     config.stash[_RUN] = run
     config.stash[_RESULTS] = []
+
+
+#: What the plugin writes into --exohil-out (``exohil conform`` adds junit.xml).
+REPORT_FILES = ("conformance.json", "summary.md", "run.mcap")
+
+
+def _clear_earlier_reports(out: Path, run, bench_file: str | None) -> None:
+    """Refuse an --exohil-out whose reports would replace one of the run's inputs (a
+    baseline ``conformance.json`` in the same folder, the target recording, the model, the
+    bench file or the profile), then remove an earlier run's reports there: a run killed
+    before it writes leaves no report of another run looking like its own, and a run whose
+    real-time segment did not run leaves no earlier ``run.mcap`` beside its reports."""
+    from exohil.formats.atomic import same_file
+    from exohil.harness.bench import EmulatorDevice
+
+    inputs = [run.model_path, run.baseline_path, run.reference_file, run.profile.path,
+              bench_file and Path(bench_file),
+              run.device.recording if isinstance(run.device, EmulatorDevice) else None]
+    for name in REPORT_FILES:
+        clash = same_file(out / name, [p for p in inputs if p is not None])
+        if clash is not None:
+            raise pytest.UsageError(f"--exohil-out {out}: its {name} is the input {clash}; "
+                                    "refusing to overwrite it (choose another folder)")
+    for name in REPORT_FILES:
+        (out / name).unlink(missing_ok=True)
 
 
 def _progress_writer(config: pytest.Config) -> Callable[[str], None]:

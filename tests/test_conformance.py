@@ -270,6 +270,32 @@ def test_a_misspelt_family_limit_fails_its_check(tmp_path):
     assert "accuracy.rmse.elv_anlge" in last_line(output)
 
 
+def test_plain_pytest_refuses_an_out_folder_whose_report_is_its_baseline(tmp_path):
+    """``--exohil-baseline DIR/conformance.json --exohil-out DIR`` replaced the baseline with
+    this run's report (``exohil conform`` refused it; the plugin did not)."""
+    baseline = tmp_path / "conformance.json"
+    baseline.write_bytes((Path(__file__).parents[1] / "conformance" / "baselines" /
+                          "ci.json").read_bytes())
+    before = sha256_file(baseline)
+    code = pytest.main(["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
+                        "--exohil-target", f"emulator:{HELDOUT}", "--exohil-model", str(ENNET),
+                        "--exohil-profile", "ci", "--exohil-baseline", str(baseline),
+                        "-k", "nothing", "--exohil-out", str(tmp_path)])
+    assert code == pytest.ExitCode.USAGE_ERROR and sha256_file(baseline) == before
+
+
+def test_an_earlier_runs_reports_are_not_left_as_this_runs(tmp_path, fast_profile):
+    """A run whose segment did not run kept an earlier run's run.mcap and listed it among
+    its reports; a run killed before writing left the earlier reports looking like its own."""
+    for name in ("junit.xml", "conformance.json", "summary.md", "run.mcap"):
+        (tmp_path / name).write_text("an earlier run's\n")
+    code, output, report = conform(tmp_path, fast_profile, "-k", "nothing")
+    assert code == 1 and report["verdict"] == "fail"
+    assert not (tmp_path / "run.mcap").exists()
+    assert "run.mcap" not in output
+    assert "an earlier run" not in (tmp_path / "junit.xml").read_text()
+
+
 def test_a_baseline_enables_the_regression_check(tmp_path, fast_profile):
     code, output, report = conform(tmp_path, fast_profile, "--baseline", str(ENNET),
                                    "-k", "regression")
