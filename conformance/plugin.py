@@ -95,6 +95,12 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
             # another port for the bench's device (it re-enumerated): the same ground truth
             reference = bench.device.reference
         baseline = config.getoption("exohil_baseline")
+        if baseline is not None and "regression" not in profile.checks:
+            raise pytest.UsageError(
+                f"baseline {baseline}: profile {profile.name} has no "
+                "[checks.regression], so nothing would compare with the baseline and the run "
+                "could pass without it; add [checks.regression] to the profile or leave out "
+                "the baseline")
         run = ConformanceRun(target, Path(model), profile,
                              reference=None if reference is None else Path(reference),
                              baseline=None if baseline is None else Path(baseline),

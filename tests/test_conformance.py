@@ -284,6 +284,17 @@ def test_plain_pytest_refuses_an_out_folder_whose_report_is_its_baseline(tmp_pat
     assert code == pytest.ExitCode.USAGE_ERROR and sha256_file(baseline) == before
 
 
+def test_a_baseline_for_a_profile_without_regression_is_refused(tmp_path):
+    """A profile without [checks.regression] skipped the regression check as "not in
+    profile", not required, so a run given --baseline passed without comparing anything."""
+    profile = tmp_path / "noregression.toml"
+    profile.write_text(FAST_PROFILE.replace("[checks.regression]\n", ""), encoding="utf-8")
+    code, output, _ = conform(tmp_path / "out", profile, "--baseline", str(ENNET), "-k",
+                              "nothing")
+    assert code != 0 and "has no [checks.regression]" in output
+    assert not (tmp_path / "out" / "conformance.json").exists()
+
+
 def test_an_earlier_runs_reports_are_not_left_as_this_runs(tmp_path, fast_profile):
     """A run whose segment did not run kept an earlier run's run.mcap and listed it among
     its reports; a run killed before writing left the earlier reports looking like its own."""
