@@ -239,6 +239,10 @@ def load_profile(name_or_path: str) -> Profile:
             raise ProfileError(f"{path}: [checks.{check}] must be a table of limits")
         parsed = {}
         for measurement, text in limits.items():
+            if isinstance(text, dict):  # TOML reads an unquoted dotted key as nested tables
+                raise ProfileError(f"{path}: [checks.{check}]: {measurement}.… is a table, "
+                                   "not a limit: put the measurement's dotted name in quotes "
+                                   f'("{check}.….…" = "< X unit")')
             unit = _family(check, measurement)
             if unit is None:
                 raise ProfileError(f"{path}: check {check!r} has no measurement "

@@ -141,6 +141,9 @@ def test_the_ci_gate_limits_change_only_with_this_test():
     ('checks = "accuracy"\n', r"checks must be a table \(\[checks\]\), got str"),
     ('settings = 3\n', r"settings must be a table"),
     ('[checks.conversions]\n"conversions.failures" = "5 .. 1 count"\n', "above its high end"),
+    # unquoted, TOML reads the dots as tables: 'no measurement accuracy' misled
+    ('[checks.accuracy]\naccuracy.rmse.elv_angle = "< 3 deg"\n',
+     r"accuracy\.… is a table, not a limit: put the measurement's dotted name in quotes"),
     # regression compares the accuracy figures in degrees only: never frames_scored
     ('[checks.regression]\n"regression.accuracy.frames_scored" = "< 1 count"\n',
      "has no measurement"),
