@@ -95,7 +95,10 @@ def summary_markdown(run: Any, results: list[Any]) -> str:
              "| check | verdict | measurement | value | unit | limit |",
              "|---|---|---|---:|---|---|"]
     for r in results:
-        if not r.measurements:
+        # a check failed on no measurement's figure (a profile limit it did not measure)
+        # says why, or its rows would all read pass under a FAIL heading
+        if not r.measurements or (r.verdict is Verdict.FAIL and
+                                  not any(m.failed for m in r.measurements)):
             lines.append(f"| {r.name} | {r.verdict.value} | — | — | — | {r.message} |")
         for m in r.measurements:
             limit = m.limit.describe() if m.limit else ""

@@ -271,6 +271,8 @@ def test_a_misspelt_family_limit_fails_its_check(tmp_path):
         checks["accuracy"]["message"]
     assert "limits latency.end_to_end.p95, which" in checks["latency"]["message"]
     assert "accuracy.rmse.elv_anlge" in last_line(output)
+    assert "| accuracy | fail | — | — | — | profile fast-test limits accuracy.rmse.elv_anlge" \
+        in (tmp_path / "out" / "summary.md").read_text()
 
 
 def test_plain_pytest_refuses_an_out_folder_whose_report_is_its_baseline(tmp_path):
