@@ -30,6 +30,7 @@ from exohil.formats.measurement import Measurement, Verdict
 CHECKS_MODULE = "exohil.conformance.test_checks"
 _RESULTS = pytest.StashKey[list["CheckResult"]]()
 _RUN = pytest.StashKey[object]()
+_SELECTED = pytest.StashKey[set[str]]()
 
 
 @dataclass
@@ -167,11 +168,21 @@ def _required(name: str, run) -> bool:
                                                run.baseline_path is None)
 
 
-def _with_checks_not_run(run, results: list[CheckResult]) -> list[CheckResult]:
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Which checks the session selected (``-k`` and node ids applied)."""
+    if _RUN in session.config.stash:
+        selected: set[str] = {str(item.callspec.params["name"]) for item in session.items
+                              if isinstance(item, pytest.Function) and _is_check(item)}
+        session.config.stash[_SELECTED] = selected
+
+
+def _with_checks_not_run(run, results: list[CheckResult],
+                         interrupted: set[str] | None = None) -> list[CheckResult]:
     """``results`` with a skipped entry for each check the session left out (``-k``, a node
-    id), in the suite's order."""
+    id) or, among ``interrupted`` (those selected in a run that was interrupted), never
+    reached, in the suite's order."""
     from exohil.conformance.profile import CHECKS
-    from exohil.conformance.report import NOT_RUN
+    from exohil.conformance.report import INTERRUPTED, NOT_RUN
 
     ran = {r.name: r for r in results}
     out = []
@@ -179,8 +190,8 @@ def _with_checks_not_run(run, results: list[CheckResult]) -> list[CheckResult]:
         if name in ran:
             out.append(ran.pop(name))
         else:
-            message = (NOT_RUN if name in run.profile.checks
-                       else f"not in profile {run.profile.name}")
+            message = (f"not in profile {run.profile.name}" if name not in run.profile.checks
+                       else INTERRUPTED if name in (interrupted or ()) else NOT_RUN)
             out.append(CheckResult(name, Verdict.SKIP, _required(name, run), message, 0.0))
     return out + list(ran.values())
 
@@ -277,7 +288,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     config = session.config
     if _RESULTS not in config.stash:
         return
-    results = _with_checks_not_run(config.stash[_RUN], config.stash[_RESULTS])
+    interrupted = (config.stash.get(_SELECTED, set())
+                   if exitstatus == pytest.ExitCode.INTERRUPTED else None)
+    results = _with_checks_not_run(config.stash[_RUN], config.stash[_RESULTS], interrupted)
     config.stash[_RESULTS] = results
     from exohil.conformance.report import overall
 

@@ -31,6 +31,8 @@ from exohil.harness.machine import machine
 SCHEMA = "exohil-conformance/1"
 #: The message of a check the session left out (``-k``, a node id).
 NOT_RUN = "not run: left out of this session (-k or a node id)"
+#: The message of a check an interrupted run (Ctrl-C) never reached.
+INTERRUPTED = "not run: the run was interrupted before it"
 
 
 def _version(package: str) -> str | None:

@@ -312,6 +312,25 @@ def test_an_earlier_runs_reports_are_not_left_as_this_runs(tmp_path, fast_profil
     assert "an earlier run" not in (tmp_path / "junit.xml").read_text()
 
 
+def test_an_interrupted_run_says_so_not_that_checks_were_left_out(tmp_path, fast_profile,
+                                                                   monkeypatch):
+    """A run stopped by Ctrl-C reported the checks it never reached as "left out of this
+    session (-k or a node id)", as if someone had chosen a subset."""
+    from exohil.conformance.context import ConformanceRun
+
+    def interrupt(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ConformanceRun, "heldout_measurements", interrupt)
+    code, output, report = conform(tmp_path, fast_profile, "-k", "heldout or conversions")
+    checks = {c["name"]: c for c in report["checks"]}
+    assert code == 1 and report["verdict"] == "fail"
+    assert checks["heldout"]["message"] == checks["conversions"]["message"] == \
+        "not run: the run was interrupted before it"
+    assert last_line(output) == "FAIL: heldout: skipped, not passed: not run: the run was " \
+        "interrupted before it"
+
+
 def test_a_baseline_enables_the_regression_check(tmp_path, fast_profile):
     code, output, report = conform(tmp_path, fast_profile, "--baseline", str(ENNET),
                                    "-k", "regression")
