@@ -71,8 +71,9 @@ REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
 @click.option("--profile", type=ConformanceProfile(), default="default", show_default=True,
               help="Profile: default, bench, ci, or a .toml file (docs/conformance.md).")
 @click.option("--baseline", type=InputFile(), default=None,
-              help="Baseline checkpoint: accuracy and latency must not regress beyond the "
-                   "profile's margin and factor.")
+              help="Baseline: a checkpoint (accuracy and latency must not regress beyond "
+                   "the profile's margin and factor) or an earlier run's conformance.json on "
+                   "the same reference (accuracy only).")
 @click.option("--reference", type=InputFile(), default=None,
               help="Ground truth recording for a serial device (aligned by device time); "
                    "without it the accuracy checks are skipped, never passed.")
@@ -81,7 +82,8 @@ REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
               help="Streaming inference backend [the bench's, else auto].")
 @click.option("--out", "out_dir", type=OutputDir(), default=Path("conformance-report"),
               show_default=True,
-              help="Folder for junit.xml, conformance.json, summary.md, run.mcap.")
+              help="Folder for junit.xml, conformance.json, summary.md, run.mcap (an "
+                   "earlier run's are removed first; one that is an input is refused).")
 @click.option("-k", "select", type=KeywordExpression(), default=None,
               help="Run only the checks matching this pytest -k expression (to debug "
                    "one); the required checks left out are reported as not run, so such a "
@@ -102,6 +104,9 @@ def conform(target: str | None, model: Path | None, bench_file: Path | None, pro
     refuse_overwriting_inputs([("--out", out_dir / name) for name in REPORT_FILES],
                               [target_file, model, bench_file, baseline, reference])
     out_dir.mkdir(parents=True, exist_ok=True)
+    # an earlier run's junit.xml must not pass for this run's if this one is killed (the
+    # plugin clears the other reports the same way)
+    (out_dir / "junit.xml").unlink(missing_ok=True)
     args = ["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
             "-o", "junit_family=xunit1", "-W", "ignore::pytest.PytestAssertRewriteWarning",
             f"--junitxml={out_dir / 'junit.xml'}", "--exohil-profile", profile,

@@ -30,6 +30,7 @@ from exohil.formats.measurement import Measurement, Verdict
 CHECKS_MODULE = "exohil.conformance.test_checks"
 _RESULTS = pytest.StashKey[list["CheckResult"]]()
 _RUN = pytest.StashKey[object]()
+_SELECTED = pytest.StashKey[set[str]]()
 
 
 @dataclass
@@ -55,13 +56,15 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--exohil-profile", default="default",
                     help="Profile name (default, bench, ci) or a .toml file.")
     group.addoption("--exohil-baseline", default=None,
-                    help="Baseline checkpoint for the regression check.")
+                    help="Baseline for the regression check: a checkpoint or an earlier "
+                         "run's conformance.json.")
     group.addoption("--exohil-reference", default=None,
                     help="Ground truth recording for a serial device (aligned by device time).")
     group.addoption("--exohil-backend", default=None,
                     help="Streaming inference backend [the bench's, else auto].")
     group.addoption("--exohil-out", default=None,
-                    help="Folder for conformance.json, summary.md and run.mcap.")
+                    help="Folder for conformance.json, summary.md and run.mcap (an earlier "
+                         "run's are removed first; one that is an input is refused).")
 
 
 def _is_check(item: pytest.Item) -> bool:
@@ -93,6 +96,12 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
             # another port for the bench's device (it re-enumerated): the same ground truth
             reference = bench.device.reference
         baseline = config.getoption("exohil_baseline")
+        if baseline is not None and "regression" not in profile.checks:
+            raise pytest.UsageError(
+                f"baseline {baseline}: profile {profile.name} has no "
+                "[checks.regression], so nothing would compare with the baseline and the run "
+                "could pass without it; add [checks.regression] to the profile or leave out "
+                "the baseline")
         run = ConformanceRun(target, Path(model), profile,
                              reference=None if reference is None else Path(reference),
                              baseline=None if baseline is None else Path(baseline),
@@ -101,8 +110,36 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
                              rate_hz=bench.rate_hz)
     except (ProfileError, BenchError) as err:
         raise pytest.UsageError(str(err)) from None
+    out = config.getoption("exohil_out")
+    if out:
+        _clear_earlier_reports(Path(out), run, bench_file)
     config.stash[_RUN] = run
     config.stash[_RESULTS] = []
+
+
+#: What the plugin writes into --exohil-out (``exohil conform`` adds junit.xml).
+REPORT_FILES = ("conformance.json", "summary.md", "run.mcap")
+
+
+def _clear_earlier_reports(out: Path, run, bench_file: str | None) -> None:
+    """Refuse an --exohil-out whose reports would replace one of the run's inputs (a
+    baseline ``conformance.json`` in the same folder, the target recording, the model, the
+    bench file or the profile), then remove an earlier run's reports there: a run killed
+    before it writes leaves no report of another run looking like its own, and a run whose
+    real-time segment did not run leaves no earlier ``run.mcap`` beside its reports."""
+    from exohil.formats.atomic import same_file
+    from exohil.harness.bench import EmulatorDevice
+
+    inputs = [run.model_path, run.baseline_path, run.reference_file, run.profile.path,
+              bench_file and Path(bench_file),
+              run.device.recording if isinstance(run.device, EmulatorDevice) else None]
+    for name in REPORT_FILES:
+        clash = same_file(out / name, [p for p in inputs if p is not None])
+        if clash is not None:
+            raise pytest.UsageError(f"--exohil-out {out}: its {name} is the input {clash}; "
+                                    "refusing to overwrite it (choose another folder)")
+    for name in REPORT_FILES:
+        (out / name).unlink(missing_ok=True)
 
 
 def _progress_writer(config: pytest.Config) -> Callable[[str], None]:
@@ -131,11 +168,21 @@ def _required(name: str, run) -> bool:
                                                run.baseline_path is None)
 
 
-def _with_checks_not_run(run, results: list[CheckResult]) -> list[CheckResult]:
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Which checks the session selected (``-k`` and node ids applied)."""
+    if _RUN in session.config.stash:
+        selected: set[str] = {str(item.callspec.params["name"]) for item in session.items
+                              if isinstance(item, pytest.Function) and _is_check(item)}
+        session.config.stash[_SELECTED] = selected
+
+
+def _with_checks_not_run(run, results: list[CheckResult],
+                         interrupted: set[str] | None = None) -> list[CheckResult]:
     """``results`` with a skipped entry for each check the session left out (``-k``, a node
-    id), in the suite's order."""
+    id) or, among ``interrupted`` (those selected in a run that was interrupted), never
+    reached, in the suite's order."""
     from exohil.conformance.profile import CHECKS
-    from exohil.conformance.report import NOT_RUN
+    from exohil.conformance.report import INTERRUPTED, NOT_RUN
 
     ran = {r.name: r for r in results}
     out = []
@@ -143,10 +190,23 @@ def _with_checks_not_run(run, results: list[CheckResult]) -> list[CheckResult]:
         if name in ran:
             out.append(ran.pop(name))
         else:
-            message = (NOT_RUN if name in run.profile.checks
-                       else f"not in profile {run.profile.name}")
+            message = (f"not in profile {run.profile.name}" if name not in run.profile.checks
+                       else INTERRUPTED if name in (interrupted or ()) else NOT_RUN)
             out.append(CheckResult(name, Verdict.SKIP, _required(name, run), message, 0.0))
     return out + list(ran.values())
+
+
+def unmatched_limits(profile, check: str, measurements: list[Measurement]) -> list[str]:
+    """The profile's limits on members of ``check``'s families (``accuracy.rmse.*``: the
+    model's angles; ``latency.end_to_end.*``: p50, p99, max) that name none of
+    ``measurements``. A profile is loaded before the model is, so ``accuracy.rmse.elv_anlge``
+    or ``latency.end_to_end.p95`` pass the profile's vocabulary and would judge nothing,
+    leaving the measurement they meant without its limit."""
+    from exohil.conformance.profile import CHECKS
+
+    measured = {m.name for m in measurements}
+    return [limit for limit in profile.checks.get(check, {})
+            if limit not in CHECKS[check] and limit not in measured]
 
 
 @pytest.fixture(scope="session")
@@ -193,6 +253,13 @@ def check(request: pytest.FixtureRequest, conformance_run, record_property):
         for m in measurements:
             for key, value in m.junit_properties():
                 record_property(key, value)
+        unmatched = unmatched_limits(profile, name, measurements)
+        if unmatched:
+            message = (f"profile {profile.name} limits {', '.join(unmatched)}, which this check "
+                       f"did not measure (it measured {', '.join(m.name for m in measurements)}"
+                       "): a misspelt limit judges nothing")
+            done(Verdict.FAIL, message, measurements)
+            pytest.fail(f"{name}: {message}", pytrace=False)
         failed = [m for m in measurements if m.failed]
         judged = [m for m in measurements if m.limit is not None]
         if failed:  # a note the measurement before gave (the frames scored) is not repeated
@@ -221,7 +288,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     config = session.config
     if _RESULTS not in config.stash:
         return
-    results = _with_checks_not_run(config.stash[_RUN], config.stash[_RESULTS])
+    interrupted = (config.stash.get(_SELECTED, set())
+                   if exitstatus == pytest.ExitCode.INTERRUPTED else None)
+    results = _with_checks_not_run(config.stash[_RUN], config.stash[_RESULTS], interrupted)
     config.stash[_RESULTS] = results
     from exohil.conformance.report import overall
 

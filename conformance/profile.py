@@ -70,7 +70,9 @@ CHECKS: dict[str, dict[str, str]] = {
                     "conversions.max_error": "deg"},
     "teleop": {"teleop.rmse.*": "deg", "teleop.clamped_share": "ratio",
                "teleop.mapping_error": "deg"},
-    "regression": {"regression.accuracy.*": "deg", "regression.latency_p99_ratio": "x"},
+    "regression": {"regression.accuracy.rmse.*": "deg",
+                   "regression.accuracy.direction_rmse": "deg",
+                   "regression.latency_p99_ratio": "x"},
 }
 #: Tolerance of ``teleop.mapping_error``, deg: float round-off only (see BUILTIN_LIMITS).
 TELEOP_MAPPING_TOLERANCE_DEG = 1e-6
@@ -237,6 +239,10 @@ def load_profile(name_or_path: str) -> Profile:
             raise ProfileError(f"{path}: [checks.{check}] must be a table of limits")
         parsed = {}
         for measurement, text in limits.items():
+            if isinstance(text, dict):  # TOML reads an unquoted dotted key as nested tables
+                raise ProfileError(f"{path}: [checks.{check}]: {measurement}.… is a table, "
+                                   "not a limit: put the measurement's dotted name in quotes "
+                                   f'("{check}.….…" = "< X unit")')
             unit = _family(check, measurement)
             if unit is None:
                 raise ProfileError(f"{path}: check {check!r} has no measurement "

@@ -31,6 +31,8 @@ from exohil.harness.machine import machine
 SCHEMA = "exohil-conformance/1"
 #: The message of a check the session left out (``-k``, a node id).
 NOT_RUN = "not run: left out of this session (-k or a node id)"
+#: The message of a check an interrupted run (Ctrl-C) never reached.
+INTERRUPTED = "not run: the run was interrupted before it"
 
 
 def _version(package: str) -> str | None:
@@ -95,7 +97,10 @@ def summary_markdown(run: Any, results: list[Any]) -> str:
              "| check | verdict | measurement | value | unit | limit |",
              "|---|---|---|---:|---|---|"]
     for r in results:
-        if not r.measurements:
+        # a check failed on no measurement's figure (a profile limit it did not measure)
+        # says why, or its rows would all read pass under a FAIL heading
+        if not r.measurements or (r.verdict is Verdict.FAIL and
+                                  not any(m.failed for m in r.measurements)):
             lines.append(f"| {r.name} | {r.verdict.value} | — | — | — | {r.message} |")
         for m in r.measurements:
             limit = m.limit.describe() if m.limit else ""

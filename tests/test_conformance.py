@@ -141,12 +141,29 @@ def test_the_ci_gate_limits_change_only_with_this_test():
     ('checks = "accuracy"\n', r"checks must be a table \(\[checks\]\), got str"),
     ('settings = 3\n', r"settings must be a table"),
     ('[checks.conversions]\n"conversions.failures" = "5 .. 1 count"\n', "above its high end"),
+    # unquoted, TOML reads the dots as tables: 'no measurement accuracy' misled
+    ('[checks.accuracy]\naccuracy.rmse.elv_angle = "< 3 deg"\n',
+     r"accuracy\.… is a table, not a limit: put the measurement's dotted name in quotes"),
+    # regression compares the accuracy figures in degrees only: never frames_scored
+    ('[checks.regression]\n"regression.accuracy.frames_scored" = "< 1 count"\n',
+     "has no measurement"),
 ])
 def test_bad_profiles_are_clear_errors(tmp_path, text, message):
     path = tmp_path / "p.toml"
     path.write_text(text, encoding="utf-8")
     with pytest.raises(ProfileError, match=message):
         load_profile(str(path))
+
+
+def test_a_profile_may_limit_each_regression_figure_by_its_name(tmp_path):
+    """The regression check measures ``regression.accuracy.rmse.<angle>``; the profile
+    refused that name (its family had one dot fewer)."""
+    path = tmp_path / "p.toml"
+    path.write_text('[checks.regression]\n"regression.accuracy.rmse.elv_angle" = "<= 0.1 deg"\n'
+                    '"regression.accuracy.direction_rmse" = "<= 0.2 deg"\n', encoding="utf-8")
+    limits = load_profile(str(path)).limits("regression")
+    assert limits["regression.accuracy.rmse.elv_angle"].high == 0.1
+    assert limits["regression.accuracy.direction_rmse"].high == 0.2
 
 
 def test_limits_parse():
@@ -234,6 +251,84 @@ def test_a_subset_of_the_checks_never_passes_the_profile(tmp_path, fast_profile)
                                  f"{', '.join(left_out)}; the 1 that ran passed")
     assert "| accuracy | skip | — | — | — | not run: left out" in \
         (tmp_path / "summary.md").read_text()
+
+
+def test_a_misspelt_family_limit_fails_its_check(tmp_path):
+    """``accuracy.rmse.elv_anlge`` and ``latency.end_to_end.p95`` pass the profile's
+    vocabulary (the model's angles are not known when it loads; p95 fell in the family) and
+    judged nothing: the accuracy check passed with θ unlimited."""
+    profile = tmp_path / "typo.toml"
+    profile.write_text(FAST_PROFILE.replace('"accuracy.rmse.elv_angle"',
+                                            '"accuracy.rmse.elv_anlge"')
+                       .replace("realtime_seconds = 3", "realtime_seconds = 1")
+                       .replace("[checks.latency]",
+                                '[checks.latency]\n"latency.end_to_end.p95" = "< 12 ms"'),
+                       encoding="utf-8")
+    code, output, report = conform(tmp_path / "out", profile, "-k", "accuracy or latency")
+    checks = {c["name"]: c for c in report["checks"]}
+    assert code == 1 and checks["accuracy"]["verdict"] == checks["latency"]["verdict"] == "fail"
+    assert "limits accuracy.rmse.elv_anlge, which this check did not measure" in \
+        checks["accuracy"]["message"]
+    assert "limits latency.end_to_end.p95, which" in checks["latency"]["message"]
+    assert "accuracy.rmse.elv_anlge" in last_line(output)
+    assert "| accuracy | fail | — | — | — | profile fast-test limits accuracy.rmse.elv_anlge" \
+        in (tmp_path / "out" / "summary.md").read_text()
+
+
+def test_plain_pytest_refuses_an_out_folder_whose_report_is_its_baseline(tmp_path):
+    """``--exohil-baseline DIR/conformance.json --exohil-out DIR`` replaced the baseline with
+    this run's report (``exohil conform`` refused it; the plugin did not)."""
+    baseline = tmp_path / "conformance.json"
+    baseline.write_bytes((Path(__file__).parents[1] / "conformance" / "baselines" /
+                          "ci.json").read_bytes())
+    before = sha256_file(baseline)
+    code = pytest.main(["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
+                        "--exohil-target", f"emulator:{HELDOUT}", "--exohil-model", str(ENNET),
+                        "--exohil-profile", "ci", "--exohil-baseline", str(baseline),
+                        "-k", "nothing", "--exohil-out", str(tmp_path)])
+    assert code == pytest.ExitCode.USAGE_ERROR and sha256_file(baseline) == before
+
+
+def test_a_baseline_for_a_profile_without_regression_is_refused(tmp_path):
+    """A profile without [checks.regression] skipped the regression check as "not in
+    profile", not required, so a run given --baseline passed without comparing anything."""
+    profile = tmp_path / "noregression.toml"
+    profile.write_text(FAST_PROFILE.replace("[checks.regression]\n", ""), encoding="utf-8")
+    code, output, _ = conform(tmp_path / "out", profile, "--baseline", str(ENNET), "-k",
+                              "nothing")
+    assert code != 0 and "has no [checks.regression]" in output
+    assert not (tmp_path / "out" / "conformance.json").exists()
+
+
+def test_an_earlier_runs_reports_are_not_left_as_this_runs(tmp_path, fast_profile):
+    """A run whose segment did not run kept an earlier run's run.mcap and listed it among
+    its reports; a run killed before writing left the earlier reports looking like its own."""
+    for name in ("junit.xml", "conformance.json", "summary.md", "run.mcap"):
+        (tmp_path / name).write_text("an earlier run's\n")
+    code, output, report = conform(tmp_path, fast_profile, "-k", "nothing")
+    assert code == 1 and report["verdict"] == "fail"
+    assert not (tmp_path / "run.mcap").exists()
+    assert "run.mcap" not in output
+    assert "an earlier run" not in (tmp_path / "junit.xml").read_text()
+
+
+def test_an_interrupted_run_says_so_not_that_checks_were_left_out(tmp_path, fast_profile,
+                                                                   monkeypatch):
+    """A run stopped by Ctrl-C reported the checks it never reached as "left out of this
+    session (-k or a node id)", as if someone had chosen a subset."""
+    from exohil.conformance.context import ConformanceRun
+
+    def interrupt(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ConformanceRun, "heldout_measurements", interrupt)
+    code, output, report = conform(tmp_path, fast_profile, "-k", "heldout or conversions")
+    checks = {c["name"]: c for c in report["checks"]}
+    assert code == 1 and report["verdict"] == "fail"
+    assert checks["heldout"]["message"] == checks["conversions"]["message"] == \
+        "not run: the run was interrupted before it"
+    assert last_line(output) == "FAIL: heldout: skipped, not passed: not run: the run was " \
+        "interrupted before it"
 
 
 def test_a_baseline_enables_the_regression_check(tmp_path, fast_profile):
