@@ -3,7 +3,6 @@ and its report folder; `exohil run --out` against a separately started `exohil e
 
 import json
 import os
-import signal
 import subprocess
 import sys
 from collections import Counter
@@ -11,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_interrupt import interrupt_once_streaming
 from click.testing import CliRunner
 from PIL import Image
 
@@ -438,20 +438,9 @@ def test_a_run_stopped_with_ctrl_c_writes_a_report_that_says_it_ended_early(tmp_
     """A demo or run stopped with Ctrl-C (SIGINT) mid-stream wrote a report whose summary,
     console and summary.md read as those of a whole run: nothing said it ended early."""
     out = tmp_path / "report"
-    proc = subprocess.Popen([str(Path(sys.executable).parent / "exohil"), "demo", "--seconds",
-                             "30", "--sink", "none", "--no-faults", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        for line in proc.stderr:  # the first status line: frames are streaming
-            if " frames " in line:
-                break
-        proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 0, stderr
+    code, stdout, stderr = interrupt_once_streaming(["demo", "--seconds", "30", "--sink", "none",
+                                                     "--no-faults", "--out", str(out)])
+    assert code == 0, stderr
     s = json.loads((out / "summary.json").read_text())
     assert 0 < s["frames"]["received"] < 30 * 250
     assert s["ended_early"].startswith("stopped on request (Ctrl-C or SIGTERM)"), s

@@ -14,6 +14,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from cli_interrupt import interrupt_once_streaming
 from click.testing import CliRunner
 
 from exohil.formats.wire import WireFrame, encode_frame
@@ -136,27 +137,10 @@ def test_a_run_without_an_end_stopped_with_ctrl_c_did_not_end_early(tmp_path: Pa
     """`exohil run URL` without --duration or a reference streams until Ctrl-C, its
     documented end: its report must not say that it ended early (a run given an end and
     stopped before it does: test_harness_demo)."""
-    import signal
-    import subprocess
-    import sys
-
     summary = tmp_path / "summary.json"
     with pty_device(_frame_at(4000), 0.004) as port:
-        proc = subprocess.Popen([str(Path(sys.executable).parent / "exohil"), "run", port,
-                                 "--sink", "none", "--json", str(summary)],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            assert proc.stderr is not None
-            for line in proc.stderr:  # the first status line: frames are streaming
-                if " frames " in line:
-                    break
-            time.sleep(1.0)
-            proc.send_signal(signal.SIGINT)
-            _, stderr = proc.communicate(timeout=60)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-    assert proc.returncode == 0, stderr
+        code, _, stderr = interrupt_once_streaming(["run", port, "--sink", "none", "--json",
+                                                    str(summary)], after_s=1.0, timeout_s=60)
+    assert code == 0, stderr
     s = json.loads(summary.read_text())
     assert s["frames"]["received"] > 0 and s["ended_early"] is None, s["ended_early"]
