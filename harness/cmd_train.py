@@ -235,6 +235,7 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     if split.test:
         est.info.setdefault("metrics", {})["test"] = evaluate(est, split.test)
     est.info["command"] = _command_line()
+    est.info["test_fraction"] = test_fraction
     save_checkpoint(out, est)
     metrics = est.info.get("metrics", {})
     part = "test" if "test" in metrics else "validation"
@@ -258,14 +259,16 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     elevation is at least 20°, and the arm-direction RMSE over all frames), then per-angle
     RMSE, MAE and max |error| (degrees) over all frames, overall and per movement segment.
     A warning comes first when 1 % or more of the frames lie outside the readings the model
-    was trained on (docs/estimator.md; another suit or movement: calibrate first), or when
-    the recordings run at another sensor rate than the model's. A calibrated model is not
+    was trained on (docs/estimator.md; another suit or movement: calibrate first), when
+    the recordings run at another sensor rate than the model's, or when a recording is one
+    the model was trained on, scored beyond the end `train --test-fraction` held out (its
+    figures are then no test). A calibrated model is not
     scored on its calibration frames: a recording that would score one (a calibration
     recording, a part cut from it, or the recording it was cut from at its times, after
     --test-fraction) is refused. Example:
 
     \b
-        exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
+        exohil evaluate ennet.npz fixtures/paper_protocol_heldout.mcap --json metrics.json
     """
     from exohil.estimator.coverage import block_coverage
     from exohil.estimator.evaluation import evaluate
@@ -289,6 +292,8 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         result = evaluate(est, blocks, limits)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
+    for line in training_frame_warnings(est.info, data.sources, test_fraction):
+        click.echo(f"warning: {line}", err=True)
     other_rate = rate_mismatch(data.rate_hz, est.sensor_rate_hz)
     if other_rate:
         click.echo(f"warning: {other_rate}; {RATE_REMEDY}", err=True)
@@ -337,6 +342,31 @@ def _refuse_training_frames(train: list[dict], test: list[dict]) -> None:
             if overlap:
                 raise click.UsageError(f"--test {scored['file']}: {why}: a model would be "
                                        "scored on frames it was trained on")
+
+
+def training_frame_warnings(info: dict, scored: list[dict], test_fraction: float) -> list[str]:
+    """One line per scored recording (``info.sources``-style entries) that may hold frames
+    the model (checkpoint ``info``) was trained or validated on: one of its training
+    recordings, or related to one (the heldout check's rule, formats.recording_metadata).
+    Only the training recording itself, scored on no more than the end of each block that
+    ``train --test-fraction`` held out (``info["test_fraction"]``), is a test."""
+    from exohil.formats.recording_metadata import shared_frames
+
+    held_out = float(info.get("test_fraction", 0.0))
+    lines = []
+    for entry in scored:
+        for source in info.get("sources", []):
+            if source.get("role") == "calibration":
+                continue  # refuse_calibration_frames judges those
+            overlap, why = shared_frames(entry, source)
+            if not overlap or (entry.get("sha256") == source.get("sha256")
+                               and 0 < test_fraction <= held_out):
+                continue
+            lines.append(f"{why}: these figures include frames it was trained or validated "
+                         "on, not a test (score a held-out recording, or the part `train "
+                         "--test-fraction F` held out with --test-fraction F or less)")
+            break
+    return lines
 
 
 def refuse_calibration_frames(info: dict, scored: list[tuple[dict, np.ndarray]],
@@ -445,6 +475,7 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
         save_dir.mkdir(parents=True, exist_ok=True)
         for r in results:
             r.estimator.info["command"] = _command_line()
+            r.estimator.info["test_fraction"] = 0.0 if test_paths else test_fraction
             save_checkpoint(save_dir / f"{r.kind}.npz", r.estimator)
     if json_out:
         payload = {r.kind: {"test": r.test, "info": r.estimator.info} for r in results}

@@ -259,6 +259,28 @@ def test_evaluate_warns_when_the_recording_runs_at_another_rate(files):
     assert same.exit_code == 0 and "sensor rate" not in same.output
 
 
+def test_evaluate_warns_when_it_scores_frames_the_model_was_trained_on(files):
+    def warned(*extra):
+        result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(files["good"]),
+                                           *extra])
+        assert result.exit_code == 0, result.output
+        return "frames it was trained or validated on, not a test" in result.output
+
+    # the model was trained with --test-fraction 0.3: only that held-out end is a test
+    assert warned() and warned("--test-fraction", "0.5")
+    assert not warned("--test-fraction", "0.3") and not warned("--test-fraction", "0.1")
+    other = files["dir"] / "other.mcap"
+    write_recording(other, shoulder_recording(seconds=3.0, seed=5))
+    result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(other)])
+    assert result.exit_code == 0 and "trained or validated on" not in result.output
+    whole = files["dir"] / "whole.npz"  # trained on every frame: nothing of it is a test
+    assert CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
+                                     str(whole), "--max-epochs", "1"]).exit_code == 0
+    result = CliRunner().invoke(main, ["evaluate", str(whole), str(files["good"]),
+                                       "--test-fraction", "0.3"])
+    assert result.exit_code == 0 and "good.mcap was used to train the model" in result.output
+
+
 def test_training_on_recordings_at_two_rates_is_one_clear_error(files):
     slow = files["dir"] / "slow2.mcap"
     write_recording(slow, shoulder_recording(seconds=3.0, rate=100.0, seed=3))
