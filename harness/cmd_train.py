@@ -349,22 +349,27 @@ def training_frame_warnings(info: dict, scored: list[dict], test_fraction: float
     the model (checkpoint ``info``) was trained or validated on: one of its training
     recordings, or related to one (the heldout check's rule, formats.recording_metadata).
     Only the training recording itself, scored on no more than the end of each block that
-    ``train --test-fraction`` held out (``info["test_fraction"]``), is a test."""
+    ``train --test-fraction`` held out (``info["test_fraction"]``), is a test; a checkpoint
+    made before it kept that fraction does not tell, and that end is said to be unknown."""
     from exohil.formats.recording_metadata import shared_frames
 
-    held_out = float(info.get("test_fraction", 0.0))
+    held_out = info.get("test_fraction")
     lines = []
     for entry in scored:
         for source in info.get("sources", []):
             if source.get("role") == "calibration":
                 continue  # refuse_calibration_frames judges those
             overlap, why = shared_frames(entry, source)
-            if not overlap or (entry.get("sha256") == source.get("sha256")
-                               and 0 < test_fraction <= held_out):
+            itself = entry.get("sha256") == source.get("sha256") and test_fraction > 0
+            if not overlap or (itself and held_out is not None and test_fraction <= held_out):
                 continue
-            lines.append(f"{why}: these figures include frames it was trained or validated "
-                         "on, not a test (score a held-out recording, or the part `train "
-                         "--test-fraction F` held out with --test-fraction F or less)")
+            include = ("may include frames it was trained or validated on: the checkpoint "
+                       "does not say what `train --test-fraction` held out"
+                       if itself and held_out is None else
+                       "include frames it was trained or validated on, not a test")
+            lines.append(f"{why}: these figures {include} (score a held-out recording, or the "
+                         "part `train --test-fraction F` held out with --test-fraction F or "
+                         "less)")
             break
     return lines
 

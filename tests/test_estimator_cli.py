@@ -6,6 +6,7 @@ import pytest
 from click.testing import CliRunner
 from estimator_synth import shoulder_recording
 
+from exohil.estimator.checkpoint import load_checkpoint, save_checkpoint
 from exohil.formats.recording import cut_recording
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
@@ -279,6 +280,16 @@ def test_evaluate_warns_when_it_scores_frames_the_model_was_trained_on(files):
     result = CliRunner().invoke(main, ["evaluate", str(whole), str(files["good"]),
                                        "--test-fraction", "0.3"])
     assert result.exit_code == 0 and "good.mcap was used to train the model" in result.output
+    assert "figures include frames it was trained" in result.output
+    unknown = files["dir"] / "unknown.npz"  # made before checkpoints kept the fraction
+    est = load_checkpoint(files["ckpt"])
+    del est.info["test_fraction"]
+    save_checkpoint(unknown, est)
+    for extra, said in (((), "figures include frames"), (("--test-fraction", "0.3"),
+                                                          "figures may include frames")):
+        result = CliRunner().invoke(main, ["evaluate", str(unknown), str(files["good"]),
+                                           *extra])
+        assert result.exit_code == 0 and said in result.output, result.output
 
 
 def test_training_on_recordings_at_two_rates_is_one_clear_error(files):
