@@ -92,6 +92,18 @@ def test_a_sensor_that_never_changes_is_warned_of(files):
         assert f"warning: {said}" in result.output
 
 
+def test_a_plane_of_elevation_without_the_elevation_is_warned_of(files):
+    """--angles elv_angle alone trains and scores θ where the arm hangs, without a word."""
+    said = "elv_angle without shoulder_elv: the plane of elevation is undefined"
+    for angles, warned in (("elv_angle", True), ("shoulder_elv", False),
+                           ("elv_angle,shoulder_elv", False)):
+        result = CliRunner().invoke(main, ["train", "--model", "classical", str(files["good"]),
+                                           "--angles", angles, "--out",
+                                           str(files["dir"] / "theta.npz")])
+        assert result.exit_code == 0, result.output
+        assert (said in result.output) is warned, result.output
+
+
 @pytest.mark.parametrize(("kind", "args", "said"), [
     ("classical", ["--window", "5", "--hidden", "3"], "--hidden, --window have no effect on "
                                                       "the classical model"),
