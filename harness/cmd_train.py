@@ -13,7 +13,7 @@ import numpy as np
 
 from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
 from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
-from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
+from exohil.estimator.rates import RATE_REMEDY, rate_mismatch, same_rate
 from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
 from exohil.harness.cli_types import (
@@ -399,8 +399,9 @@ def refuse_calibration_frames(info: dict, scored: list[tuple[dict, np.ndarray]],
 @click.option("--train", "train_paths", multiple=True, required=True, type=InputFile(),
               help="Training recording (repeat the option for several).")
 @click.option("--test", "test_paths", multiple=True, type=InputFile(),
-              help="Test recording(s) (across-trial split); without them the end of each "
-              "training movement piece is the test set (--test-fraction).")
+              help="Test recording(s) (across-trial split), at the --train recordings' "
+              "sensor rate; without them the end of each training movement piece is the "
+              "test set (--test-fraction).")
 @click.option("--test-fraction", type=Finite(0.05, 0.9), default=0.3,
               show_default=True, help="Within-recording split: test = last fraction.")
 @click.option("--models", type=NameList(MODEL_NAMES),
@@ -448,6 +449,11 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
                       data.sensor_names) if test_paths else None
     if test_data is not None:
         _refuse_training_frames(data.sources, test_data.sources)
+        if not same_rate(test_data.rate_hz, data.rate_hz):  # as train refuses two rates
+            raise click.ClickException(
+                f"--test recordings at {test_data.rate_hz:g} Hz, --train recordings at "
+                f"{data.rate_hz:g} Hz: each model's window would span another time in the "
+                "test; resample them to one rate")
     split = wf.make_split(data, offset_frames, test_paths_data=test_data,
                           test_fraction=test_fraction, val_fraction=val_fraction)
     if not split.train or not split.test:

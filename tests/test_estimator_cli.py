@@ -312,6 +312,11 @@ def test_training_on_recordings_at_two_rates_is_one_clear_error(files):
                "--out", str(files["dir"] / "mixed.npz"), "--max-epochs", "1"]))
     assert "sensors at 100 Hz" in line and "at 250 Hz" in line
     assert not (files["dir"] / "mixed.npz").exists()
+    # table --test at another rate than --train trained and scored every model silently
+    line = _one_line_error(CliRunner().invoke(
+        main, ["table", "--train", str(files["good"]), "--test", str(slow), "--models", "ann",
+               "--max-epochs", "1"]))
+    assert "--test recordings at 100 Hz, --train recordings at 250 Hz" in line
 
 
 def test_a_recording_without_the_models_joint_is_named_in_the_error(files):
