@@ -293,6 +293,14 @@ def test_evaluate_warns_when_it_scores_frames_the_model_was_trained_on(files):
                                        "--test-fraction", "0.3"])
     assert result.exit_code == 0 and "good.mcap was used to train the model" in result.output
     assert "figures include frames it was trained" in result.output
+    calibrated = files["dir"] / "calibrated.npz"  # keeps what its base model held out
+    write_recording(other, shoulder_recording(seconds=6.0, seed=5))  # calibration needs 5 s
+    assert CliRunner().invoke(main, ["calibrate", str(files["ckpt"]), str(other), "--steps",
+                                     "2", "--jitter", "0.1", "--out",
+                                     str(calibrated)]).exit_code == 0
+    result = CliRunner().invoke(main, ["evaluate", str(calibrated), str(files["good"]),
+                                       "--test-fraction", "0.3"])
+    assert result.exit_code == 0 and "trained or validated on" not in result.output
     unknown = files["dir"] / "unknown.npz"  # made before checkpoints kept the fraction
     est = load_checkpoint(files["ckpt"])
     del est.info["test_fraction"]
