@@ -121,6 +121,8 @@ def calibrate(
     est.info = {
         "sources": [*base_info.get("sources", []),
                     *({**s, "role": "calibration"} for s in (sources or []))],
+        # the end of each block of its training recordings that the base model never saw
+        "test_fraction": base_info.get("test_fraction", 0.0),
         "calibration": {
             "method": METHOD,
             "base_checkpoint": base_source or {},

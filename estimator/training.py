@@ -48,12 +48,13 @@ ALL_KINDS = (*MODEL_KINDS, "classical")
 #: Largest gradient norm per update (LSTMs trained through time need the clip).
 GRADIENT_CLIP = 1.0
 #: Stateful ENNet training (truncated backpropagation through time, :func:`_stream_batches`):
-#: streams per minibatch, their length, frames per backpropagated chunk, frames not scored at
-#: the start of a stream that starts inside a block, and the share that start at a block start.
+#: streams per minibatch, their length (seconds, so at any sensor rate a stream spans the same
+#: time: 1250 frames at 250 Hz), frames per backpropagated chunk, seconds not scored at the
+#: start of a stream that starts inside a block, and the share that start at a block start.
 STREAMS_PER_BATCH = 64
-STREAM_FRAMES = 1_250
+STREAM_SECONDS = 5.0
 TBPTT_FRAMES = 50
-BURN_IN_FRAMES = 250
+BURN_IN_SECONDS = 1.0
 FROM_START_SHARE = 0.1
 #: Stream batches per epoch at least (an epoch of long streams is few updates otherwise).
 MIN_STREAM_GROUPS = 4
@@ -271,12 +272,12 @@ def _stream_batches(est: TrainedEstimator, tr: NormalisedFrames, cfg: TrainConfi
                     rng: np.random.Generator):
     """One epoch's minibatches for a stateful ENNet, by truncated backpropagation through time.
 
-    :data:`STREAMS_PER_BATCH` streams of up to :data:`STREAM_FRAMES` frames, each starting at a
+    :data:`STREAMS_PER_BATCH` streams of up to :data:`STREAM_SECONDS`, each starting at a
     random frame of a training block (at the block's start with probability
     :data:`FROM_START_SHARE`), run side by side in chunks of :data:`TBPTT_FRAMES`, the LSTM
     state carried (detached) from chunk to chunk: each update sees as many arm poses as
     streams. A stream that starts inside a block starts from a zero state the true history
-    would not give, so its first :data:`BURN_IN_FRAMES` frames are not scored. An epoch scores
+    would not give, so its first :data:`BURN_IN_SECONDS` are not scored. An epoch scores
     about as many frames as the training part holds, in at least :data:`MIN_STREAM_GROUPS`
     batches of streams. Yields (loss, scored frames).
     """
@@ -286,8 +287,10 @@ def _stream_batches(est: TrainedEstimator, tr: NormalisedFrames, cfg: TrainConfi
     starts = np.asarray([a for a, _ in tr.bounds])
     stops = np.asarray([b for _, b in tr.bounds])
     lengths = stops - starts
-    scored_per_group = STREAMS_PER_BATCH * max(1, min(STREAM_FRAMES, int(lengths.max()))
-                                               - BURN_IN_FRAMES)
+    stream_frames = max(1, round(STREAM_SECONDS * est.sensor_rate_hz))
+    burn_in_frames = round(BURN_IN_SECONDS * est.sensor_rate_hz)
+    scored_per_group = STREAMS_PER_BATCH * max(1, min(stream_frames, int(lengths.max()))
+                                               - burn_in_frames)
     groups = max(MIN_STREAM_GROUPS, int(np.ceil(len(tr) / scored_per_group)))
 
     def group() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -296,7 +299,7 @@ def _stream_batches(est: TrainedEstimator, tr: NormalisedFrames, cfg: TrainConfi
         first = np.where(fresh, starts[block],
                          starts[block] + rng.random(STREAMS_PER_BATCH) * lengths[block])
         first = first.astype(np.int64)
-        stop = np.minimum(first + STREAM_FRAMES, stops[block])
+        stop = np.minimum(first + stream_frames, stops[block])
         longest = int((stop - first).max())
         x = np.zeros((STREAMS_PER_BATCH, longest, table.x.shape[1]), dtype=np.float32)
         y = np.zeros((STREAMS_PER_BATCH, longest, table.y.shape[1]), dtype=np.float32)
@@ -304,7 +307,7 @@ def _stream_batches(est: TrainedEstimator, tr: NormalisedFrames, cfg: TrainConfi
         for k in range(STREAMS_PER_BATCH):
             lo, hi = int(first[k]), int(stop[k])
             x[k, : hi - lo], y[k, : hi - lo] = table.x[lo:hi], table.y[lo:hi]
-            burn = 0 if lo == starts[block[k]] else min(BURN_IN_FRAMES, (hi - lo) // 2)
+            burn = 0 if lo == starts[block[k]] else min(burn_in_frames, (hi - lo) // 2)
             scored[k, burn : hi - lo] = 1.0
         return x, y, scored
 

@@ -29,10 +29,14 @@ from exohil.estimator.defaults import DEFAULT_HIDDEN, DEFAULT_WINDOW, MODEL_NAME
 from exohil.estimator.evaluation import evaluate
 from exohil.estimator.rates import same_rate
 from exohil.estimator.splits import Split, cut_at_segments, time_block_split, trial_split
-from exohil.estimator.trained import TrainedEstimator
+from exohil.estimator.trained import DIRECTION_ANGLES, TrainedEstimator
 from exohil.estimator.training import TrainConfig, train
 from exohil.formats.recording import Recording
 from exohil.formats.recording_metadata import source_entry
+from exohil.kinematics import OBSERVABLE_ELEVATION_DEG
+
+#: The plane of elevation θ and the elevation φ (the humerus direction's angles).
+THETA, PHI = DIRECTION_ANGLES
 
 
 def model_config(name: str, base: TrainConfig, rate_hz: float,
@@ -126,9 +130,18 @@ def setting_warnings(data: LoadedData, split: Split, cfg: TrainConfig,
     """One line for each setting the data leave without meaning, for ``cfg`` trained on
     ``split`` of ``data``: a window longer than every training piece (its windows are then
     mostly the piece's first frame, repeated by the edge padding), and an offset taken over
-    more frames than a recording holds (its rest value never settles); and a sensor that
-    reads one value over every training frame (a model learns nothing from it)."""
+    more frames than a recording holds (its rest value never settles); a sensor that
+    reads one value over every training frame (a model learns nothing from it); and a plane
+    of elevation without the elevation (trained and scored where the arm hangs and it is
+    undefined)."""
     lines: list[str] = []
+    angles = data.target.angles
+    if THETA in angles and PHI not in angles:
+        lines.append(f"{THETA} without {PHI}: the plane of elevation is undefined with the arm "
+                     "hanging, and without the elevation it is trained and scored on every "
+                     "frame, those included; keep both (the default) to learn the arm "
+                     f"direction and score {THETA} where {PHI} >= "
+                     f"{OBSERVABLE_ELEVATION_DEG:g} deg")
     pieces = [b.x for b in split.train if len(b)]
     if pieces:
         x = np.concatenate(pieces)

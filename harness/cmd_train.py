@@ -13,7 +13,7 @@ import numpy as np
 
 from exohil.estimator.architecture import DENSE_STACK, OUTPUTS
 from exohil.estimator.defaults import DEFAULT_DENSE, DEFAULT_WINDOW, MODEL_NAMES
-from exohil.estimator.rates import RATE_REMEDY, rate_mismatch
+from exohil.estimator.rates import RATE_REMEDY, rate_mismatch, same_rate
 from exohil.formats import strict_json
 from exohil.formats.atomic import write_text
 from exohil.harness.cli_types import (
@@ -235,6 +235,7 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     if split.test:
         est.info.setdefault("metrics", {})["test"] = evaluate(est, split.test)
     est.info["command"] = _command_line()
+    est.info["test_fraction"] = test_fraction
     save_checkpoint(out, est)
     metrics = est.info.get("metrics", {})
     part = "test" if "test" in metrics else "validation"
@@ -258,14 +259,16 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
     elevation is at least 20°, and the arm-direction RMSE over all frames), then per-angle
     RMSE, MAE and max |error| (degrees) over all frames, overall and per movement segment.
     A warning comes first when 1 % or more of the frames lie outside the readings the model
-    was trained on (docs/estimator.md; another suit or movement: calibrate first), or when
-    the recordings run at another sensor rate than the model's. A calibrated model is not
+    was trained on (docs/estimator.md; another suit or movement: calibrate first), when
+    the recordings run at another sensor rate than the model's, or when a recording is one
+    the model was trained on, scored beyond the end `train --test-fraction` held out (its
+    figures are then no test). A calibrated model is not
     scored on its calibration frames: a recording that would score one (a calibration
     recording, a part cut from it, or the recording it was cut from at its times, after
     --test-fraction) is refused. Example:
 
     \b
-        exohil evaluate ennet.npz fixtures/paper_protocol.mcap --json metrics.json
+        exohil evaluate ennet.npz fixtures/paper_protocol_heldout.mcap --json metrics.json
     """
     from exohil.estimator.coverage import block_coverage
     from exohil.estimator.evaluation import evaluate
@@ -289,6 +292,8 @@ def evaluate_command(checkpoint, recordings, json_out, test_fraction, min_angle)
         result = evaluate(est, blocks, limits)
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
+    for line in training_frame_warnings(est.info, data.sources, test_fraction):
+        click.echo(f"warning: {line}", err=True)
     other_rate = rate_mismatch(data.rate_hz, est.sensor_rate_hz)
     if other_rate:
         click.echo(f"warning: {other_rate}; {RATE_REMEDY}", err=True)
@@ -339,6 +344,36 @@ def _refuse_training_frames(train: list[dict], test: list[dict]) -> None:
                                        "scored on frames it was trained on")
 
 
+def training_frame_warnings(info: dict, scored: list[dict], test_fraction: float) -> list[str]:
+    """One line per scored recording (``info.sources``-style entries) that may hold frames
+    the model (checkpoint ``info``) was trained or validated on: one of its training
+    recordings, or related to one (the heldout check's rule, formats.recording_metadata).
+    Only the training recording itself, scored on no more than the end of each block that
+    ``train --test-fraction`` held out (``info["test_fraction"]``), is a test; a checkpoint
+    made before it kept that fraction does not tell, and that end is said to be unknown."""
+    from exohil.formats.recording_metadata import shared_frames
+
+    held_out = info.get("test_fraction")
+    lines = []
+    for entry in scored:
+        for source in info.get("sources", []):
+            if source.get("role") == "calibration":
+                continue  # refuse_calibration_frames judges those
+            overlap, why = shared_frames(entry, source)
+            itself = entry.get("sha256") == source.get("sha256") and test_fraction > 0
+            if not overlap or (itself and held_out is not None and test_fraction <= held_out):
+                continue
+            include = ("may include frames it was trained or validated on: the checkpoint "
+                       "does not say what `train --test-fraction` held out"
+                       if itself and held_out is None else
+                       "include frames it was trained or validated on, not a test")
+            lines.append(f"{why}: these figures {include} (score a held-out recording, or the "
+                         "part `train --test-fraction F` held out with --test-fraction F or "
+                         "less)")
+            break
+    return lines
+
+
 def refuse_calibration_frames(info: dict, scored: list[tuple[dict, np.ndarray]],
                               label: str) -> None:
     """Refuse (a usage error) to score a calibrated model (checkpoint ``info``) on one of its
@@ -364,8 +399,9 @@ def refuse_calibration_frames(info: dict, scored: list[tuple[dict, np.ndarray]],
 @click.option("--train", "train_paths", multiple=True, required=True, type=InputFile(),
               help="Training recording (repeat the option for several).")
 @click.option("--test", "test_paths", multiple=True, type=InputFile(),
-              help="Test recording(s) (across-trial split); without them the end of each "
-              "training movement piece is the test set (--test-fraction).")
+              help="Test recording(s) (across-trial split), at the --train recordings' "
+              "sensor rate; without them the end of each training movement piece is the "
+              "test set (--test-fraction).")
 @click.option("--test-fraction", type=Finite(0.05, 0.9), default=0.3,
               show_default=True, help="Within-recording split: test = last fraction.")
 @click.option("--models", type=NameList(MODEL_NAMES),
@@ -413,6 +449,11 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
                       data.sensor_names) if test_paths else None
     if test_data is not None:
         _refuse_training_frames(data.sources, test_data.sources)
+        if not same_rate(test_data.rate_hz, data.rate_hz):  # as train refuses two rates
+            raise click.ClickException(
+                f"--test recordings at {test_data.rate_hz:g} Hz, --train recordings at "
+                f"{data.rate_hz:g} Hz: each model's window would span another time in the "
+                "test; resample them to one rate")
     split = wf.make_split(data, offset_frames, test_paths_data=test_data,
                           test_fraction=test_fraction, val_fraction=val_fraction)
     if not split.train or not split.test:
@@ -445,6 +486,7 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
         save_dir.mkdir(parents=True, exist_ok=True)
         for r in results:
             r.estimator.info["command"] = _command_line()
+            r.estimator.info["test_fraction"] = 0.0 if test_paths else test_fraction
             save_checkpoint(save_dir / f"{r.kind}.npz", r.estimator)
     if json_out:
         payload = {r.kind: {"test": r.test, "info": r.estimator.info} for r in results}

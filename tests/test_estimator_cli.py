@@ -6,6 +6,7 @@ import pytest
 from click.testing import CliRunner
 from estimator_synth import shoulder_recording
 
+from exohil.estimator.checkpoint import load_checkpoint, save_checkpoint
 from exohil.formats.recording import cut_recording
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
@@ -89,6 +90,18 @@ def test_a_sensor_that_never_changes_is_warned_of(files):
                                            str(files["dir"] / "stuck.npz")])
         assert result.exit_code == 0, result.output
         assert f"warning: {said}" in result.output
+
+
+def test_a_plane_of_elevation_without_the_elevation_is_warned_of(files):
+    """--angles elv_angle alone trains and scores θ where the arm hangs, without a word."""
+    said = "elv_angle without shoulder_elv: the plane of elevation is undefined"
+    for angles, warned in (("elv_angle", True), ("shoulder_elv", False),
+                           ("elv_angle,shoulder_elv", False)):
+        result = CliRunner().invoke(main, ["train", "--model", "classical", str(files["good"]),
+                                           "--angles", angles, "--out",
+                                           str(files["dir"] / "theta.npz")])
+        assert result.exit_code == 0, result.output
+        assert (said in result.output) is warned, result.output
 
 
 @pytest.mark.parametrize(("kind", "args", "said"), [
@@ -259,6 +272,46 @@ def test_evaluate_warns_when_the_recording_runs_at_another_rate(files):
     assert same.exit_code == 0 and "sensor rate" not in same.output
 
 
+def test_evaluate_warns_when_it_scores_frames_the_model_was_trained_on(files):
+    def warned(*extra):
+        result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(files["good"]),
+                                           *extra])
+        assert result.exit_code == 0, result.output
+        return "frames it was trained or validated on, not a test" in result.output
+
+    # the model was trained with --test-fraction 0.3: only that held-out end is a test
+    assert warned() and warned("--test-fraction", "0.5")
+    assert not warned("--test-fraction", "0.3") and not warned("--test-fraction", "0.1")
+    other = files["dir"] / "other.mcap"
+    write_recording(other, shoulder_recording(seconds=3.0, seed=5))
+    result = CliRunner().invoke(main, ["evaluate", str(files["ckpt"]), str(other)])
+    assert result.exit_code == 0 and "trained or validated on" not in result.output
+    whole = files["dir"] / "whole.npz"  # trained on every frame: nothing of it is a test
+    assert CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
+                                     str(whole), "--max-epochs", "1"]).exit_code == 0
+    result = CliRunner().invoke(main, ["evaluate", str(whole), str(files["good"]),
+                                       "--test-fraction", "0.3"])
+    assert result.exit_code == 0 and "good.mcap was used to train the model" in result.output
+    assert "figures include frames it was trained" in result.output
+    calibrated = files["dir"] / "calibrated.npz"  # keeps what its base model held out
+    write_recording(other, shoulder_recording(seconds=6.0, seed=5))  # calibration needs 5 s
+    assert CliRunner().invoke(main, ["calibrate", str(files["ckpt"]), str(other), "--steps",
+                                     "2", "--jitter", "0.1", "--out",
+                                     str(calibrated)]).exit_code == 0
+    result = CliRunner().invoke(main, ["evaluate", str(calibrated), str(files["good"]),
+                                       "--test-fraction", "0.3"])
+    assert result.exit_code == 0 and "trained or validated on" not in result.output
+    unknown = files["dir"] / "unknown.npz"  # made before checkpoints kept the fraction
+    est = load_checkpoint(files["ckpt"])
+    del est.info["test_fraction"]
+    save_checkpoint(unknown, est)
+    for extra, said in (((), "figures include frames"), (("--test-fraction", "0.3"),
+                                                          "figures may include frames")):
+        result = CliRunner().invoke(main, ["evaluate", str(unknown), str(files["good"]),
+                                           *extra])
+        assert result.exit_code == 0 and said in result.output, result.output
+
+
 def test_training_on_recordings_at_two_rates_is_one_clear_error(files):
     slow = files["dir"] / "slow2.mcap"
     write_recording(slow, shoulder_recording(seconds=3.0, rate=100.0, seed=3))
@@ -267,6 +320,11 @@ def test_training_on_recordings_at_two_rates_is_one_clear_error(files):
                "--out", str(files["dir"] / "mixed.npz"), "--max-epochs", "1"]))
     assert "sensors at 100 Hz" in line and "at 250 Hz" in line
     assert not (files["dir"] / "mixed.npz").exists()
+    # table --test at another rate than --train trained and scored every model silently
+    line = _one_line_error(CliRunner().invoke(
+        main, ["table", "--train", str(files["good"]), "--test", str(slow), "--models", "ann",
+               "--max-epochs", "1"]))
+    assert "--test recordings at 100 Hz, --train recordings at 250 Hz" in line
 
 
 def test_a_recording_without_the_models_joint_is_named_in_the_error(files):

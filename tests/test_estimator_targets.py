@@ -76,6 +76,30 @@ def test_trained_direction_models_round_trip_with_their_config(recording, tmp_pa
     np.testing.assert_allclose(back.predict_block(block), est.predict_block(block), atol=1e-9)
 
 
+@pytest.mark.parametrize("rate", [100.0, 500.0])
+def test_stateful_training_streams_span_seconds_at_any_rate(monkeypatch, rate):
+    """Truncated backpropagation runs streams of 5 s (1250 frames at 250 Hz), not 1250
+    frames: 12.5 s at 100 Hz, 2.5 s at 500 Hz."""
+    from exohil.estimator.models import ENNet
+
+    rec = shoulder_recording(seconds=20.0, rate=rate, seed=4)
+    streams: list[int] = []  # frames of each group of streams run side by side
+    sequence = ENNet.sequence
+
+    def recorded(self, x, state=None, *args, **kwargs):
+        if self.training:
+            if state is None:
+                streams.append(0)
+            streams[-1] += x.shape[1]
+        return sequence(self, x, state, *args, **kwargs)
+
+    monkeypatch.setattr(ENNet, "sequence", recorded)
+    split = time_block_split(recording_blocks(rec, default_target(rec)), 0.0)
+    cfg = TrainConfig(kind="ennet", stateful=True, hidden=4, max_epochs=1, dense=(4,))
+    train(split, rec.sensor_names, default_target(rec), cfg, sensor_rate_hz=rate)
+    assert streams and max(streams) == round(5.0 * rate)
+
+
 def test_knee_like_targets_are_learnt_as_angles(recording):
     target = TargetSpec("shoulder", ("elv_angle",))
     blocks = recording_blocks(recording, target)
