@@ -90,7 +90,7 @@ def demo(bench_file: Path | None, recording: Path | None, model: Path | None, se
     fault_spec = None if no_faults else (faults or base.faults)
     config = config.with_overrides(
         device=EmulatorDevice(recording or base.recording, fault_spec,
-                              base.seed if seed is None else seed),
+                              base.seed if seed is None else seed, base.loop),
         model=model or config.model or DEFAULT_MODEL, backend=backend, record=record_path,
         robots=(tuple(s for s in sinks if s != "none") if sinks
                 else None if bench_file else DEFAULT_ROBOTS))

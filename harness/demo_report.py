@@ -53,7 +53,8 @@ if TYPE_CHECKING:
 
 #: Elevation below which the plane of elevation θ is undefined (shaded), deg.
 LOW_ELEVATION_DEG = 20.0
-#: Arm pictures: still frames, and at most this many GIF frames (played in device time).
+#: Arm pictures: still frames, and at most this many GIF frames (played in device time, at
+#: 1 frame per second at the slowest).
 ARM_FRAMES = 4
 GIF_MAX_FRAMES = 120
 
@@ -299,7 +300,8 @@ def _arm_pictures(result: SessionResult, out_dir: Path, notes: list[str]) -> Fil
     step = max(1, int(np.ceil(known.size / GIF_MAX_FRAMES)))
     shown = known[::step]
     span = float(trace.device_time_s[known[-1]] - trace.device_time_s[known[0]])
-    # the frames play over the span they sample (25 fps at most, the trace's rate)
+    # the frames play over the span they sample (25 fps at most, the trace's rate; 1 fps at
+    # least, so a span over GIF_MAX_FRAMES seconds plays faster, in one second per frame)
     fps = min(25.0, max(1.0, shown.size / span)) if span > 0 else 1.0
     gif = write_arm_animation(trace.arm_samples(shown), out_dir / "arm.gif", fps=fps)
     stills = known[np.linspace(0, known.size - 1, ARM_FRAMES).astype(int)]

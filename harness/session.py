@@ -89,7 +89,7 @@ LATENCY_INTERVALS = {
 
 
 #: Frames with ground truth whose robot commands are kept to be scored at the end of a session
-#: (``teleop.rmse.*``): 2**20, 70 min at 250 Hz, 40 MiB. Mapping a true pose to its command
+#: (``teleop.rmse.*``): 2**20, 70 min at 250 Hz, 48 MiB. Mapping a true pose to its command
 #: takes ~0.3 ms, too long for the pipeline's thread, so it is done after the run.
 TELEOP_MAX_FRAMES = 1 << 20
 

@@ -514,3 +514,29 @@ def test_the_latency_picture_names_the_machine_it_timed(tmp_path, monkeypatch):
     assert result.exit_code == 0, result.output
     machine = json.loads((out / "summary.json").read_text())["machine"]
     assert f"on {machine}" in titles["latency.png"], titles
+
+
+def test_a_demo_on_a_looped_bench_streams_the_seconds_asked_for(tmp_path):
+    """`demo --bench B --seconds 600` with `loop = true` in B streamed the fixture's 246 s
+    once and told the user to set `loop = true` under [device]: the demo dropped the bench's
+    loop when it filled in the emulator's faults and seed."""
+    part = tmp_path / "part.mcap"
+    runner = CliRunner()
+    result = runner.invoke(main, ["record", "cut", str(FIXTURES_DIR /
+                                                       "paper_protocol_heldout.mcap"),
+                                  "--stop", "1", "--out", str(part)])
+    assert result.exit_code == 0, result.output
+    from exohil.formats.recording_reader import read_recording
+
+    frames = len(read_recording(part).sensors)
+    bench = tmp_path / "bench.toml"
+    bench.write_text(f'[device]\nemulator = "{part.name}"\nloop = true\n')
+    summary = tmp_path / "summary.json"
+    result = runner.invoke(main, ["demo", "--bench", str(bench), "--seconds", "2.5",
+                                  "--sink", "none", "--no-faults", "--json", str(summary)])
+    assert result.exit_code == 0, result.output
+    s = json.loads(summary.read_text())
+    assert s["ended_early"] is None and "the recording holds" not in result.output
+    # 2.5 s of frames: the 1 s recording two and a half times (less what the host missed
+    # while it attached, logged by the device)
+    assert s["frames"]["received"] + s["device_log"].get("not_read", 0) > 2 * frames
