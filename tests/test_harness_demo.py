@@ -377,17 +377,23 @@ def test_a_demo_that_never_raises_the_arm_reports_the_arm_direction_it_measured(
     assert "arm-direction RMSE" in result.output
 
 
-def test_a_demo_longer_than_its_recording_says_it_streamed_less(tmp_path):
-    """`demo --seconds 4` on a 1.5 s recording stopped at its end without a word."""
-    part = tmp_path / "part.mcap"
-    runner = CliRunner()
-    result = runner.invoke(main, ["record", "cut", str(FIXTURES_DIR /
-                                                       "paper_protocol_heldout.mcap"),
-                                  "--stop", "1.5", "--out", str(part)])
-    assert result.exit_code == 0, result.output
+def _fixture_part(tmp_path, stop_s: str) -> tuple[Path, int]:
+    """The held-out fixture's first ``stop_s`` seconds, cut with `exohil record cut` into
+    ``tmp_path``, and its sensor frame count."""
     from exohil.formats.recording_reader import read_recording
 
-    frames = len(read_recording(part).sensors)
+    part = tmp_path / "part.mcap"
+    result = CliRunner().invoke(main, ["record", "cut", str(FIXTURES_DIR /
+                                                            "paper_protocol_heldout.mcap"),
+                                       "--stop", stop_s, "--out", str(part)])
+    assert result.exit_code == 0, result.output
+    return part, len(read_recording(part).sensors)
+
+
+def test_a_demo_longer_than_its_recording_says_it_streamed_less(tmp_path):
+    """`demo --seconds 4` on a 1.5 s recording stopped at its end without a word."""
+    runner = CliRunner()
+    part, frames = _fixture_part(tmp_path, "1.5")
     summary = tmp_path / "summary.json"
     note = ("note        the recording holds 1.5 s of frames, so the run streamed those, "
             "not the 4 s asked for")
@@ -520,15 +526,8 @@ def test_a_demo_on_a_looped_bench_streams_the_seconds_asked_for(tmp_path):
     """`demo --bench B --seconds 600` with `loop = true` in B streamed the fixture's 246 s
     once and told the user to set `loop = true` under [device]: the demo dropped the bench's
     loop when it filled in the emulator's faults and seed."""
-    part = tmp_path / "part.mcap"
     runner = CliRunner()
-    result = runner.invoke(main, ["record", "cut", str(FIXTURES_DIR /
-                                                       "paper_protocol_heldout.mcap"),
-                                  "--stop", "1", "--out", str(part)])
-    assert result.exit_code == 0, result.output
-    from exohil.formats.recording_reader import read_recording
-
-    frames = len(read_recording(part).sensors)
+    part, frames = _fixture_part(tmp_path, "1")
     bench = tmp_path / "bench.toml"
     bench.write_text(f'[device]\nemulator = "{part.name}"\nloop = true\n')
     summary = tmp_path / "summary.json"
