@@ -135,11 +135,13 @@ def profile_from_dict(data: dict[str, Any]) -> SuitProfile:
                            "effect"}, "profile")
     if data.get("schema") != PROFILE_SCHEMA:
         raise ProfileError(f"'schema' must be \"{PROFILE_SCHEMA}\", got {data.get('schema')!r}")
-    if data.get("version") != PROFILE_VERSION:
+    version = data.get("version")
+    # TOML's true equals 1 and 1.0 does too; only the integer names a schema version
+    if type(version) is not int or version != PROFILE_VERSION:
         raise ProfileError(f"unsupported profile version {data.get('version')!r} "
                            f"(this exohil reads version {PROFILE_VERSION})")
     name = _require(data, "name", "profile")
-    if not isinstance(name, str) or not name:
+    if not isinstance(name, str) or not name.strip():
         raise ProfileError("'name' must be a non-empty string")
     cap = _table(_require(data, "cap", "profile"), "[cap]")
     _reject_unknown(cap, {"centre_mm", "radius_mm"}, "[cap]")
@@ -160,10 +162,13 @@ def profile_from_dict(data: dict[str, Any]) -> SuitProfile:
     for i, table in enumerate(tendon_tables):
         where = f"[[tendon]] #{i + 1}"
         tname = _require(_table(table, where), "name", where)
+        if not isinstance(tname, str) or not tname.strip():
+            # the name labels the sensor's channel in every recording the profile makes
+            raise ProfileError(f"{where}: name must be a non-empty string, got {tname!r}")
         where = f"[[tendon]] {tname!r}"
         _reject_unknown(table, {"name", "thorax_points_mm", "humerus_points_mm"}, where)
         tendons.append(Tendon(
-            name=str(tname),
+            name=tname,
             thorax_points_mm=_points(_require(table, "thorax_points_mm", where),
                                      f"{where} thorax_points_mm"),
             humerus_points_mm=_points(_require(table, "humerus_points_mm", where),
@@ -174,8 +179,12 @@ def profile_from_dict(data: dict[str, Any]) -> SuitProfile:
         raise ProfileError(f"tendon names must be unique, got {names}")
     geometry = SuitGeometry(cap_centre_mm=centre, cap_radius_mm=float(radius),
                             tendons=tuple(tendons))
+    effect_tables = data.get("effect", [])
+    if not isinstance(effect_tables, list):
+        raise ProfileError("'effect' must be a list of [[effect]] tables, got "
+                           f"{type(effect_tables).__name__}")
     effects = []
-    for i, table in enumerate(data.get("effect", [])):
+    for i, table in enumerate(effect_tables):
         try:
             effect = effect_from_dict(table)
         except (TypeError, ValueError) as exc:

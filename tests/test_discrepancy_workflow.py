@@ -2492,6 +2492,9 @@ def test_the_mocap_filter_line_claims_nothing_when_the_gaps_agree_to_the_digits_
     (("version = 1", "version = 2"), "calibrated suit profile version 2; this exohil reads "
                                      "version 1"),
     (("[[sensor]]", "[[sensors]]"), "malformed calibrated suit profile: no 'sensor' "),
+    # TOML's true and 1.0 compare equal to 1: they passed as version 1
+    (("version = 1", "version = true"), "calibrated suit profile version True; this exohil"),
+    (("version = 1", "version = 1.0"), "calibrated suit profile version 1.0; this exohil"),
 ])
 def test_a_profile_of_another_version_or_without_a_table_is_refused_in_words(
         hysteresis_outcome, tmp_path, corrupt, error):

@@ -165,6 +165,17 @@ def default_text() -> str:
      r"\[cap\]: expected a table"),
     (lambda s: s.replace('description = "', 'tendon = [1]\ndescription = "').split("[[tendon]]")[0],
      r"\[\[tendon\]\] #1: expected a table"),
+    # TOML's true and 1.0 compare equal to 1, so they passed as version 1; an empty tendon
+    # name made a channel without a name; an [[effect]] that is not a list was read key by key
+    (lambda s: s.replace("version = 1", "version = true"), "unsupported profile version True"),
+    (lambda s: s.replace("version = 1", "version = 1.0"), "unsupported profile version 1.0"),
+    (lambda s: s.replace('name = "default"', 'name = "  "'), "'name' must be a non-empty"),
+    (lambda s: s.replace('name = "SR"', 'name = ""'),
+     r"\[\[tendon\]\] #3: name must be a non-empty string, got ''"),
+    (lambda s: s.replace('name = "SR"', 'name = 7'),
+     r"\[\[tendon\]\] #3: name must be a non-empty string, got 7"),
+    (lambda s: s.replace('description = "', 'effect = 3\ndescription = "').split("[[effect]]")[0],
+     "'effect' must be a list of \\[\\[effect\\]\\] tables, got int"),
 ])
 def test_bad_profiles_give_one_clear_error(tmp_path, edit, message):
     path = write_profile(tmp_path, edit(default_text()))

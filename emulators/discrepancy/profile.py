@@ -239,7 +239,8 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
     if data.get("schema") != CALIBRATED_SCHEMA:
         raise ProfileError(f"{path}: not a calibrated suit profile (schema "
                            f"{CALIBRATED_SCHEMA!r} version {CALIBRATED_VERSION})")
-    if data.get("version") != CALIBRATED_VERSION:
+    version = data.get("version")
+    if type(version) is not int or version != CALIBRATED_VERSION:  # TOML's true == 1 == 1.0
         raise ProfileError(f"{path}: calibrated suit profile version {data.get('version')!r}; "
                            f"this exohil reads version {CALIBRATED_VERSION}")
     try:
