@@ -490,7 +490,9 @@ class ConformanceRun:
         mine = accuracy_measurements(self.replay.estimates, self.replay.truth,
                                      self.model.estimator.target.angles)
         if self.baseline_path.suffix.lower() == ".json":  # an earlier run's figures
-            base_values, whose = figures_baseline(self.baseline_path, self.reference_sha256)
+            scored = next((m.value for m in mine if m.name == "accuracy.frames_scored"), None)
+            base_values, whose = figures_baseline(self.baseline_path, self.reference_sha256,
+                                                  scored)
             baseline = None
         else:
             baseline = load_model(self.baseline_path, self.backend)
@@ -536,11 +538,21 @@ class ConformanceRun:
         return None if self.profile.path is None else sha256_file(self.profile.path)
 
 
-def figures_baseline(path: Path, reference_sha256: str | None) -> tuple[dict[str, float], str]:
+#: how far (a share) an earlier run's count of scored frames may be from this run's: models
+#: with other windows score a few frames fewer of a reference's tens of thousands; a real-time
+#: segment instead of the whole replay scores a fraction of them.
+FRAMES_SCORED_TOLERANCE = 0.01
+
+
+def figures_baseline(path: Path, reference_sha256: str | None,
+                     frames_scored: float | None = None) -> tuple[dict[str, float], str]:
     """The accuracy figures (measurement name → degrees) of an earlier run's
     ``conformance.json`` at ``path``, and how the notes name them ("baseline <model
     sha256[:12]>"). SessionError where the file is no such report, holds no accuracy
-    figure, or was measured on another reference recording than ``reference_sha256``."""
+    figure, was measured on another reference recording than ``reference_sha256``, or
+    scored other frames of it than ``frames_scored`` (this run's count; within
+    :data:`FRAMES_SCORED_TOLERANCE`): its profile scored a real-time segment
+    (``replay`` not "full"), where the regression check scores the whole replay."""
     from exohil.conformance.report import SCHEMA
 
     try:
@@ -559,6 +571,18 @@ def figures_baseline(path: Path, reference_sha256: str | None) -> tuple[dict[str
               for check in data.get("checks", []) if check.get("name") == "accuracy"
               for m in check.get("measurements", [])
               if m.get("unit") == "deg" and isinstance(m.get("value"), (int, float))}
+    theirs_scored = next((m.get("value") for check in data.get("checks", [])
+                          if check.get("name") == "accuracy"
+                          for m in check.get("measurements", [])
+                          if m.get("name") == "accuracy.frames_scored"), None)
+    if (frames_scored is not None and isinstance(theirs_scored, (int, float))
+            and abs(theirs_scored - frames_scored)
+            > FRAMES_SCORED_TOLERANCE * max(frames_scored, 1.0)):
+        raise SessionError(
+            f"{path}: its accuracy scored {theirs_scored:.0f} frames of the reference, this "
+            f"run's whole replay {frames_scored:.0f}: its profile scored another part of it "
+            "(a real-time segment: replay is not \"full\"), so its figures are not comparable; "
+            "measure the baseline with a profile whose replay is \"full\"")
     model = (data.get("model") or {}).get("sha256") or "?"
     return values, f"baseline figures (model {model[:12]})"
 

@@ -398,6 +398,12 @@ def test_a_figures_baseline_of_another_recording_or_no_report_is_refused(tmp_pat
                                                 f"baseline figures (model {'b' * 12})")
     with pytest.raises(SessionError, match="measured on another reference recording"):
         figures_baseline(path, "c" * 64)
+    # a profile with replay other than "full" scores only its real-time segment: those
+    # figures were compared with the whole replay's as if they were the same measurement
+    assert figures_baseline(path, "a" * 64, 10.05)[0] == {"accuracy.rmse.elv_angle": 1.5}
+    with pytest.raises(SessionError, match=r"scored 10 frames of the reference, this run's "
+                                           r"whole replay 7500: .* not comparable"):
+        figures_baseline(path, "a" * 64, 7500.0)
     for text in ("{not json", json.dumps({"schema": "other"}), json.dumps([1])):
         path.write_text(text, encoding="utf-8")
         with pytest.raises(SessionError, match="not a conformance report"):
