@@ -21,6 +21,7 @@ from exohil.kinematics.rotations import (
     X,
     Y,
     Z,
+    broadcast_hint,
     elementary_matrix,
     intrinsic_euler_from_first_two,
     quat_to_matrix,
@@ -49,13 +50,14 @@ def quat_to_zyx(q, yaw_hint=0.0) -> np.ndarray:
 
     This is the paper's last step toward V-REP/CoppeliaSim (equivalently extrinsic X-Y-Z).
     Pitch in [−π/2, π/2]; at gimbal lock (pitch = ±π/2) yaw = ``yaw_hint`` and roll absorbs the
-    rest. Never NaN for unit input.
+    rest. Never NaN for unit input; ValueError for a ``yaw_hint`` that is not finite or does
+    not broadcast to the quaternions.
     """
     m = quat_to_matrix(q)
     pitch = np.arctan2(-m[..., 2, 0], np.hypot(m[..., 0, 0], m[..., 1, 0]))
     yaw_regular = np.arctan2(m[..., 1, 0], m[..., 0, 0])
     cos_p = np.hypot(m[..., 0, 0], m[..., 1, 0])
-    hint = np.broadcast_to(np.asarray(yaw_hint, dtype=float), pitch.shape)
+    hint = broadcast_hint(yaw_hint, pitch.shape, "yaw_hint")
     yaw = np.where(cos_p < SINGULAR_EPS, hint, yaw_regular)
     return intrinsic_euler_from_first_two(m, (Z, Y, X), yaw, pitch)
 

@@ -38,6 +38,19 @@ def as_angles(a, b=None, c=None) -> np.ndarray:
     return np.stack([a, b, c], axis=-1)
 
 
+def broadcast_hint(hint, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """``hint`` (radians) as a finite array of ``shape``; ValueError naming ``name`` for a value
+    that is not finite or does not broadcast (a NaN hint would come back as a NaN angle)."""
+    h = np.asarray(hint, dtype=float)
+    if not np.isfinite(h).all():
+        raise ValueError(f"{name} must be finite radians, got {hint!r}")
+    try:
+        return np.broadcast_to(h, shape)
+    except ValueError:
+        raise ValueError(f"{name} of shape {h.shape} does not fit quaternions of "
+                         f"shape {shape + (4,)}") from None
+
+
 def wrap_angle(a) -> np.ndarray:
     """Wrap angles to [-π, π)."""
     return (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi

@@ -37,6 +37,7 @@ from exohil.kinematics.rotations import (
     Y,
     as_angles,
     axis_angle_quat,
+    broadcast_hint,
     elementary_quat,
     intrinsic_euler_from_first_two,
     normalize_quat,
@@ -124,14 +125,7 @@ def quat_to_isb(q, plane_hint=0.0) -> np.ndarray:
     sin_b = -np.hypot(m[..., 0, 1], m[..., 2, 1])
     beta = np.arctan2(sin_b, m[..., 1, 1])
     alpha_regular = np.arctan2(-m[..., 0, 1], -m[..., 2, 1])
-    hint = np.asarray(plane_hint, dtype=float)
-    if not np.isfinite(hint).all():
-        raise ValueError(f"plane_hint must be finite radians, got {plane_hint!r}")
-    try:
-        hint = np.broadcast_to(hint, beta.shape)
-    except ValueError:
-        raise ValueError(f"plane_hint of shape {hint.shape} does not fit quaternions of "
-                         f"shape {beta.shape + (4,)}") from None
+    hint = broadcast_hint(plane_hint, beta.shape, "plane_hint")
     alpha = np.where(-sin_b < SINGULAR_EPS, hint, alpha_regular)
     out = intrinsic_euler_from_first_two(m, (Y, X, Y), alpha, beta)
     return np.stack([out[..., 0], out[..., 1], wrap_angle(out[..., 2])], axis=-1)

@@ -184,3 +184,17 @@ def test_bad_quaternions_raise_value_error():
         quat_to_isb([np.nan, 0.0, 0.0, 1.0])
     with pytest.raises(ValueError):
         quat_to_isb([1.0, 0.0, 0.0])
+
+
+def test_quat_to_zyx_refuses_a_yaw_hint_it_cannot_use():
+    """At gimbal lock a NaN or infinite yaw_hint came back as NaN yaw and roll (with a
+    RuntimeWarning), and a hint of the wrong shape raised NumPy's broadcast error, where
+    quat_to_isb names its plane_hint."""
+    lock = np.array([[0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5)], [0.0, 0.0, 0.0, 1.0]])
+    for bad in (np.nan, np.inf, [0.0, np.nan]):
+        with pytest.raises(ValueError, match="yaw_hint must be finite"):
+            quat_to_zyx(lock, yaw_hint=bad)
+    with pytest.raises(ValueError, match="yaw_hint of shape .* does not fit"):
+        quat_to_zyx(lock, yaw_hint=[0.0, 1.0, 2.0])
+    yaw, pitch, roll = quat_to_zyx(lock[0], yaw_hint=0.5)
+    assert (yaw, pitch) == pytest.approx((0.5, PI / 2))
