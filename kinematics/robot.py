@@ -49,9 +49,9 @@ def quat_to_zyx(q, yaw_hint=0.0) -> np.ndarray:
     """Quaternion → intrinsic Z-Y'-X'' angles (yaw, pitch, roll), radians, ``(..., 3)``.
 
     This is the paper's last step toward V-REP/CoppeliaSim (equivalently extrinsic X-Y-Z).
-    Pitch in [−π/2, π/2]; at gimbal lock (pitch = ±π/2) yaw = ``yaw_hint`` and roll absorbs the
-    rest. Never NaN for unit input; ValueError for a ``yaw_hint`` that is not finite or does
-    not broadcast to the quaternions.
+    Pitch in [−π/2, π/2]; at gimbal lock (pitch = ±π/2) yaw = ``yaw_hint`` (wrapped to
+    [−π, π)) and roll absorbs the rest. Never NaN for unit input; ValueError for a
+    ``yaw_hint`` that is not finite or does not broadcast to the quaternions.
     """
     m = quat_to_matrix(q)
     pitch = np.arctan2(-m[..., 2, 0], np.hypot(m[..., 0, 0], m[..., 1, 0]))
@@ -83,14 +83,15 @@ class NaoArm:
 
 
 def _pitch_of(hint, shape: tuple[int, ...]) -> np.ndarray:
-    """The pitch of ``hint`` (``(..., 3)`` joint angles, radians) for commands of ``shape``;
-    ValueError for another shape or a value that is not finite."""
+    """The pitch of ``hint`` (``(..., 3)`` joint angles, radians) for commands of ``shape``,
+    wrapped to (−π, π] like the exact pitch; ValueError for another shape or a value that is
+    not finite."""
     h = np.asarray(hint, dtype=float)
     if h.ndim == 0 or h.shape[-1] != 3 or not np.isfinite(h).all():
         raise ValueError(f"hint must be finite joint angles (..., 3), radians (the previous "
                          f"unclamped), got shape {h.shape}")
     try:
-        return np.broadcast_to(h[..., 0], shape)
+        return -wrap_angle(-np.broadcast_to(h[..., 0], shape))  # (−π, π], as pitch is
     except ValueError:
         raise ValueError(f"hint of shape {h.shape} does not fit commands of shape "
                          f"{shape + (3,)}") from None

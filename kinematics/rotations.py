@@ -39,13 +39,14 @@ def as_angles(a, b=None, c=None) -> np.ndarray:
 
 
 def broadcast_hint(hint, shape: tuple[int, ...], name: str) -> np.ndarray:
-    """``hint`` (radians) as a finite array of ``shape``; ValueError naming ``name`` for a value
-    that is not finite or does not broadcast (a NaN hint would come back as a NaN angle)."""
+    """``hint`` (radians) as a finite array of ``shape``, wrapped to [−π, π) like the angle it
+    stands for; ValueError naming ``name`` for a value that is not finite or does not
+    broadcast (a NaN hint would come back as a NaN angle)."""
     h = np.asarray(hint, dtype=float)
     if not np.isfinite(h).all():
         raise ValueError(f"{name} must be finite radians, got {hint!r}")
     try:
-        return np.broadcast_to(h, shape)
+        return wrap_angle(np.broadcast_to(h, shape))
     except ValueError:
         raise ValueError(f"{name} of shape {h.shape} does not fit quaternions of "
                          f"shape {shape + (4,)}") from None

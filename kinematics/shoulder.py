@@ -117,8 +117,9 @@ def quat_to_isb(q, plane_hint=0.0) -> np.ndarray:
 
     β is returned in [−π, 0] (elevation φ = −β in [0, π]); α and γ in [−π, π).
     At the singularities β = 0 (arm hanging) and β = −π (arm straight up) only α + γ, resp.
-    γ − α, is defined: α is then set to ``plane_hint`` (pass the previous plane of elevation to
-    keep a stream continuous) and γ absorbs the rest. Never NaN, never raises for unit input.
+    γ − α, is defined: α is then set to ``plane_hint`` wrapped to [−π, π) (pass the previous
+    plane of elevation to keep a stream continuous) and γ absorbs the rest. Never NaN, never
+    raises for unit input.
     """
     m = quat_to_matrix(q)
     # Column Y of R is (sin α sin β, cos β, cos α sin β); choose sin β ≤ 0.

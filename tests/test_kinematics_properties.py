@@ -198,3 +198,23 @@ def test_quat_to_zyx_refuses_a_yaw_hint_it_cannot_use():
         quat_to_zyx(lock, yaw_hint=[0.0, 1.0, 2.0])
     yaw, pitch, roll = quat_to_zyx(lock[0], yaw_hint=0.5)
     assert (yaw, pitch) == pytest.approx((0.5, PI / 2))
+
+
+def test_hints_are_wrapped_to_the_range_of_the_angle_they_stand_for():
+    """A hint of 300° came back unwrapped as α = 300° (documented [−180°, 180°)) or yaw 300°;
+    for NAO the pitch 300° lay outside the limits, so the command went to the pitch limit
+    −119.5° where the same hint written −60° commands pitch −60°."""
+    from exohil.kinematics import humerus_to_nao
+
+    hanging = ms_to_quat(0.7, 0.0, 0.2)
+    alpha = quat_to_isb(hanging, plane_hint=np.deg2rad(300.0))[0]
+    assert np.rad2deg(alpha) == pytest.approx(-60.0)
+    lock = [0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5)]
+    assert np.rad2deg(quat_to_zyx(lock, yaw_hint=np.deg2rad(-300.0))[0]) == pytest.approx(60.0)
+    abducted = ms_to_quat(0.0, PI / 2, 0.0)  # NAO roll −90°: the pitch comes from the hint
+    for wrapped in (300.0, -420.0):
+        far = humerus_to_nao(abducted, hint=np.deg2rad([wrapped, 0.0, 0.0]))
+        near = humerus_to_nao(abducted, hint=np.deg2rad([-60.0, 0.0, 0.0]))
+        np.testing.assert_allclose(far.angles, near.angles, atol=1e-12)
+        np.testing.assert_allclose(far.unclamped, near.unclamped, atol=1e-12)
+        assert np.rad2deg(far.angles[0]) == pytest.approx(-60.0)
