@@ -36,10 +36,21 @@ MAX_VALUE = 1e6
 _DECIMALS = 9
 
 
-def _clean(values: np.ndarray) -> list[float]:
-    """Round for display and turn −0.0 into 0.0."""
-    return (np.round(values, _DECIMALS) + 0.0).tolist()
+def _clean(values: np.ndarray, half_open: dict[int, float] | None = None) -> list[float]:
+    """Round for display and turn −0.0 into 0.0. ``half_open`` maps an index to the bound its
+    range excludes (180 for [−180, 180), −180 for (−180, 180]): an angle a hair inside it
+    would round onto it, and is printed as the other end, the same angle."""
+    rounded = np.round(values, _DECIMALS) + 0.0
+    for index, excluded in (half_open or {}).items():
+        if rounded[index] == excluded:
+            rounded[index] = -excluded
+    return rounded.tolist()
 
+
+#: Angles documented in a half-open range (docs/conventions.md): index → the excluded end.
+_HALF_OPEN = {"ms": {0: 180.0, 2: 180.0}, "isb": {0: 180.0, 2: 180.0}}
+#: NAO's exact (unclamped) pitch lies in (−180, 180].
+_NAO_UNCLAMPED_HALF_OPEN = {0: -180.0}
 
 _TARGET_FIELDS = {
     "ms": _SOURCES["ms"],
@@ -71,7 +82,8 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
             "values": dict(zip(names, _clean(np.rad2deg(arm.angles)), strict=True)),
             "clamped": dict(zip(names, arm.clamped.tolist(), strict=True)),
             "any_clamped": bool(arm.any_clamped),
-            "unclamped": dict(zip(names, _clean(np.rad2deg(arm.unclamped)), strict=True)),
+            "unclamped": dict(zip(names, _clean(np.rad2deg(arm.unclamped),
+                                                _NAO_UNCLAMPED_HALF_OPEN), strict=True)),
         }
     if target == "ms":
         angles = quat_to_ms(q, plane_hint=hint, convention=convention)
@@ -79,7 +91,8 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
         angles = quat_to_isb(q, plane_hint=hint)
     else:
         angles = quat_to_zyx(q, yaw_hint=hint)
-    return {"values": dict(zip(_TARGET_FIELDS[target], _clean(np.rad2deg(angles)), strict=True))}
+    return {"values": dict(zip(_TARGET_FIELDS[target],
+                               _clean(np.rad2deg(angles), _HALF_OPEN.get(target)), strict=True))}
 
 
 @click.command(context_settings={"ignore_unknown_options": True})

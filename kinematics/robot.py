@@ -142,8 +142,8 @@ def humerus_to_nao(q, side: Side = "right", hint=None, hysteresis: float = 0.0) 
     roll = np.arctan2(direction[..., 1], cos_r)
     pitch_hint = np.broadcast_to(0.0 if hint is None else _pitch_of(hint, roll.shape),
                                  roll.shape)
-    pitch = np.where(cos_r < SINGULAR_EPS, pitch_hint,
-                     np.arctan2(-direction[..., 2], direction[..., 0]))
+    pitch = np.where(cos_r < SINGULAR_EPS, pitch_hint,  # atan2 gives ±π; keep (−π, π]
+                     -wrap_angle(-np.arctan2(-direction[..., 2], direction[..., 0])))
     exact = intrinsic_euler_from_first_two(m, (Y, Z, X), pitch, roll)
     # The left arm is the mirror image: solve in right-arm angles with mirrored limits.
     mirror = np.array([1.0, -1.0, -1.0]) if side == "left" else np.ones(3)

@@ -53,8 +53,10 @@ def broadcast_hint(hint, shape: tuple[int, ...], name: str) -> np.ndarray:
 
 
 def wrap_angle(a) -> np.ndarray:
-    """Wrap angles to [-π, π)."""
-    return (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    """Wrap angles to [-π, π). (The modulo alone gives +π for an angle a hair below −π: the
+    tiny negative remainder rounds to 2π.)"""
+    wrapped = (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    return np.where(wrapped >= np.pi, -np.pi, wrapped)[()]
 
 
 def axis_angle_quat(axis, angle) -> np.ndarray:

@@ -125,7 +125,7 @@ def quat_to_isb(q, plane_hint=0.0) -> np.ndarray:
     # Column Y of R is (sin α sin β, cos β, cos α sin β); choose sin β ≤ 0.
     sin_b = -np.hypot(m[..., 0, 1], m[..., 2, 1])
     beta = np.arctan2(sin_b, m[..., 1, 1])
-    alpha_regular = np.arctan2(-m[..., 0, 1], -m[..., 2, 1])
+    alpha_regular = wrap_angle(np.arctan2(-m[..., 0, 1], -m[..., 2, 1]))  # atan2 gives ±π
     hint = broadcast_hint(plane_hint, beta.shape, "plane_hint")
     alpha = np.where(-sin_b < SINGULAR_EPS, hint, alpha_regular)
     out = intrinsic_euler_from_first_two(m, (Y, X, Y), alpha, beta)

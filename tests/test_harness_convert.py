@@ -23,3 +23,16 @@ def test_a_hint_beyond_180_means_the_same_angle_as_its_wrapped_value():
     near = convert("--from", "ms", "--to", "nao", "--hint", "-60", "0", "90", "0")
     assert far["values"] == near["values"] and far["unclamped"] == near["unclamped"]
     assert far["values"]["RShoulderPitch"] == pytest.approx(-60.0)
+
+
+def test_printed_angles_keep_to_their_documented_half_open_ranges():
+    """`--from ms --to isb 180 60 0` printed α = 180 (documented [−180, 180)), as did an angle
+    a hair below 180 once rounded to 9 decimals; NAO's exact pitch printed −180 for an arm
+    pointing straight back (documented (−180, 180])."""
+    for theta in ("180", "179.9999999999"):
+        isb = convert("--from", "ms", "--to", "isb", theta, "60", "0")["values"]
+        assert isb["plane_of_elevation"] == -180.0 and isb["axial_rotation"] == -180.0
+        ms = convert("--from", "ms", "--to", "ms", theta, "60", "180")["values"]
+        assert ms["elv_angle"] == -180.0 and ms["shoulder_rot"] == -180.0
+    nao = convert("--from", "ms", "--to", "nao", "-170", "90", "0")
+    assert nao["unclamped"]["RShoulderPitch"] == 180.0

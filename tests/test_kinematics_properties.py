@@ -218,3 +218,19 @@ def test_hints_are_wrapped_to_the_range_of_the_angle_they_stand_for():
         np.testing.assert_allclose(far.angles, near.angles, atol=1e-12)
         np.testing.assert_allclose(far.unclamped, near.unclamped, atol=1e-12)
         assert np.rad2deg(far.angles[0]) == pytest.approx(-60.0)
+
+
+def test_returned_angles_keep_to_their_documented_half_open_ranges():
+    """On a 15° grid, α (and θ) came back as +180° for 1.9% of the poses, ψ as +180° and NAO's
+    exact pitch as −180°: wrap_angle gave +π for an angle a hair below −π, and atan2 gives
+    both ±π. Documented: α, γ, θ, ψ in [−π, π), NAO unclamped pitch in (−π, π]."""
+    from exohil.kinematics import humerus_to_nao
+
+    assert wrap_angle(-PI - 1e-17) == -PI and wrap_angle(PI) == -PI
+    grid = np.deg2rad(np.arange(-360.0, 361.0, 15.0))
+    poses = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), axis=-1).reshape(-1, 3)
+    q = isb_to_quat(poses)
+    for angles in (quat_to_isb(q), quat_to_ms(q)):
+        assert np.all((angles[:, [0, 2]] >= -PI) & (angles[:, [0, 2]] < PI))
+    pitch = humerus_to_nao(q).unclamped[:, 0]
+    assert np.all((pitch > -PI) & (pitch <= PI))
