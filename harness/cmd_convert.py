@@ -104,7 +104,8 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
               show_default=True,
               help="MS↔ISB step: 'coupled' (ISB γ = ψ − θ, the model's coupler) or the paper's.")
 @click.option("--axes", type=click.Choice(["ideal", "mobl"]), default="ideal", show_default=True,
-              help="MS → rotation with ideal ISB axes or the MoBL-ARMS model file's axes.")
+              help="--from ms only: MS → rotation with ideal ISB axes or the MoBL-ARMS model "
+                   "file's axes (up to 8.3° apart); --to ms/isb always read ideal axes.")
 @click.option("--side", type=click.Choice(["right", "left"]), default="right", show_default=True,
               help="Arm side for --to nao.")
 @click.option("--hint", type=Finite(-360.0, 360.0), default=0.0, show_default=True,
@@ -119,6 +120,12 @@ def convert(source: str, target: str, convention: Convention, axes: Axes, side: 
 
     Example: exohil convert --from ms --to nao 90 90 0
     """
+    if axes == "mobl" and source != "ms":
+        raise click.BadParameter(f"mobl applies to --from ms only; --from {source} would ignore "
+                                 "it", param_hint="'--axes'")
+    if axes == "mobl" and convention == "paper":
+        raise click.BadParameter("paper cannot go with --axes mobl: the model file's coupler is "
+                                 "the coupled form", param_hint="'--convention'")
     expected = len(_SOURCES[source])
     numbers = np.array(values, dtype=np.float64)
     if numbers.size != expected:

@@ -36,3 +36,20 @@ def test_printed_angles_keep_to_their_documented_half_open_ranges():
         assert ms["elv_angle"] == -180.0 and ms["shoulder_rot"] == -180.0
     nao = convert("--from", "ms", "--to", "nao", "-170", "90", "0")
     assert nao["unclamped"]["RShoulderPitch"] == 180.0
+
+
+def test_axes_mobl_where_it_cannot_apply_is_refused_naming_the_option():
+    """`--axes mobl --convention paper` failed as 'Invalid value for VALUES' (the values were
+    fine), and `--axes mobl` with --from isb or quat was ignored while the JSON reported
+    "axes": "mobl"."""
+    for args, option in ((["--from", "ms", "--axes", "mobl", "--convention", "paper",
+                           "1", "2", "3"], "'--convention'"),
+                         (["--from", "quat", "--axes", "mobl", "0", "0", "0", "1"], "'--axes'"),
+                         (["--from", "isb", "--axes", "mobl", "1", "2", "3"], "'--axes'")):
+        result = CliRunner().invoke(main, ["convert", "--to", "isb", *args])
+        assert result.exit_code == 2, result.output
+        assert result.exception is None or isinstance(result.exception, SystemExit)
+        errors = [line for line in result.output.splitlines() if line.startswith("Error")]
+        assert len(errors) == 1 and option in errors[0] and "VALUES" not in errors[0]
+    used = convert("--from", "ms", "--to", "ms", "--axes", "mobl", "45", "60", "-30")
+    assert used["axes"] == "mobl" and used["values"]["elv_angle"] != pytest.approx(45.0)
