@@ -52,6 +52,22 @@ _HALF_OPEN = {"ms": {0: 180.0, 2: 180.0}, "isb": {0: 180.0, 2: 180.0}}
 #: NAO's exact (unclamped) pitch lies in (−180, 180].
 _NAO_UNCLAMPED_HALF_OPEN = {0: -180.0}
 
+class _Value(Finite):
+    """A number of VALUES. ``ignore_unknown_options`` lets negative numbers through as
+    arguments, and with them a mistyped option: name it as one, not as a bad number."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and value.startswith("-"):
+            try:
+                float(value)
+            except ValueError:
+                options = [] if ctx is None else [
+                    opt for p in ctx.command.params for opt in p.opts if opt.startswith("--")]
+                raise click.NoSuchOption(value.split("=", 1)[0], possibilities=options,
+                                         ctx=ctx) from None
+        return super().convert(value, param, ctx)
+
+
 _TARGET_FIELDS = {
     "ms": _SOURCES["ms"],
     "isb": _SOURCES["isb"],
@@ -111,7 +127,7 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
 @click.option("--hint", type=Finite(-360.0, 360.0), default=0.0, show_default=True,
               help="Degrees used at singularities: plane of elevation (ms/isb), yaw (zyx), "
                    "pitch (nao).")
-@click.argument("values", nargs=-1, required=True, type=Finite(-MAX_VALUE, MAX_VALUE))
+@click.argument("values", nargs=-1, required=True, type=_Value(-MAX_VALUE, MAX_VALUE))
 def convert(source: str, target: str, convention: Convention, axes: Axes, side: Side,
             hint: float,
             values: tuple[float, ...]) -> None:

@@ -53,3 +53,15 @@ def test_axes_mobl_where_it_cannot_apply_is_refused_naming_the_option():
         assert len(errors) == 1 and option in errors[0] and "VALUES" not in errors[0]
     used = convert("--from", "ms", "--to", "ms", "--axes", "mobl", "45", "60", "-30")
     assert used["axes"] == "mobl" and used["values"]["elv_angle"] != pytest.approx(45.0)
+
+
+def test_a_mistyped_option_is_named_as_an_option_not_as_a_bad_number():
+    """Negative numbers pass as VALUES, and so did `--hnit 5`: the error was "'--hnit' is not
+    a valid float", as if the user had typed a bad number."""
+    result = CliRunner().invoke(main, ["convert", "--from", "ms", "--to", "isb",
+                                       "--hnit", "5", "1", "2", "3"])
+    assert result.exit_code == 2
+    assert "No such option '--hnit'" in result.output and "--hint" in result.output
+    assert "valid float" not in result.output
+    assert convert("--from", "ms", "--to", "isb", "-1e1", "-0", "-5")["input"] == {
+        "elv_angle": -10.0, "shoulder_elv": -0.0, "shoulder_rot": -5.0}
