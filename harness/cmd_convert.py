@@ -125,14 +125,17 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
 @click.option("--side", type=click.Choice(["right", "left"]), default="right", show_default=True,
               help="Arm side for --to nao.")
 @click.option("--hint", type=Finite(-360.0, 360.0), default=0.0, show_default=True,
-              help="Degrees used at singularities: plane of elevation (ms/isb), yaw (zyx), "
-                   "pitch (nao).")
+              help="Degrees for the angle a singular pose leaves free: plane of elevation "
+                   "(ms/isb), yaw (zyx), pitch (nao; also picks the pitch limit nearer the hint "
+                   "where both are equally near, as for an arm horizontal behind the "
+                   "shoulder).")
 @click.argument("values", nargs=-1, required=True, type=_Value(-MAX_VALUE, MAX_VALUE))
 def convert(source: str, target: str, convention: Convention, axes: Axes, side: Side,
             hint: float,
             values: tuple[float, ...]) -> None:
-    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w), each
-    finite and within ±1e6.
+    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w, any
+    non-zero length: it is normalised), each finite and within ±1e6. Prints JSON: the output
+    angles in degrees (a quaternion for --to quat) under "values".
 
     Example: exohil convert --from ms --to nao 90 90 0
     """
