@@ -133,8 +133,8 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
 def convert(source: str, target: str, convention: Convention, axes: Axes, side: Side,
             hint: float,
             values: tuple[float, ...]) -> None:
-    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w, any
-    non-zero length: it is normalised), each finite and within ±1e6. Prints JSON: the output
+    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w, of any
+    length from 1e-12: it is normalised), each finite and within ±1e6. Prints JSON: the output
     angles in degrees (a quaternion for --to quat) under "values".
 
     Example: exohil convert --from ms --to nao 90 90 0

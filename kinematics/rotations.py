@@ -94,13 +94,14 @@ def quat_multiply(p, q) -> np.ndarray:
 
 
 def normalize_quat(q) -> np.ndarray:
-    """Unit quaternion with ``w >= 0``. Raises ValueError for a zero or non-finite quaternion."""
+    """Unit quaternion with ``w >= 0``. Raises ValueError for a non-finite quaternion or one
+    shorter than 1e-12 (zero, or too near it to have a direction)."""
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (4,):
         raise ValueError(f"a quaternion has 4 components (x, y, z, w), got shape {q.shape}")
     norm = np.linalg.norm(q, axis=-1, keepdims=True)
     if not np.all(np.isfinite(q)) or np.any(norm < 1e-12):
-        raise ValueError("quaternions must be finite and non-zero")
+        raise ValueError("quaternions must be finite, with a length of at least 1e-12")
     q = q / norm
     return np.where(q[..., 3:4] < 0.0, -q, q)
 

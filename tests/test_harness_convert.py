@@ -65,3 +65,13 @@ def test_a_mistyped_option_is_named_as_an_option_not_as_a_bad_number():
     assert "valid float" not in result.output
     assert convert("--from", "ms", "--to", "isb", "-1e1", "-0", "-5")["input"] == {
         "elv_angle": -10.0, "shoulder_elv": -0.0, "shoulder_rot": -5.0}
+
+
+def test_a_too_short_quaternion_is_refused_with_the_length_it_needs():
+    """(1e-13, 0, 0, 0) was refused as 'must be finite and non-zero', though it is not zero;
+    1e-11 was accepted. The limit is a length of 1e-12, and the error says so."""
+    result = CliRunner().invoke(main, ["convert", "--from", "quat", "--to", "isb",
+                                       "1e-13", "0", "0", "0"])
+    assert result.exit_code == 2 and "length of at least 1e-12" in result.output
+    assert convert("--from", "quat", "--to", "quat", "1e-11", "0", "0", "0")["values"] == {
+        "x": 1.0, "y": 0.0, "z": 0.0, "w": 0.0}
