@@ -165,7 +165,9 @@ def quat_to_ms(q, plane_hint=0.0, convention: Convention = "coupled") -> np.ndar
 
 
 def ms_to_matrix(theta, phi=None, psi=None, axes: Axes = "ideal") -> np.ndarray:
-    """MoBL-ARMS (θ, φ, ψ) → thorax ← humerus rotation matrix ``(..., 3, 3)``."""
+    """MoBL-ARMS (θ, φ, ψ), radians → thorax ← humerus rotation matrix ``(..., 3, 3)``, the
+    matrix of :func:`ms_to_quat` (coupled convention). ψ defaults to 0 when only θ and φ are
+    given."""
     if psi is None and phi is None:
         return quat_to_matrix(ms_to_quat(theta, axes=axes))
     return quat_to_matrix(ms_to_quat(theta, phi, 0.0 if psi is None else psi, axes=axes))
