@@ -52,6 +52,7 @@ _HALF_OPEN = {"ms": {0: 180.0, 2: 180.0}, "isb": {0: 180.0, 2: 180.0}}
 #: NAO's exact (unclamped) pitch lies in (−180, 180].
 _NAO_UNCLAMPED_HALF_OPEN = {0: -180.0}
 
+
 class _Value(Finite):
     """A number of VALUES. ``ignore_unknown_options`` lets negative numbers through as
     arguments, and with them a mistyped option: name it as one, not as a bad number."""
