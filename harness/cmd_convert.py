@@ -36,9 +36,37 @@ MAX_VALUE = 1e6
 _DECIMALS = 9
 
 
-def _clean(values: np.ndarray) -> list[float]:
-    """Round for display and turn −0.0 into 0.0."""
-    return (np.round(values, _DECIMALS) + 0.0).tolist()
+def _clean(values: np.ndarray, half_open: dict[int, float] | None = None) -> list[float]:
+    """Round for display and turn −0.0 into 0.0. ``half_open`` maps an index to the bound its
+    range excludes (180 for [−180, 180), −180 for (−180, 180]): an angle a hair inside it
+    would round onto it, and is printed as the other end, the same angle."""
+    rounded = np.round(values, _DECIMALS) + 0.0
+    for index, excluded in (half_open or {}).items():
+        if rounded[index] == excluded:
+            rounded[index] = -excluded
+    return rounded.tolist()
+
+
+#: Angles documented in a half-open range (docs/conventions.md): index → the excluded end.
+_HALF_OPEN = {"ms": {0: 180.0, 2: 180.0}, "isb": {0: 180.0, 2: 180.0}}
+#: NAO's exact (unclamped) pitch lies in (−180, 180].
+_NAO_UNCLAMPED_HALF_OPEN = {0: -180.0}
+
+
+class _Value(Finite):
+    """A number of VALUES. ``ignore_unknown_options`` lets negative numbers through as
+    arguments, and with them a mistyped option: name it as one, not as a bad number."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and value.startswith("-"):
+            try:
+                float(value)
+            except ValueError:
+                options = [] if ctx is None else [
+                    opt for p in ctx.command.params for opt in p.opts if opt.startswith("--")]
+                raise click.NoSuchOption(value.split("=", 1)[0], possibilities=options,
+                                         ctx=ctx) from None
+        return super().convert(value, param, ctx)
 
 
 _TARGET_FIELDS = {
@@ -71,7 +99,8 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
             "values": dict(zip(names, _clean(np.rad2deg(arm.angles)), strict=True)),
             "clamped": dict(zip(names, arm.clamped.tolist(), strict=True)),
             "any_clamped": bool(arm.any_clamped),
-            "unclamped": dict(zip(names, _clean(np.rad2deg(arm.unclamped)), strict=True)),
+            "unclamped": dict(zip(names, _clean(np.rad2deg(arm.unclamped),
+                                                _NAO_UNCLAMPED_HALF_OPEN), strict=True)),
         }
     if target == "ms":
         angles = quat_to_ms(q, plane_hint=hint, convention=convention)
@@ -79,7 +108,8 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
         angles = quat_to_isb(q, plane_hint=hint)
     else:
         angles = quat_to_zyx(q, yaw_hint=hint)
-    return {"values": dict(zip(_TARGET_FIELDS[target], _clean(np.rad2deg(angles)), strict=True))}
+    return {"values": dict(zip(_TARGET_FIELDS[target],
+                               _clean(np.rad2deg(angles), _HALF_OPEN.get(target)), strict=True))}
 
 
 @click.command(context_settings={"ignore_unknown_options": True})
@@ -91,21 +121,31 @@ def _from_quat(target: str, q: np.ndarray, convention: Convention, side: Side,
               show_default=True,
               help="MS↔ISB step: 'coupled' (ISB γ = ψ − θ, the model's coupler) or the paper's.")
 @click.option("--axes", type=click.Choice(["ideal", "mobl"]), default="ideal", show_default=True,
-              help="MS → rotation with ideal ISB axes or the MoBL-ARMS model file's axes.")
+              help="--from ms only: MS → rotation with ideal ISB axes or the MoBL-ARMS model "
+                   "file's axes (up to 8.3° apart); --to ms/isb always read ideal axes.")
 @click.option("--side", type=click.Choice(["right", "left"]), default="right", show_default=True,
               help="Arm side for --to nao.")
 @click.option("--hint", type=Finite(-360.0, 360.0), default=0.0, show_default=True,
-              help="Degrees used at singularities: plane of elevation (ms/isb), yaw (zyx), "
-                   "pitch (nao).")
-@click.argument("values", nargs=-1, required=True, type=Finite(-MAX_VALUE, MAX_VALUE))
+              help="Degrees for the angle a singular pose leaves free: plane of elevation "
+                   "(ms/isb), yaw (zyx), pitch (nao; also picks the pitch limit nearer the hint "
+                   "where both are equally near, as for an arm horizontal behind the "
+                   "shoulder).")
+@click.argument("values", nargs=-1, required=True, type=_Value(-MAX_VALUE, MAX_VALUE))
 def convert(source: str, target: str, convention: Convention, axes: Axes, side: Side,
             hint: float,
             values: tuple[float, ...]) -> None:
-    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w), each
-    finite and within ±1e6.
+    """Convert one pose. VALUES are degrees (3 for ms/isb) or a quaternion (4: x y z w, of any
+    length from 1e-12: it is normalised), each finite and within ±1e6. Prints JSON: the output
+    angles in degrees (a quaternion for --to quat) under "values".
 
     Example: exohil convert --from ms --to nao 90 90 0
     """
+    if axes == "mobl" and source != "ms":
+        raise click.BadParameter(f"mobl applies to --from ms only; --from {source} would ignore "
+                                 "it", param_hint="'--axes'")
+    if axes == "mobl" and convention == "paper":
+        raise click.BadParameter("paper cannot go with --axes mobl: the model file's coupler is "
+                                 "the coupled form", param_hint="'--convention'")
     expected = len(_SOURCES[source])
     numbers = np.array(values, dtype=np.float64)
     if numbers.size != expected:

@@ -21,6 +21,7 @@ from exohil.kinematics.rotations import (
     X,
     Y,
     Z,
+    broadcast_hint,
     elementary_matrix,
     intrinsic_euler_from_first_two,
     quat_to_matrix,
@@ -48,14 +49,15 @@ def quat_to_zyx(q, yaw_hint=0.0) -> np.ndarray:
     """Quaternion → intrinsic Z-Y'-X'' angles (yaw, pitch, roll), radians, ``(..., 3)``.
 
     This is the paper's last step toward V-REP/CoppeliaSim (equivalently extrinsic X-Y-Z).
-    Pitch in [−π/2, π/2]; at gimbal lock (pitch = ±π/2) yaw = ``yaw_hint`` and roll absorbs the
-    rest. Never NaN for unit input.
+    Pitch in [−π/2, π/2]; at gimbal lock (pitch = ±π/2) yaw = ``yaw_hint`` (wrapped to
+    [−π, π)) and roll absorbs the rest. Never NaN for unit input; ValueError for a
+    ``yaw_hint`` that is not finite or does not broadcast to the quaternions.
     """
     m = quat_to_matrix(q)
     pitch = np.arctan2(-m[..., 2, 0], np.hypot(m[..., 0, 0], m[..., 1, 0]))
     yaw_regular = np.arctan2(m[..., 1, 0], m[..., 0, 0])
     cos_p = np.hypot(m[..., 0, 0], m[..., 1, 0])
-    hint = np.broadcast_to(np.asarray(yaw_hint, dtype=float), pitch.shape)
+    hint = broadcast_hint(yaw_hint, pitch.shape, "yaw_hint")
     yaw = np.where(cos_p < SINGULAR_EPS, hint, yaw_regular)
     return intrinsic_euler_from_first_two(m, (Z, Y, X), yaw, pitch)
 
@@ -81,14 +83,15 @@ class NaoArm:
 
 
 def _pitch_of(hint, shape: tuple[int, ...]) -> np.ndarray:
-    """The pitch of ``hint`` (``(..., 3)`` joint angles, radians) for commands of ``shape``;
-    ValueError for another shape or a value that is not finite."""
+    """The pitch of ``hint`` (``(..., 3)`` joint angles, radians) for commands of ``shape``,
+    wrapped to (−π, π] like the exact pitch; ValueError for another shape or a value that is
+    not finite."""
     h = np.asarray(hint, dtype=float)
     if h.ndim == 0 or h.shape[-1] != 3 or not np.isfinite(h).all():
         raise ValueError(f"hint must be finite joint angles (..., 3), radians (the previous "
                          f"unclamped), got shape {h.shape}")
     try:
-        return np.broadcast_to(h[..., 0], shape)
+        return -wrap_angle(-np.broadcast_to(h[..., 0], shape))  # (−π, π], as pitch is
     except ValueError:
         raise ValueError(f"hint of shape {h.shape} does not fit commands of shape "
                          f"{shape + (3,)}") from None
@@ -139,8 +142,8 @@ def humerus_to_nao(q, side: Side = "right", hint=None, hysteresis: float = 0.0) 
     roll = np.arctan2(direction[..., 1], cos_r)
     pitch_hint = np.broadcast_to(0.0 if hint is None else _pitch_of(hint, roll.shape),
                                  roll.shape)
-    pitch = np.where(cos_r < SINGULAR_EPS, pitch_hint,
-                     np.arctan2(-direction[..., 2], direction[..., 0]))
+    pitch = np.where(cos_r < SINGULAR_EPS, pitch_hint,  # atan2 gives ±π; keep (−π, π]
+                     -wrap_angle(-np.arctan2(-direction[..., 2], direction[..., 0])))
     exact = intrinsic_euler_from_first_two(m, (Y, Z, X), pitch, roll)
     # The left arm is the mirror image: solve in right-arm angles with mirrored limits.
     mirror = np.array([1.0, -1.0, -1.0]) if side == "left" else np.ones(3)

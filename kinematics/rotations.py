@@ -38,9 +38,25 @@ def as_angles(a, b=None, c=None) -> np.ndarray:
     return np.stack([a, b, c], axis=-1)
 
 
+def broadcast_hint(hint, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """``hint`` (radians) as a finite array of ``shape``, wrapped to [−π, π) like the angle it
+    stands for; ValueError naming ``name`` for a value that is not finite or does not
+    broadcast (a NaN hint would come back as a NaN angle)."""
+    h = np.asarray(hint, dtype=float)
+    if not np.isfinite(h).all():
+        raise ValueError(f"{name} must be finite radians, got {hint!r}")
+    try:
+        return wrap_angle(np.broadcast_to(h, shape))
+    except ValueError:
+        raise ValueError(f"{name} of shape {h.shape} does not fit quaternions of "
+                         f"shape {shape + (4,)}") from None
+
+
 def wrap_angle(a) -> np.ndarray:
-    """Wrap angles to [-π, π)."""
-    return (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    """Wrap angles to [-π, π). (The modulo alone gives +π for an angle a hair below −π: the
+    tiny negative remainder rounds to 2π.)"""
+    wrapped = (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    return np.where(wrapped >= np.pi, -np.pi, wrapped)[()]
 
 
 def axis_angle_quat(axis, angle) -> np.ndarray:
@@ -78,13 +94,14 @@ def quat_multiply(p, q) -> np.ndarray:
 
 
 def normalize_quat(q) -> np.ndarray:
-    """Unit quaternion with ``w >= 0``. Raises ValueError for a zero or non-finite quaternion."""
+    """Unit quaternion with ``w >= 0``. Raises ValueError for a non-finite quaternion or one
+    shorter than 1e-12 (zero, or too near it to have a direction)."""
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (4,):
         raise ValueError(f"a quaternion has 4 components (x, y, z, w), got shape {q.shape}")
     norm = np.linalg.norm(q, axis=-1, keepdims=True)
     if not np.all(np.isfinite(q)) or np.any(norm < 1e-12):
-        raise ValueError("quaternions must be finite and non-zero")
+        raise ValueError("quaternions must be finite, with a length of at least 1e-12")
     q = q / norm
     return np.where(q[..., 3:4] < 0.0, -q, q)
 

@@ -37,6 +37,7 @@ from exohil.kinematics.rotations import (
     Y,
     as_angles,
     axis_angle_quat,
+    broadcast_hint,
     elementary_quat,
     intrinsic_euler_from_first_two,
     normalize_quat,
@@ -116,22 +117,16 @@ def quat_to_isb(q, plane_hint=0.0) -> np.ndarray:
 
     β is returned in [−π, 0] (elevation φ = −β in [0, π]); α and γ in [−π, π).
     At the singularities β = 0 (arm hanging) and β = −π (arm straight up) only α + γ, resp.
-    γ − α, is defined: α is then set to ``plane_hint`` (pass the previous plane of elevation to
-    keep a stream continuous) and γ absorbs the rest. Never NaN, never raises for unit input.
+    γ − α, is defined: α is then set to ``plane_hint`` wrapped to [−π, π) (pass the previous
+    plane of elevation to keep a stream continuous) and γ absorbs the rest. Never NaN, never
+    raises for unit input.
     """
     m = quat_to_matrix(q)
     # Column Y of R is (sin α sin β, cos β, cos α sin β); choose sin β ≤ 0.
     sin_b = -np.hypot(m[..., 0, 1], m[..., 2, 1])
     beta = np.arctan2(sin_b, m[..., 1, 1])
-    alpha_regular = np.arctan2(-m[..., 0, 1], -m[..., 2, 1])
-    hint = np.asarray(plane_hint, dtype=float)
-    if not np.isfinite(hint).all():
-        raise ValueError(f"plane_hint must be finite radians, got {plane_hint!r}")
-    try:
-        hint = np.broadcast_to(hint, beta.shape)
-    except ValueError:
-        raise ValueError(f"plane_hint of shape {hint.shape} does not fit quaternions of "
-                         f"shape {beta.shape + (4,)}") from None
+    alpha_regular = wrap_angle(np.arctan2(-m[..., 0, 1], -m[..., 2, 1]))  # atan2 gives ±π
+    hint = broadcast_hint(plane_hint, beta.shape, "plane_hint")
     alpha = np.where(-sin_b < SINGULAR_EPS, hint, alpha_regular)
     out = intrinsic_euler_from_first_two(m, (Y, X, Y), alpha, beta)
     return np.stack([out[..., 0], out[..., 1], wrap_angle(out[..., 2])], axis=-1)
@@ -170,7 +165,9 @@ def quat_to_ms(q, plane_hint=0.0, convention: Convention = "coupled") -> np.ndar
 
 
 def ms_to_matrix(theta, phi=None, psi=None, axes: Axes = "ideal") -> np.ndarray:
-    """MoBL-ARMS (θ, φ, ψ) → thorax ← humerus rotation matrix ``(..., 3, 3)``."""
+    """MoBL-ARMS (θ, φ, ψ), radians → thorax ← humerus rotation matrix ``(..., 3, 3)``, the
+    matrix of :func:`ms_to_quat` (coupled convention). ψ defaults to 0 when only θ and φ are
+    given."""
     if psi is None and phi is None:
         return quat_to_matrix(ms_to_quat(theta, axes=axes))
     return quat_to_matrix(ms_to_quat(theta, phi, 0.0 if psi is None else psi, axes=axes))

@@ -184,3 +184,53 @@ def test_bad_quaternions_raise_value_error():
         quat_to_isb([np.nan, 0.0, 0.0, 1.0])
     with pytest.raises(ValueError):
         quat_to_isb([1.0, 0.0, 0.0])
+
+
+def test_quat_to_zyx_refuses_a_yaw_hint_it_cannot_use():
+    """At gimbal lock a NaN or infinite yaw_hint came back as NaN yaw and roll (with a
+    RuntimeWarning), and a hint of the wrong shape raised NumPy's broadcast error, where
+    quat_to_isb names its plane_hint."""
+    lock = np.array([[0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5)], [0.0, 0.0, 0.0, 1.0]])
+    for bad in (np.nan, np.inf, [0.0, np.nan]):
+        with pytest.raises(ValueError, match="yaw_hint must be finite"):
+            quat_to_zyx(lock, yaw_hint=bad)
+    with pytest.raises(ValueError, match="yaw_hint of shape .* does not fit"):
+        quat_to_zyx(lock, yaw_hint=[0.0, 1.0, 2.0])
+    yaw, pitch, roll = quat_to_zyx(lock[0], yaw_hint=0.5)
+    assert (yaw, pitch) == pytest.approx((0.5, PI / 2))
+
+
+def test_hints_are_wrapped_to_the_range_of_the_angle_they_stand_for():
+    """A hint of 300° came back unwrapped as α = 300° (documented [−180°, 180°)) or yaw 300°;
+    for NAO the pitch 300° lay outside the limits, so the command went to the pitch limit
+    −119.5° where the same hint written −60° commands pitch −60°."""
+    from exohil.kinematics import humerus_to_nao
+
+    hanging = ms_to_quat(0.7, 0.0, 0.2)
+    alpha = quat_to_isb(hanging, plane_hint=np.deg2rad(300.0))[0]
+    assert np.rad2deg(alpha) == pytest.approx(-60.0)
+    lock = [0.0, np.sqrt(0.5), 0.0, np.sqrt(0.5)]
+    assert np.rad2deg(quat_to_zyx(lock, yaw_hint=np.deg2rad(-300.0))[0]) == pytest.approx(60.0)
+    abducted = ms_to_quat(0.0, PI / 2, 0.0)  # NAO roll −90°: the pitch comes from the hint
+    for wrapped in (300.0, -420.0):
+        far = humerus_to_nao(abducted, hint=np.deg2rad([wrapped, 0.0, 0.0]))
+        near = humerus_to_nao(abducted, hint=np.deg2rad([-60.0, 0.0, 0.0]))
+        np.testing.assert_allclose(far.angles, near.angles, atol=1e-12)
+        np.testing.assert_allclose(far.unclamped, near.unclamped, atol=1e-12)
+        assert np.rad2deg(far.angles[0]) == pytest.approx(-60.0)
+
+
+def test_returned_angles_keep_to_their_documented_half_open_ranges():
+    """On a 15° grid, α (and θ) came back as +180° for 1.9% of the poses, ψ as +180° and NAO's
+    exact pitch as −180°: wrap_angle gave +π for an angle a hair below −π, and atan2 gives
+    both ±π. Documented: α, γ, θ, ψ in [−π, π), NAO unclamped pitch in (−π, π]."""
+    from exohil.kinematics import humerus_to_nao
+
+    assert wrap_angle(-PI - 1e-17) == -PI and wrap_angle(PI) == -PI
+    grid = np.deg2rad(np.arange(-360.0, 361.0, 15.0))
+    poses = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), axis=-1).reshape(-1, 3)
+    q = isb_to_quat(poses)
+    for angles in (quat_to_isb(q), quat_to_ms(q)):
+        assert np.all((angles[:, [0, 2]] >= -PI) & (angles[:, [0, 2]] < PI))
+    pitch = humerus_to_nao(q).unclamped[:, 0]
+    assert np.all((pitch > -PI) & (pitch <= PI))
