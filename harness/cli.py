@@ -118,3 +118,6 @@ def _register() -> None:
         main.add_command(entry.load())
 
 _register()
+
+if __name__ == "__main__":  # python -m exohil.harness.cli: it printed nothing and exited 0
+    main(prog_name="exohil")

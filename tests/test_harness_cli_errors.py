@@ -92,3 +92,20 @@ def test_a_time_window_past_the_recording_is_one_line_and_no_empty_plot(tmp_path
     assert result.exit_code == 1
     assert "no sensor frame or mocap sample in the chosen time window" in result.output
     assert not out.exists()
+
+
+@pytest.mark.parametrize("module", ["exohil", "exohil.harness.cli"])
+def test_python_dash_m_runs_the_same_command_line(module):
+    """`python -m exohil` failed ("is a package and cannot be directly executed") and
+    `python -m exohil.harness.cli convert ...` printed nothing and exited 0."""
+    import json
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", module, "convert", "--from", "ms", "--to",
+                           "isb", "0", "90", "0"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["values"]["elevation"] == pytest.approx(-90.0)
+    bad = subprocess.run([sys.executable, "-m", module, "convert", "--from", "ms", "--to",
+                          "isb", "0", "nan", "0"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "Error" in bad.stderr
