@@ -35,6 +35,8 @@ from exohil.formats.wire import MM_PER_LSB, SEQ_MODULUS, TIME_MODULUS_US, WireFr
 from exohil.realtime import SPIN_S, request_realtime, sleep_until
 
 _IDLE_POLL_S = 0.001
+#: How often a stream started with ``begin(when_attached=True)`` looks for a host, s.
+_ATTACH_POLL_S = 0.005
 _RECENT_FRAMES = 8192
 #: How many recent frames keep their write time for :meth:`ArduinoEmulator.write_time_ns`
 #: (2**16 frames: 262 s at 250 Hz).
@@ -149,6 +151,7 @@ class ArduinoEmulator:
         self._host_ready = False
         self._ready = threading.Event()
         self._go = threading.Event()
+        self._when_attached = False
         self._stop = threading.Event()
         self._finished = threading.Event()
         if autostart:
@@ -179,8 +182,11 @@ class ArduinoEmulator:
         if self.error is not None:
             raise RuntimeError(f"emulator failed to start: {self.error}") from self.error
 
-    def begin(self) -> None:
-        """Start streaming (only needed with ``autostart=False``)."""
+    def begin(self, when_attached: bool = False) -> None:
+        """Start streaming (only needed with ``autostart=False``); with ``when_attached``,
+        only once a host has the port open (device time starts then, so a fault at
+        ``at_s`` meets a host however long it took to open the port)."""
+        self._when_attached = when_attached
         self._go.set()
 
     def stop(self, timeout_s: float = 5.0) -> None:
@@ -268,6 +274,9 @@ class ArduinoEmulator:
         self._ready.set()
         try:
             self._go.wait()
+            while (self._when_attached and not self._stop.is_set()
+                   and not self._port.host_attached()):
+                self._stop.wait(_ATTACH_POLL_S)
             if not self._stop.is_set():
                 self._stream()
             if self._port.connected and self._port.host_attached():

@@ -311,3 +311,19 @@ def test_a_host_that_does_not_read_fills_the_buffer_and_frames_are_logged_not_re
             os.close(fd)
     assert got == expected
     assert stats.crc_errors == 0 and stats.decode_errors == 0
+
+
+def test_a_stream_begun_when_attached_waits_for_a_host():
+    """``begin(when_attached=True)`` starts the device clock once a host has the port open:
+    a session that took longer to open it than a fault's ``at_s`` never met the fault."""
+    import time
+
+    import serial
+
+    with ArduinoEmulator(_values(10_000), autostart=False) as emulator:
+        emulator.begin(when_attached=True)
+        time.sleep(0.3)
+        assert emulator.frames_generated == 0  # no host yet: nothing streamed
+        with serial.Serial(emulator.port, timeout=2.0) as port:
+            data = port.read(200)
+        assert emulator.frames_generated > 0 and data

@@ -33,7 +33,10 @@ def reference(tmp_path_factory) -> Path:
 
 def _session(reference: Path, **emulator):
     rec = read_recording(reference)
-    with ArduinoEmulator.from_recording(rec, **emulator) as device:
+    # the device's clock starts once the session has the port open: on a busy machine the
+    # session took over 1.5 s to open it, so the outage below met no host and was not seen
+    with ArduinoEmulator.from_recording(rec, autostart=False, **emulator) as device:
+        device.begin(when_attached=True)
         config = BenchConfig(device=SerialDevice(device.port, reference), model=MODEL,
                              robots=())
         return rec, run_session(config, None, reference=rec)
