@@ -2502,3 +2502,37 @@ def test_a_profile_of_another_version_or_without_a_table_is_refused_in_words(
     path.write_text(text.replace(*corrupt))
     with pytest.raises(ProfileError, match=re.escape(error)):
         load_calibrated_profile(path)
+
+
+def test_outputs_that_fail_half_way_leave_the_earlier_results_whole(hysteresis_outcome, tmp_path,
+                                                                    monkeypatch):
+    """The five outputs are one result: a run stopped while writing them (Ctrl-C, a full
+    disk) leaves the folder's earlier results as they were, never some files of each run
+    (until 2026-12-04 each file was renamed into place as it was done, so a stop at the third
+    left the new discrepancy.json and report.md beside the old plots and profile)."""
+    import exohil.emulators.discrepancy.report as report
+
+    _, outcome = hysteresis_outcome
+    out = tmp_path / "disc"
+    out.mkdir()
+    earlier = {name: f"earlier {name}".encode() for name in report.OUTPUT_NAMES}
+    for name, data in earlier.items():
+        (out / name).write_bytes(data)
+    calls = []
+    real = report.write_bytes
+
+    def stopped_at_the_third(path, data):
+        calls.append(path)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        real(path, data)
+
+    monkeypatch.setattr(report, "write_bytes", stopped_at_the_third)
+    with pytest.raises(KeyboardInterrupt):
+        report.write_outputs(outcome, out, "test", workers=1)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == earlier  # no temporary left
+    monkeypatch.setattr(report, "write_bytes", real)
+    written = report.write_outputs(outcome, out, "test", workers=1)
+    assert [p.name for p in written] == list(report.OUTPUT_NAMES)
+    assert sorted(p.name for p in out.iterdir()) == sorted(report.OUTPUT_NAMES)
+    assert all((out / name).read_bytes() != data for name, data in earlier.items())

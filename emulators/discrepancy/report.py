@@ -1,12 +1,14 @@
 """Outputs of a discrepancy run: ``discrepancy.json``, ``report.md`` with two plots, and the
-calibrated suit profile ``suit_profile.toml``. Every file is written under a temporary name
-in the output folder and renamed when complete, so a crash never leaves a half-written file
-under a final name.
+calibrated suit profile ``suit_profile.toml``. Every file is first written under a temporary
+name in the output folder, and they are renamed into place only once all of them are
+complete, so a crash or Ctrl-C never leaves a half-written file under a final name, nor some
+files of this run beside others of an earlier run in the same folder.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +33,7 @@ from exohil.emulators.discrepancy.timing import (
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import Outcome, map_words, resampled_words
 from exohil.emulators.protocols import ANGLE_NAMES
-from exohil.formats.atomic import write_bytes
+from exohil.formats.atomic import temporary_name, write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
                 "suit_profile.toml")
@@ -591,9 +593,11 @@ def _profile_line(summary: dict) -> str:
 
 def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str,
                   workers: int | None = None) -> list[Path]:
-    """Write every output into ``out_dir`` (created if needed); returns the paths. The plots
-    are drawn in up to ``workers`` processes (default: one per CPU, one inside a worker
-    process; :func:`~.workers.workers_for`)."""
+    """Write every output into ``out_dir`` (created if needed); returns the paths. All of
+    them are written under temporary names before any is renamed into place (module doc):
+    an exception or Ctrl-C before the renames leaves ``out_dir``'s earlier files as they
+    were. The plots are drawn in up to ``workers`` processes (default: one per CPU, one
+    inside a worker process; :func:`~.workers.workers_for`)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     files: dict[str, bytes] = plots(outcome, workers)
     suit = calibrated_suit(outcome, profile_name)
@@ -604,9 +608,15 @@ def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str,
     # allow_nan=False: NaN is not JSON; a statistic with no frame to measure is null
     summary = json.dumps(outcome.summary, indent=1, allow_nan=False)
     files["discrepancy.json"] = (summary + "\n").encode("utf-8")
-    written = []
-    for name in OUTPUT_NAMES:
-        path = out_dir / name
-        write_bytes(path, files[name])
-        written.append(path)
+    written = [out_dir / name for name in OUTPUT_NAMES]
+    staged: list[Path] = []
+    try:
+        for path in written:  # each complete under its temporary name first
+            staged.append(temporary_name(path))
+            write_bytes(staged[-1], files[path.name])
+        for tmp, path in zip(staged, written, strict=True):
+            os.replace(tmp, path)
+    finally:
+        for tmp in staged:
+            tmp.unlink(missing_ok=True)
     return written
