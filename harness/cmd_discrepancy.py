@@ -100,6 +100,11 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
 
     refuse_overwriting_inputs([("--out", out_dir / name) for name in OUTPUT_NAMES],
                               [measured, profile_path])
+    for name in OUTPUT_NAMES:  # found now, not after the analysis
+        if (out_dir / name).is_dir():
+            raise click.BadParameter(f"{out_dir / name} is a folder, so {name} cannot be "
+                                     "written there (choose another output folder)",
+                                     param_hint="'--out'")
     name, in_model, calibrated_on = _in_model(profile_path)
     try:
         rec = read_recording(measured)

@@ -2536,3 +2536,23 @@ def test_outputs_that_fail_half_way_leave_the_earlier_results_whole(hysteresis_o
     assert [p.name for p in written] == list(report.OUTPUT_NAMES)
     assert sorted(p.name for p in out.iterdir()) == sorted(report.OUTPUT_NAMES)
     assert all((out / name).read_bytes() != data for name, data in earlier.items())
+
+
+def test_an_output_name_taken_by_a_folder_is_refused_before_any_work(tmp_path, monkeypatch):
+    """`--out D` where D/report.md is a folder: refused when the command starts, exit 2,
+    one line naming it (until 2026-12-04 the whole analysis ran, then failed on the
+    temporary name '.report.partial-N.md: Is a directory', exit 1, with discrepancy.json
+    already replaced)."""
+    import exohil.emulators.discrepancy as discrepancy
+
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    path = tmp_path / "trial.mcap"
+    write_recording(path, rec)
+    (tmp_path / "out" / "report.md").mkdir(parents=True)
+    ran = []
+    monkeypatch.setattr(discrepancy, "run", lambda *a, **k: ran.append(1))
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and not ran, result.output
+    (line,) = result.output.strip().splitlines()
+    assert "report.md" in line and "is a folder" in line and "partial" not in line
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["report.md"]
