@@ -17,6 +17,8 @@ MAX_WORKERS = 64
 #: with seven tendons at 250 Hz (docs/discrepancy-results.md, Speed); 17–23 kB in the largest
 #: process for four to seven sensors.
 BYTES_PER_FRAME = 28_000
+#: Exit status of a run stopped with Ctrl-C (128 + SIGINT, as a shell reports it).
+INTERRUPTED = 130
 
 
 def memory_warning(frames: int, available: int | None) -> str | None:
@@ -79,7 +81,8 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     minus measurement, in the recording's units) before and after. Where it says "what
     remains ... none of the five effects explains", the written profile is the best fit
     found, not a faithful model of the suit. Exit status: 0 done (whatever was named), 1
-    unusable recording or profile, 2 wrong command line (docs/discrepancy.md: every output).
+    unusable recording or profile, 2 wrong command line, 130 stopped with Ctrl-C (the output
+    folder left as it was) (docs/discrepancy.md: every output).
 
     Time and memory grow with the recording: a four-minute trial with seven tendons takes
     30-65 s on two cores (the machine's hour moves it), a thirty-minute one ten minutes and
@@ -92,11 +95,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
       exohil discrepancy trial.mcap --out disc/
       exohil record cut session.mcap --stop 900 --out part1.mcap
     """
-    from exohil.emulators.discrepancy import DiscrepancyError, run
-    from exohil.emulators.discrepancy.report import OUTPUT_NAMES, write_outputs
-    from exohil.formats.errors import RecordingError
-    from exohil.formats.recording_reader import read_recording
-    from exohil.harness.machine import available_memory_bytes
+    from exohil.emulators.discrepancy.report import OUTPUT_NAMES
 
     refuse_overwriting_inputs([("--out", out_dir / name) for name in OUTPUT_NAMES],
                               [measured, profile_path])
@@ -106,6 +105,29 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
                                      "written there (choose another output folder)",
                                      param_hint="'--out'")
     name, in_model, calibrated_on = _in_model(profile_path)
+    try:
+        summary, written = _analyse_and_write(measured, profile_path, out_dir, workers, name,
+                                              in_model, calibrated_on)
+    except KeyboardInterrupt:
+        click.echo(f"interrupted: {out_dir} left as it was (no output of this run written)",
+                   err=True)
+        raise SystemExit(INTERRUPTED) from None
+    click.echo(f"{summary['conclusion']}: held-out gap {summary['gap_before']:.4g} -> "
+               f"{summary['gap_after']:.4g} {summary['units']}; wrote "
+               f"{', '.join(str(p) for p in written)}")
+
+
+def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
+                       workers: int | None, name: str, in_model: tuple[str, ...],
+                       calibrated_on: str | None) -> tuple[dict, list[Path]]:
+    """Analyse ``measured`` and write the outputs into ``out_dir``: the run's summary and the
+    files written."""
+    from exohil.emulators.discrepancy import DiscrepancyError, run
+    from exohil.emulators.discrepancy.report import write_outputs
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.recording_reader import read_recording
+    from exohil.harness.machine import available_memory_bytes
+
     try:
         rec = read_recording(measured)
         measured_on = _sensors_words(tuple(rec.sensor_names), rec.sensor_units)
@@ -120,10 +142,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
                       progress=lambda line: click.echo(line, err=True), workers=workers)
     except (RecordingError, DiscrepancyError) as exc:
         raise click.ClickException(str(exc)) from exc
-    written = write_outputs(outcome, out_dir, f"{name}+{measured.stem}", workers)
-    s = outcome.summary
-    click.echo(f"{s['conclusion']}: held-out gap {s['gap_before']:.4g} -> {s['gap_after']:.4g} "
-               f"{s['units']}; wrote {', '.join(str(p) for p in written)}")
+    return outcome.summary, write_outputs(outcome, out_dir, f"{name}+{measured.stem}", workers)
 
 
 COMMANDS: list[click.Command] = [discrepancy]

@@ -2556,3 +2556,40 @@ def test_an_output_name_taken_by_a_folder_is_refused_before_any_work(tmp_path, m
     (line,) = result.output.strip().splitlines()
     assert "report.md" in line and "is a folder" in line and "partial" not in line
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["report.md"]
+
+
+def test_ctrl_c_during_the_analysis_says_nothing_was_written_and_exits_130(tmp_path,
+                                                                           monkeypatch):
+    """Ctrl-C half-way: one line saying the output folder was left as it was, exit status
+    130 (128 + SIGINT), not click's 'Aborted!' with 1, the status of an unusable recording."""
+    import exohil.emulators.discrepancy as discrepancy
+
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    path = tmp_path / "trial.mcap"
+    write_recording(path, rec)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(discrepancy, "run", interrupted)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(out)])
+    assert result.exit_code == 130, result.output
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith("interrupted") and str(out) in line and "as it was" in line
+    assert result.stdout == "" and not out.exists()
+
+
+def test_ctrl_c_while_the_plots_are_drawn_creates_no_output_folder(hysteresis_outcome, tmp_path,
+                                                                   monkeypatch):
+    """The plots take seconds to draw: a stop then leaves no empty --out folder behind (until
+    2026-12-04 the folder was made before the plots were drawn)."""
+    import exohil.emulators.discrepancy.report as report
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "plots", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        report.write_outputs(hysteresis_outcome[1], tmp_path / "new" / "disc", "test", workers=1)
+    assert list(tmp_path.iterdir()) == []

@@ -598,7 +598,6 @@ def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str,
     an exception or Ctrl-C before the renames leaves ``out_dir``'s earlier files as they
     were. The plots are drawn in up to ``workers`` processes (default: one per CPU, one
     inside a worker process; :func:`~.workers.workers_for`)."""
-    out_dir.mkdir(parents=True, exist_ok=True)
     files: dict[str, bytes] = plots(outcome, workers)
     suit = calibrated_suit(outcome, profile_name)
     files["suit_profile.toml"] = to_toml(profile_dict(
@@ -608,6 +607,7 @@ def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str,
     # allow_nan=False: NaN is not JSON; a statistic with no frame to measure is null
     summary = json.dumps(outcome.summary, indent=1, allow_nan=False)
     files["discrepancy.json"] = (summary + "\n").encode("utf-8")
+    out_dir.mkdir(parents=True, exist_ok=True)  # once the plots are drawn: nothing before
     written = [out_dir / name for name in OUTPUT_NAMES]
     staged: list[Path] = []
     try:
