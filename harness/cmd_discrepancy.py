@@ -55,7 +55,8 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...], str | No
 
 
 def _sensors_words(sensors: tuple[str, ...], units: str) -> str:
-    return f"{len(sensors)} sensors ({', '.join(sensors)}) in {units}"
+    return (f"{len(sensors)} sensor{'' if len(sensors) == 1 else 's'} ({', '.join(sensors)}) "
+            f"in {units}")
 
 
 @click.command("discrepancy")

@@ -2593,3 +2593,18 @@ def test_ctrl_c_while_the_plots_are_drawn_creates_no_output_folder(hysteresis_ou
     with pytest.raises(KeyboardInterrupt):
         report.write_outputs(hysteresis_outcome[1], tmp_path / "new" / "disc", "test", workers=1)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_one_sensor_is_said_as_one_sensor(tmp_path):
+    """A one-sensor recording: '1 sensor (mm)' in progress line [1] and in the warning about
+    a profile calibrated on other sensors (until 2026-12-04, '1 sensors')."""
+    from exohil.harness.cmd_discrepancy import _sensors_words
+
+    assert _sensors_words(("F",), "mm") == "1 sensor (F) in mm"
+    assert _sensors_words(("F", "R"), "mm") == "2 sensors (F, R) in mm"
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=22.0))
+    one = replace(rec, sensor_names=rec.sensor_names[:1],
+                  sensors=replace(rec.sensors, values=rec.sensors.values[:, :1]))
+    lines: list[str] = []
+    run(one, "one", progress=lines.append, workers=1)
+    assert lines[0].startswith("[1] calibrating the static map: 1 sensor (mm) from "), lines[0]
