@@ -2608,3 +2608,21 @@ def test_one_sensor_is_said_as_one_sensor(tmp_path):
     lines: list[str] = []
     run(one, "one", progress=lines.append, workers=1)
     assert lines[0].startswith("[1] calibrating the static map: 1 sensor (mm) from "), lines[0]
+
+
+@pytest.mark.parametrize("text", ["", "schema = \"exohil-calibrated-suit-profil\"\n"])
+def test_a_profile_of_no_known_schema_names_both_schemas(tmp_path, text):
+    """`--profile` takes a geometric or a calibrated profile; an empty file or a misspelt
+    schema said only '\\'schema\\' must be "exohil-suit-profile", got None' (until
+    2026-12-04), as if a calibrated profile were not taken."""
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    path, profile = tmp_path / "trial.mcap", tmp_path / "p.toml"
+    write_recording(path, rec)
+    profile.write_text(text)
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--profile", str(profile),
+                                       "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1, result.output
+    (line,) = result.output.strip().splitlines()
+    assert str(profile) in line and '"exohil-suit-profile"' in line
+    assert '"exohil-calibrated-suit-profile"' in line
+    assert not (tmp_path / "out").exists()
