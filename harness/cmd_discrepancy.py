@@ -4,10 +4,15 @@ missing (docs/discrepancy.md)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
+import numpy as np
 
 from exohil.harness.cli_types import Count, InputFile, OutputDir, refuse_overwriting_inputs
+
+if TYPE_CHECKING:
+    from exohil.formats.recording import Recording
 
 #: Most processes ``--workers`` takes: a bound that refuses nonsense (a step has five
 #: candidates at most, so more than five would idle).
@@ -52,6 +57,18 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...], str | No
                 _sensors_words(profile.sensors, profile.units))
     kinds = {e.name for e in profile.effects.effects}
     return profile.name, tuple(k for k in VOCABULARY if k in kinds), None
+
+
+def _usable(rec: Recording) -> tuple[str, ...]:
+    """The recording's sensors the analysis will use: a dead channel it leaves out (method
+    step 1) is not in a profile it wrote either."""
+    from exohil.emulators.discrepancy.data import unusable_sensors
+
+    if not len(rec.sensors):
+        return tuple(rec.sensor_names)
+    dead = {sensor for sensor, _ in unusable_sensors(np.asarray(rec.sensors.values),
+                                                      rec.sensor_names, rec.sensor_units)}
+    return tuple(s for s in rec.sensor_names if s not in dead)
 
 
 def _sensors_words(sensors: tuple[str, ...], units: str) -> str:
@@ -131,7 +148,7 @@ def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
 
     try:
         rec = read_recording(measured)
-        measured_on = _sensors_words(tuple(rec.sensor_names), rec.sensor_units)
+        measured_on = _sensors_words(_usable(rec), rec.sensor_units)
         if calibrated_on is not None and calibrated_on != measured_on:
             click.echo(f"warning: {profile_path} was calibrated on {calibrated_on}, "
                        f"{measured.name} has {measured_on}: only its effects' names are "

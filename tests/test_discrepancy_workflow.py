@@ -2626,3 +2626,37 @@ def test_a_profile_of_no_known_schema_names_both_schemas(tmp_path, text):
     assert str(profile) in line and '"exohil-suit-profile"' in line
     assert '"exohil-calibrated-suit-profile"' in line
     assert not (tmp_path / "out").exists()
+
+
+def test_a_profile_of_the_same_suit_with_a_dead_channel_left_out_is_not_said_to_differ(
+        hysteresis_outcome, tmp_path, monkeypatch):
+    """The profile a run writes has the analysed sensors only; run again on the same
+    recording with it, a dead channel (left out both times) drew 'was calibrated on 3
+    sensors (...), dead.mcap has 4 sensors (...)' (until 2026-12-04). A sensor the profile
+    lacks that the analysis uses is still said."""
+    import exohil.emulators.discrepancy as discrepancy
+    from exohil.emulators.discrepancy.report import write_outputs
+
+    _, outcome = hysteresis_outcome
+    write_outputs(outcome, tmp_path / "disc", "test", workers=1)
+    profile = tmp_path / "disc" / "suit_profile.toml"
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    names = tuple(outcome.summary["sensors"])
+    values = rec.sensors.values[:, [rec.sensor_names.index(n) for n in names]]
+    stuck = np.column_stack([values, np.full(len(values), 123.0)])
+    live = np.column_stack([values, values[:, 0] * 0.5])
+
+    def stop(*args, **kwargs):
+        raise DiscrepancyError("stopped here")
+
+    monkeypatch.setattr(discrepancy, "run", stop)
+    said = {}
+    for name, extra in (("stuck", stuck), ("live", live)):
+        path = tmp_path / f"{name}.mcap"
+        write_recording(path, replace(rec, sensor_names=(*names, "X"),
+                                      sensors=replace(rec.sensors, values=extra)))
+        result = CliRunner().invoke(main, ["discrepancy", str(path), "--profile", str(profile),
+                                           "--out", str(tmp_path / "out")])
+        assert result.exit_code == 1 and "stopped here" in result.stderr
+        said[name] = "was calibrated on" in result.stderr
+    assert said == {"stuck": False, "live": True}
