@@ -2660,3 +2660,34 @@ def test_a_profile_of_the_same_suit_with_a_dead_channel_left_out_is_not_said_to_
         assert result.exit_code == 1 and "stopped here" in result.stderr
         said[name] = "was calibrated on" in result.stderr
     assert said == {"stuck": False, "live": True}
+
+
+def test_sensor_names_that_are_markdown_markup_do_not_break_the_report(hysteresis_outcome):
+    """The recording format takes any sensor name without a comma or outer spaces: 'F|x'
+    split its row of the per-sensor tables into one column too many, 'S*F*' came out
+    italic and 'R<b>' opened bold HTML for the rest of the report (until 2026-12-04). They
+    are escaped in report.md; the JSON keeps them as recorded."""
+    summary = hysteresis_outcome[1].summary
+    odd = {"T0": "F|x", "T1": "S*F*", "T2": "R<b>", "T3": "[T3](x)"}
+
+    def renamed(x):
+        if isinstance(x, str):
+            return odd.get(x, x)
+        if isinstance(x, dict):
+            return {odd.get(k, k): renamed(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [renamed(v) for v in x]
+        return x
+
+    assert set(odd) == set(summary["sensors"])
+    plain, text = markdown(summary), markdown(renamed(summary))
+    for name in odd.values():
+        assert name not in text
+    assert "F\\|x" in text and "S\\*F\\*" in text and "R\\<b\\>" in text
+    assert "\\[T3\\](x)" in text
+
+    def columns(row: str) -> int:
+        return len(re.findall(r"(?<!\\)\|", row))
+
+    rows = [[columns(r) for r in t.splitlines() if r.startswith("|")] for t in (plain, text)]
+    assert rows[0] == rows[1] and rows[1]  # each row as many columns as with plain names

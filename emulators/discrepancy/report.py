@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -450,8 +451,36 @@ def _step_lines(before: list[dict], after: list[dict], units: str, angles: list[
     return lines
 
 
+#: Characters of a sensor name that Markdown reads as markup: a table's column bar,
+#: emphasis, HTML, a link, code, the escape itself.
+_MARKUP = str.maketrans({c: "\\" + c for c in "\\`*|<>[]"})
+
+
+def _escaped_names(summary: dict) -> dict:
+    """``summary`` with each sensor name that holds Markdown markup escaped wherever it stands
+    alone (a list entry, a value, a key): the recording format takes any name without a
+    comma or outer spaces, and 'F|x' would split a table row."""
+    names = [*summary["sensors"], *(item["sensor"] for item in summary["sensors_ignored"])]
+    escaped = {name: name.translate(_MARKUP) for name in names}
+    escaped = {name: text for name, text in escaped.items() if text != name}
+    if not escaped:
+        return summary
+
+    def walk(x: object) -> object:
+        if isinstance(x, str):
+            return escaped.get(x, x)
+        if isinstance(x, dict):
+            return {escaped.get(k, k): walk(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [walk(v) for v in x]
+        return x
+
+    return cast(dict, walk(summary))
+
+
 def markdown(summary: dict) -> str:
     """The human-readable report."""
+    summary = _escaped_names(summary)
     u = summary["units"]
     final = summary["static_map"]
     calibrated = summary.get("static_map_calibrated", final)
