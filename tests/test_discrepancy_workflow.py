@@ -2691,3 +2691,16 @@ def test_sensor_names_that_are_markdown_markup_do_not_break_the_report(hysteresi
 
     rows = [[columns(r) for r in t.splitlines() if r.startswith("|")] for t in (plain, text)]
     assert rows[0] == rows[1] and rows[1]  # each row as many columns as with plain names
+
+
+def test_sensor_names_with_dollar_signs_are_drawn_as_written(hysteresis_outcome):
+    """Matplotlib reads text between dollar signs as math: a sensor named '$\\frac$' made
+    the plots fail after the whole analysis, 'unexpected ValueError', exit 1, nothing
+    written (until 2026-12-04), and '$x^2$' was drawn as x². The labels escape '$'."""
+    _, outcome = hysteresis_outcome
+    odd = replace(outcome, trial=replace(outcome.trial, sensor_names=(
+        "$\\frac$", "a$b", "$x^2$", "T3"), angle_names=tuple(
+            f"${name}$" for name in outcome.trial.angle_names)))
+    pngs = plots(odd, workers=1)
+    assert set(pngs) == {"residual_time.png", "residual_angle.png"}
+    assert all(png.startswith(b"\x89PNG") for png in pngs.values())

@@ -76,6 +76,12 @@ def plots(outcome: Outcome, workers: int | None = None) -> dict[str, bytes]:
     return dict(zip(names, pngs, strict=True))
 
 
+def _label(text: str) -> str:
+    """``text`` as a plot label drawn as written: matplotlib reads what stands between two
+    dollar signs as math (a sensor named '$\\frac$' fails to draw)."""
+    return text.replace("$", r"\$")
+
+
 def _png(fig) -> bytes:  # noqa: ANN001  (a matplotlib Figure: not imported at module level)
     """The figure as PNG bytes (90 dpi); the figure is closed."""
     import io
@@ -104,7 +110,7 @@ def _time_plot(outcome: Outcome) -> bytes:
             ax.plot(trial.t, fit.residual[:, j], lw=0.5, color=light)
             ax.plot(trial.t, _moving_rms(fit.residual[:, j], window), lw=1.2, color=dark,
                     label=label)
-        ax.set_ylabel(f"{trial.sensor_names[j]} [{trial.units}]")
+        ax.set_ylabel(_label(f"{trial.sensor_names[j]} [{trial.units}]"))
     axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle("held-out residual (measured − simulated) before and after the added "
@@ -137,10 +143,10 @@ def _angle_plot(outcome: Outcome) -> bytes:
             if j == 0:
                 ax.set_title(label)
             if col == 0:
-                ax.set_ylabel(f"{trial.sensor_names[j]} [{trial.units}]")
+                ax.set_ylabel(_label(f"{trial.sensor_names[j]} [{trial.units}]"))
     axes[0, 1].legend(loc="upper right", fontsize=8, markerscale=6)
     for ax in axes[-1]:
-        ax.set_xlabel(f"{trial.angle_names[k]} [deg]")
+        ax.set_xlabel(_label(f"{trial.angle_names[k]} [deg]"))
     fig.suptitle("held-out residual against angle, by direction of the sensor's motion")
     return _png(fig)
 
