@@ -4,10 +4,15 @@ missing (docs/discrepancy.md)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
+import numpy as np
 
 from exohil.harness.cli_types import Count, InputFile, OutputDir, refuse_overwriting_inputs
+
+if TYPE_CHECKING:
+    from exohil.formats.recording import Recording
 
 #: Most processes ``--workers`` takes: a bound that refuses nonsense (a step has five
 #: candidates at most, so more than five would idle).
@@ -17,6 +22,8 @@ MAX_WORKERS = 64
 #: with seven tendons at 250 Hz (docs/discrepancy-results.md, Speed); 17–23 kB in the largest
 #: process for four to seven sensors.
 BYTES_PER_FRAME = 28_000
+#: Exit status of a run stopped with Ctrl-C (128 + SIGINT, as a shell reports it).
+INTERRUPTED = 130
 
 
 def memory_warning(frames: int, available: int | None) -> str | None:
@@ -52,8 +59,21 @@ def _in_model(profile_path: Path | None) -> tuple[str, tuple[str, ...], str | No
     return profile.name, tuple(k for k in VOCABULARY if k in kinds), None
 
 
+def _usable(rec: Recording) -> tuple[str, ...]:
+    """The recording's sensors the analysis will use: a dead channel it leaves out (method
+    step 1) is not in a profile it wrote either."""
+    from exohil.emulators.discrepancy.data import unusable_sensors
+
+    if not len(rec.sensors):
+        return tuple(rec.sensor_names)
+    dead = {sensor for sensor, _ in unusable_sensors(np.asarray(rec.sensors.values),
+                                                      rec.sensor_names, rec.sensor_units)}
+    return tuple(s for s in rec.sensor_names if s not in dead)
+
+
 def _sensors_words(sensors: tuple[str, ...], units: str) -> str:
-    return f"{len(sensors)} sensors ({', '.join(sensors)}) in {units}"
+    return (f"{len(sensors)} sensor{'' if len(sensors) == 1 else 's'} ({', '.join(sensors)}) "
+            f"in {units}")
 
 
 @click.command("discrepancy")
@@ -79,7 +99,8 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     minus measurement, in the recording's units) before and after. Where it says "what
     remains ... none of the five effects explains", the written profile is the best fit
     found, not a faithful model of the suit. Exit status: 0 done (whatever was named), 1
-    unusable recording or profile, 2 wrong command line (docs/discrepancy.md: every output).
+    unusable recording or profile, 2 wrong command line, 130 stopped with Ctrl-C (the output
+    folder left as it was) (docs/discrepancy.md: every output).
 
     Time and memory grow with the recording: a four-minute trial with seven tendons takes
     30-65 s on two cores (the machine's hour moves it), a thirty-minute one ten minutes and
@@ -92,18 +113,42 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
       exohil discrepancy trial.mcap --out disc/
       exohil record cut session.mcap --stop 900 --out part1.mcap
     """
+    from exohil.emulators.discrepancy.report import OUTPUT_NAMES
+
+    refuse_overwriting_inputs([("--out", out_dir / name) for name in OUTPUT_NAMES],
+                              [measured, profile_path])
+    for name in OUTPUT_NAMES:  # found now, not after the analysis
+        if (out_dir / name).is_dir():
+            raise click.BadParameter(f"{out_dir / name} is a folder, so {name} cannot be "
+                                     "written there (choose another output folder)",
+                                     param_hint="'--out'")
+    name, in_model, calibrated_on = _in_model(profile_path)
+    try:
+        summary, written = _analyse_and_write(measured, profile_path, out_dir, workers, name,
+                                              in_model, calibrated_on)
+    except KeyboardInterrupt:
+        click.echo(f"interrupted: {out_dir} left as it was (no output of this run written)",
+                   err=True)
+        raise SystemExit(INTERRUPTED) from None
+    click.echo(f"{summary['conclusion']}: held-out gap {summary['gap_before']:.4g} -> "
+               f"{summary['gap_after']:.4g} {summary['units']}; wrote "
+               f"{', '.join(str(p) for p in written)}")
+
+
+def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
+                       workers: int | None, name: str, in_model: tuple[str, ...],
+                       calibrated_on: str | None) -> tuple[dict, list[Path]]:
+    """Analyse ``measured`` and write the outputs into ``out_dir``: the run's summary and the
+    files written."""
     from exohil.emulators.discrepancy import DiscrepancyError, run
-    from exohil.emulators.discrepancy.report import OUTPUT_NAMES, write_outputs
+    from exohil.emulators.discrepancy.report import write_outputs
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
     from exohil.harness.machine import available_memory_bytes
 
-    refuse_overwriting_inputs([("--out", out_dir / name) for name in OUTPUT_NAMES],
-                              [measured, profile_path])
-    name, in_model, calibrated_on = _in_model(profile_path)
     try:
         rec = read_recording(measured)
-        measured_on = _sensors_words(tuple(rec.sensor_names), rec.sensor_units)
+        measured_on = _sensors_words(_usable(rec), rec.sensor_units)
         if calibrated_on is not None and calibrated_on != measured_on:
             click.echo(f"warning: {profile_path} was calibrated on {calibrated_on}, "
                        f"{measured.name} has {measured_on}: only its effects' names are "
@@ -115,10 +160,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
                       progress=lambda line: click.echo(line, err=True), workers=workers)
     except (RecordingError, DiscrepancyError) as exc:
         raise click.ClickException(str(exc)) from exc
-    written = write_outputs(outcome, out_dir, f"{name}+{measured.stem}", workers)
-    s = outcome.summary
-    click.echo(f"{s['conclusion']}: held-out gap {s['gap_before']:.4g} -> {s['gap_after']:.4g} "
-               f"{s['units']}; wrote {', '.join(str(p) for p in written)}")
+    return outcome.summary, write_outputs(outcome, out_dir, f"{name}+{measured.stem}", workers)
 
 
 COMMANDS: list[click.Command] = [discrepancy]

@@ -2505,3 +2505,205 @@ def test_a_profile_of_another_version_or_without_a_table_is_refused_in_words(
     path.write_text(text.replace(*corrupt))
     with pytest.raises(ProfileError, match=re.escape(error)):
         load_calibrated_profile(path)
+
+
+def test_outputs_that_fail_half_way_leave_the_earlier_results_whole(hysteresis_outcome, tmp_path,
+                                                                    monkeypatch):
+    """The five outputs are one result: a run stopped while writing them (Ctrl-C, a full
+    disk) leaves the folder's earlier results as they were, never some files of each run
+    (until 2026-12-04 each file was renamed into place as it was done, so a stop at the third
+    left the new discrepancy.json and report.md beside the old plots and profile)."""
+    import exohil.emulators.discrepancy.report as report
+
+    _, outcome = hysteresis_outcome
+    out = tmp_path / "disc"
+    out.mkdir()
+    earlier = {name: f"earlier {name}".encode() for name in report.OUTPUT_NAMES}
+    for name, data in earlier.items():
+        (out / name).write_bytes(data)
+    calls = []
+    real = report.write_bytes
+
+    def stopped_at_the_third(path, data):
+        calls.append(path)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        real(path, data)
+
+    monkeypatch.setattr(report, "write_bytes", stopped_at_the_third)
+    with pytest.raises(KeyboardInterrupt):
+        report.write_outputs(outcome, out, "test", workers=1)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == earlier  # no temporary left
+    monkeypatch.setattr(report, "write_bytes", real)
+    written = report.write_outputs(outcome, out, "test", workers=1)
+    assert [p.name for p in written] == list(report.OUTPUT_NAMES)
+    assert sorted(p.name for p in out.iterdir()) == sorted(report.OUTPUT_NAMES)
+    assert all((out / name).read_bytes() != data for name, data in earlier.items())
+
+
+def test_an_output_name_taken_by_a_folder_is_refused_before_any_work(tmp_path, monkeypatch):
+    """`--out D` where D/report.md is a folder: refused when the command starts, exit 2,
+    one line naming it (until 2026-12-04 the whole analysis ran, then failed on the
+    temporary name '.report.partial-N.md: Is a directory', exit 1, with discrepancy.json
+    already replaced)."""
+    import exohil.emulators.discrepancy as discrepancy
+
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    path = tmp_path / "trial.mcap"
+    write_recording(path, rec)
+    (tmp_path / "out" / "report.md").mkdir(parents=True)
+    ran = []
+    monkeypatch.setattr(discrepancy, "run", lambda *a, **k: ran.append(1))
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and not ran, result.output
+    (line,) = result.output.strip().splitlines()
+    assert "report.md" in line and "is a folder" in line and "partial" not in line
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["report.md"]
+
+
+def test_ctrl_c_during_the_analysis_says_nothing_was_written_and_exits_130(tmp_path,
+                                                                           monkeypatch):
+    """Ctrl-C half-way: one line saying the output folder was left as it was, exit status
+    130 (128 + SIGINT), not click's 'Aborted!' with 1, the status of an unusable recording."""
+    import exohil.emulators.discrepancy as discrepancy
+
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    path = tmp_path / "trial.mcap"
+    write_recording(path, rec)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(discrepancy, "run", interrupted)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--out", str(out)])
+    assert result.exit_code == 130, result.output
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith("interrupted") and str(out) in line and "as it was" in line
+    assert result.stdout == "" and not out.exists()
+
+
+def test_ctrl_c_while_the_plots_are_drawn_creates_no_output_folder(hysteresis_outcome, tmp_path,
+                                                                   monkeypatch):
+    """The plots take seconds to draw: a stop then leaves no empty --out folder behind (until
+    2026-12-04 the folder was made before the plots were drawn)."""
+    import exohil.emulators.discrepancy.report as report
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "plots", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        report.write_outputs(hysteresis_outcome[1], tmp_path / "new" / "disc", "test", workers=1)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_one_sensor_is_said_as_one_sensor(tmp_path):
+    """A one-sensor recording: '1 sensor (mm)' in progress line [1] and in the warning about
+    a profile calibrated on other sensors (until 2026-12-04, '1 sensors')."""
+    from exohil.harness.cmd_discrepancy import _sensors_words
+
+    assert _sensors_words(("F",), "mm") == "1 sensor (F) in mm"
+    assert _sensors_words(("F", "R"), "mm") == "2 sensors (F, R) in mm"
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=22.0))
+    one = replace(rec, sensor_names=rec.sensor_names[:1],
+                  sensors=replace(rec.sensors, values=rec.sensors.values[:, :1]))
+    lines: list[str] = []
+    run(one, "one", progress=lines.append, workers=1)
+    assert lines[0].startswith("[1] calibrating the static map: 1 sensor (mm) from "), lines[0]
+
+
+@pytest.mark.parametrize("text", ["", "schema = \"exohil-calibrated-suit-profil\"\n"])
+def test_a_profile_of_no_known_schema_names_both_schemas(tmp_path, text):
+    """`--profile` takes a geometric or a calibrated profile; an empty file or a misspelt
+    schema said only '\\'schema\\' must be "exohil-suit-profile", got None' (until
+    2026-12-04), as if a calibrated profile were not taken."""
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0))
+    path, profile = tmp_path / "trial.mcap", tmp_path / "p.toml"
+    write_recording(path, rec)
+    profile.write_text(text)
+    result = CliRunner().invoke(main, ["discrepancy", str(path), "--profile", str(profile),
+                                       "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1, result.output
+    (line,) = result.output.strip().splitlines()
+    assert str(profile) in line and '"exohil-suit-profile"' in line
+    assert '"exohil-calibrated-suit-profile"' in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_profile_of_the_same_suit_with_a_dead_channel_left_out_is_not_said_to_differ(
+        hysteresis_outcome, tmp_path, monkeypatch):
+    """The profile a run writes has the analysed sensors only; run again on the same
+    recording with it, a dead channel (left out both times) drew 'was calibrated on 3
+    sensors (...), dead.mcap has 4 sensors (...)' (until 2026-12-04). A sensor the profile
+    lacks that the analysis uses is still said."""
+    import exohil.emulators.discrepancy as discrepancy
+    from exohil.emulators.discrepancy.report import write_outputs
+
+    _, outcome = hysteresis_outcome
+    write_outputs(outcome, tmp_path / "disc", "test", workers=1)
+    profile = tmp_path / "disc" / "suit_profile.toml"
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    names = tuple(outcome.summary["sensors"])
+    values = rec.sensors.values[:, [rec.sensor_names.index(n) for n in names]]
+    stuck = np.column_stack([values, np.full(len(values), 123.0)])
+    live = np.column_stack([values, values[:, 0] * 0.5])
+
+    def stop(*args, **kwargs):
+        raise DiscrepancyError("stopped here")
+
+    monkeypatch.setattr(discrepancy, "run", stop)
+    said = {}
+    for name, extra in (("stuck", stuck), ("live", live)):
+        path = tmp_path / f"{name}.mcap"
+        write_recording(path, replace(rec, sensor_names=(*names, "X"),
+                                      sensors=replace(rec.sensors, values=extra)))
+        result = CliRunner().invoke(main, ["discrepancy", str(path), "--profile", str(profile),
+                                           "--out", str(tmp_path / "out")])
+        assert result.exit_code == 1 and "stopped here" in result.stderr
+        said[name] = "was calibrated on" in result.stderr
+    assert said == {"stuck": False, "live": True}
+
+
+def test_sensor_names_that_are_markdown_markup_do_not_break_the_report(hysteresis_outcome):
+    """The recording format takes any sensor name without a comma or outer spaces: 'F|x'
+    split its row of the per-sensor tables into one column too many, 'S*F*' came out
+    italic and 'R<b>' opened bold HTML for the rest of the report (until 2026-12-04). They
+    are escaped in report.md; the JSON keeps them as recorded."""
+    summary = hysteresis_outcome[1].summary
+    odd = {"T0": "F|x", "T1": "S*F*", "T2": "R<b>", "T3": "[T3](x)"}
+
+    def renamed(x):
+        if isinstance(x, str):
+            return odd.get(x, x)
+        if isinstance(x, dict):
+            return {odd.get(k, k): renamed(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [renamed(v) for v in x]
+        return x
+
+    assert set(odd) == set(summary["sensors"])
+    plain, text = markdown(summary), markdown(renamed(summary))
+    for name in odd.values():
+        assert name not in text
+    assert "F\\|x" in text and "S\\*F\\*" in text and "R\\<b\\>" in text
+    assert "\\[T3\\](x)" in text
+
+    def columns(row: str) -> int:
+        return len(re.findall(r"(?<!\\)\|", row))
+
+    rows = [[columns(r) for r in t.splitlines() if r.startswith("|")] for t in (plain, text)]
+    assert rows[0] == rows[1] and rows[1]  # each row as many columns as with plain names
+
+
+def test_sensor_names_with_dollar_signs_are_drawn_as_written(hysteresis_outcome):
+    """Matplotlib reads text between dollar signs as math: a sensor named '$\\frac$' made
+    the plots fail after the whole analysis, 'unexpected ValueError', exit 1, nothing
+    written (until 2026-12-04), and '$x^2$' was drawn as x². The labels escape '$'."""
+    _, outcome = hysteresis_outcome
+    odd = replace(outcome, trial=replace(outcome.trial, sensor_names=(
+        "$\\frac$", "a$b", "$x^2$", "T3"), angle_names=tuple(
+            f"${name}$" for name in outcome.trial.angle_names)))
+    pngs = plots(odd, workers=1)
+    assert set(pngs) == {"residual_time.png", "residual_angle.png"}
+    assert all(png.startswith(b"\x89PNG") for png in pngs.values())

@@ -31,7 +31,13 @@ from exohil.emulators.discrepancy.stops import Stops
 from exohil.emulators.discrepancy.workflow import Outcome
 from exohil.emulators.effects import Noise, Signal
 from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory
-from exohil.emulators.suit_profile import ProfileError, SuitProfile, load_profile, read_toml
+from exohil.emulators.suit_profile import (
+    PROFILE_SCHEMA,
+    ProfileError,
+    SuitProfile,
+    load_profile,
+    read_toml,
+)
 from exohil.formats.atomic import write_text
 from exohil.formats.recording import AngleStream, Recording, SensorStream
 from exohil.kinematics import OBSERVABLE_ELEVATION_DEG
@@ -314,8 +320,13 @@ def load_any_profile(path: str | Path) -> SuitProfile | CalibratedSuit:
     (:func:`~exohil.emulators.suit_profile.load_profile`); one :class:`ProfileError` line on
     any problem."""
     path = Path(path)
-    if read_toml(path, "suit profile").get("schema") == CALIBRATED_SCHEMA:
+    schema = read_toml(path, "suit profile").get("schema")
+    if schema == CALIBRATED_SCHEMA:
         return load_calibrated_profile(path)
+    if schema != PROFILE_SCHEMA:
+        raise ProfileError(f"{path}: 'schema' must be \"{PROFILE_SCHEMA}\" (a geometric suit "
+                           f"profile) or \"{CALIBRATED_SCHEMA}\" (one `exohil discrepancy` "
+                           f"wrote), got {schema!r}")
     return load_profile(path)
 
 

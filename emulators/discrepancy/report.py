@@ -1,13 +1,16 @@
 """Outputs of a discrepancy run: ``discrepancy.json``, ``report.md`` with two plots, and the
-calibrated suit profile ``suit_profile.toml``. Every file is written under a temporary name
-in the output folder and renamed when complete, so a crash never leaves a half-written file
-under a final name.
+calibrated suit profile ``suit_profile.toml``. Every file is first written under a temporary
+name in the output folder, and they are renamed into place only once all of them are
+complete, so a crash or Ctrl-C never leaves a half-written file under a final name, nor some
+files of this run beside others of an earlier run in the same folder.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -31,7 +34,7 @@ from exohil.emulators.discrepancy.timing import (
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import Outcome, map_words, resampled_words
 from exohil.emulators.protocols import ANGLE_NAMES
-from exohil.formats.atomic import write_bytes
+from exohil.formats.atomic import temporary_name, write_bytes
 
 OUTPUT_NAMES = ("discrepancy.json", "report.md", "residual_time.png", "residual_angle.png",
                 "suit_profile.toml")
@@ -73,6 +76,12 @@ def plots(outcome: Outcome, workers: int | None = None) -> dict[str, bytes]:
     return dict(zip(names, pngs, strict=True))
 
 
+def _label(text: str) -> str:
+    """``text`` as a plot label drawn as written: matplotlib reads what stands between two
+    dollar signs as math (a sensor named '$\\frac$' fails to draw)."""
+    return text.replace("$", r"\$")
+
+
 def _png(fig) -> bytes:  # noqa: ANN001  (a matplotlib Figure: not imported at module level)
     """The figure as PNG bytes (90 dpi); the figure is closed."""
     import io
@@ -101,7 +110,7 @@ def _time_plot(outcome: Outcome) -> bytes:
             ax.plot(trial.t, fit.residual[:, j], lw=0.5, color=light)
             ax.plot(trial.t, _moving_rms(fit.residual[:, j], window), lw=1.2, color=dark,
                     label=label)
-        ax.set_ylabel(f"{trial.sensor_names[j]} [{trial.units}]")
+        ax.set_ylabel(_label(f"{trial.sensor_names[j]} [{trial.units}]"))
     axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle("held-out residual (measured − simulated) before and after the added "
@@ -134,10 +143,10 @@ def _angle_plot(outcome: Outcome) -> bytes:
             if j == 0:
                 ax.set_title(label)
             if col == 0:
-                ax.set_ylabel(f"{trial.sensor_names[j]} [{trial.units}]")
+                ax.set_ylabel(_label(f"{trial.sensor_names[j]} [{trial.units}]"))
     axes[0, 1].legend(loc="upper right", fontsize=8, markerscale=6)
     for ax in axes[-1]:
-        ax.set_xlabel(f"{trial.angle_names[k]} [deg]")
+        ax.set_xlabel(_label(f"{trial.angle_names[k]} [deg]"))
     fig.suptitle("held-out residual against angle, by direction of the sensor's motion")
     return _png(fig)
 
@@ -448,8 +457,36 @@ def _step_lines(before: list[dict], after: list[dict], units: str, angles: list[
     return lines
 
 
+#: Characters of a sensor name that Markdown reads as markup: a table's column bar,
+#: emphasis, HTML, a link, code, the escape itself.
+_MARKUP = str.maketrans({c: "\\" + c for c in "\\`*|<>[]"})
+
+
+def _escaped_names(summary: dict) -> dict:
+    """``summary`` with each sensor name that holds Markdown markup escaped wherever it stands
+    alone (a list entry, a value, a key): the recording format takes any name without a
+    comma or outer spaces, and 'F|x' would split a table row."""
+    names = [*summary["sensors"], *(item["sensor"] for item in summary["sensors_ignored"])]
+    escaped = {name: name.translate(_MARKUP) for name in names}
+    escaped = {name: text for name, text in escaped.items() if text != name}
+    if not escaped:
+        return summary
+
+    def walk(x: object) -> object:
+        if isinstance(x, str):
+            return escaped.get(x, x)
+        if isinstance(x, dict):
+            return {escaped.get(k, k): walk(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [walk(v) for v in x]
+        return x
+
+    return cast(dict, walk(summary))
+
+
 def markdown(summary: dict) -> str:
     """The human-readable report."""
+    summary = _escaped_names(summary)
     u = summary["units"]
     final = summary["static_map"]
     calibrated = summary.get("static_map_calibrated", final)
@@ -591,10 +628,11 @@ def _profile_line(summary: dict) -> str:
 
 def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str,
                   workers: int | None = None) -> list[Path]:
-    """Write every output into ``out_dir`` (created if needed); returns the paths. The plots
-    are drawn in up to ``workers`` processes (default: one per CPU, one inside a worker
-    process; :func:`~.workers.workers_for`)."""
-    out_dir.mkdir(parents=True, exist_ok=True)
+    """Write every output into ``out_dir`` (created if needed); returns the paths. All of
+    them are written under temporary names before any is renamed into place (module doc):
+    an exception or Ctrl-C before the renames leaves ``out_dir``'s earlier files as they
+    were. The plots are drawn in up to ``workers`` processes (default: one per CPU, one
+    inside a worker process; :func:`~.workers.workers_for`)."""
     files: dict[str, bytes] = plots(outcome, workers)
     suit = calibrated_suit(outcome, profile_name)
     files["suit_profile.toml"] = to_toml(profile_dict(
@@ -604,9 +642,16 @@ def write_outputs(outcome: Outcome, out_dir: Path, profile_name: str,
     # allow_nan=False: NaN is not JSON; a statistic with no frame to measure is null
     summary = json.dumps(outcome.summary, indent=1, allow_nan=False)
     files["discrepancy.json"] = (summary + "\n").encode("utf-8")
-    written = []
-    for name in OUTPUT_NAMES:
-        path = out_dir / name
-        write_bytes(path, files[name])
-        written.append(path)
+    out_dir.mkdir(parents=True, exist_ok=True)  # once the plots are drawn: nothing before
+    written = [out_dir / name for name in OUTPUT_NAMES]
+    staged: list[Path] = []
+    try:
+        for path in written:  # each complete under its temporary name first
+            staged.append(temporary_name(path))
+            write_bytes(staged[-1], files[path.name])
+        for tmp, path in zip(staged, written, strict=True):
+            os.replace(tmp, path)
+    finally:
+        for tmp in staged:
+            tmp.unlink(missing_ok=True)
     return written

@@ -635,7 +635,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     floors = trial.noise
     floor = pooled_noise(trial)
     placed = "" if trial.placed_by == FRAME_COUNTER else f" (placed by {trial.placed_by})"
-    progress(f"[1] calibrating the static map: {trial.n_sensors} sensors ({trial.units}) from "
+    sensors = f"{trial.n_sensors} sensor{'' if trial.n_sensors == 1 else 's'}"
+    progress(f"[1] calibrating the static map: {sensors} ({trial.units}) from "
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
