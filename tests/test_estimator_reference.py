@@ -42,3 +42,19 @@ def test_reference_model_accuracy(kind, test_blocks):
     assert measured["accuracy.frames_scored"] == stored["accuracy.frames_scored"]
     for name, value in stored.items():
         assert measured[name] <= value + TOLERANCE_DEG, (name, measured[name], value)
+
+
+@pytest.mark.parametrize("kind", ["ennet", "ann"])
+def test_reference_model_records_its_held_out_part_and_lineage(kind):
+    """fixtures/models/README.md's check (`exohil evaluate ... --test-fraction 0.3`) scores the
+    end each block `train --test-fraction 0.3` held out, and the conformance suite's heldout
+    check follows each training recording's lineage. Checkpoints saved before `train` kept
+    `info.test_fraction` and `cut_from` made the check warn that its figures might include
+    training frames and the heldout check note that the lineage was unknown."""
+    from exohil.harness.cmd_train import training_frame_warnings
+
+    est = load_checkpoint(MODELS / f"{kind}.npz")
+    assert est.info.get("test_fraction") == 0.3
+    assert all("cut_from" in source for source in est.info["sources"])
+    scored = load_recordings([FIXTURE]).sources
+    assert training_frame_warnings(est.info, scored, 0.3) == []
