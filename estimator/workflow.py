@@ -102,6 +102,10 @@ def load_recordings(
         raise DatasetError(f"{paths[0]}: {exc}") from None
     rate = float(recs[0].sensor_rate_hz)
     for p, r in zip(paths[1:], recs[1:], strict=True):
+        if r.sensor_units != recs[0].sensor_units:
+            raise DatasetError(f"{p}: sensors in {r.sensor_units}, {paths[0]} in "
+                               f"{recs[0].sensor_units}: one model cannot read both; "
+                               "convert them to one unit")
         if not same_rate(r.sensor_rate_hz, rate):
             raise DatasetError(f"{p}: sensors at {r.sensor_rate_hz:g} Hz, {paths[0]} at "
                                f"{rate:g} Hz: a model's window would span another time in "

@@ -384,3 +384,29 @@ def test_training_progress_names_the_model_as_the_command_line_does(files, monke
                                        "--max-epochs", "1"])
     assert result.exit_code == 0, result.output
     assert lines and all(line.startswith("[ennet-stateful] epoch ") for line in lines), lines
+
+
+def test_recordings_in_two_sensor_units_are_refused(files):
+    """Another lab's recording in volts trained beside one in mm: the model learned both as
+    one unit (validation RMSE 24-26° against 2-3° in either alone), with no word; evaluate
+    scored such a mix and table tested one on the other alike."""
+    volts = files["dir"] / "volts.mcap"
+    rec = shoulder_recording(seconds=3.0, seed=3)
+    rec.sensors.values *= 0.01
+    rec.sensor_units = "V"
+    write_recording(volts, rec)
+    out = files["dir"] / "mixed.npz"
+    line = _one_line_error(CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]),
+                                                     str(volts), "--out", str(out),
+                                                     "--max-epochs", "1"]))
+    assert line == (f"Error: {volts}: sensors in V, {files['good']} in mm: one model cannot "
+                    "read both; convert them to one unit")
+    assert not out.exists()
+    line = _one_line_error(CliRunner().invoke(main, ["evaluate", str(files["ckpt"]),
+                                                     str(files["good"]), str(volts)]))
+    assert "sensors in V" in line
+    line = _one_line_error(CliRunner().invoke(main, ["table", "--train", str(files["good"]),
+                                                     "--test", str(volts), "--models",
+                                                     "classical", "--max-epochs", "1"]))
+    assert line == ("Error: --test recordings in V, --train recordings in mm: each model "
+                    "would read the test in another unit; convert them to one unit")
