@@ -464,6 +464,10 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         reference = None
     elif reference is None:
         reference = read_reference(ref_path)
+    if reference is not None and isinstance(config.device, EmulatorDevice) \
+            and reference.sensor_units != "mm":
+        raise SessionError(f"{ref_path}: sensor values are in {reference.sensor_units!r}; the "
+                           "emulator streams them over the wire protocol, which carries mm")
     if reference is not None:
         try:
             ensure_fits(est, reference, str(ref_path))

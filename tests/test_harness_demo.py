@@ -568,3 +568,24 @@ def test_a_demo_of_a_recording_on_a_unix_epoch_clock_is_scored(tmp_path):
     assert result.exit_code == 0, result.output
     assert "no reference recording" not in result.output
     assert "arm-direction RMSE" in result.output
+
+
+def test_a_demo_of_a_recording_in_volts_names_the_file(tmp_path):
+    """Another lab's recording in V: the demo refused it with 'sensor values are in 'V'; the
+    wire protocol carries mm', naming no file (the model, or the recording?)."""
+    from exohil.formats.recording_reader import read_recording
+    from exohil.formats.recording_writer import write_recording
+
+    part, _ = _fixture_part(tmp_path, "2")
+    rec = read_recording(part)
+    rec.sensors.values *= 0.01
+    rec.sensor_units = "V"
+    volts = tmp_path / "volts.mcap"
+    write_recording(volts, rec)
+    result = CliRunner().invoke(main, ["demo", "--recording", str(volts), "--seconds", "1",
+                                       "--sink", "none", "--no-faults",
+                                       "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    errors = [line for line in result.output.splitlines() if line.startswith("Error")]
+    assert errors == [f"Error: {volts}: sensor values are in 'V'; the emulator streams them "
+                      "over the wire protocol, which carries mm"], result.output
