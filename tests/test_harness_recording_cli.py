@@ -511,3 +511,19 @@ def test_plot_window_on_a_unix_epoch_clock(tmp_path: Path, kind: str) -> None:
                  "--t1", f"{epoch + 6:.0f}", "--out", image)
     assert result.exit_code == 0, result.output
     assert image.stat().st_size > 0
+
+
+def test_a_hysteresis_plot_without_overlapping_mocap_says_so_not_a_window(tmp_path: Path) -> None:
+    """A part cut where another lab's motion capture had not started yet (its /mocap/shoulder
+    holds no sample) was refused with 'no sensor frames with mocap in the chosen time window',
+    though no window was chosen, and the empty stream went unnamed."""
+    part = tmp_path / "part.mcap"
+    t = np.arange(500) / 250.0
+    write_recording(part, Recording(("F", "SF"), SensorStream(np.arange(500), t,
+                                                              np.ones((500, 2))),
+                                    {"shoulder": AngleStream(np.zeros(0), ("shoulder_elv",),
+                                                             np.zeros((0, 1)))}))
+    line = assert_one_line_error(run("plot", part, "--kind", "hysteresis",
+                                     "--out", tmp_path / "p.png"))
+    assert line == ("Error: no sensor frame lies within the /mocap/shoulder samples of "
+                    "shoulder_elv (sensor frames 0.000 → 1.996 s, /mocap/shoulder: none)")
