@@ -410,3 +410,21 @@ def test_recordings_in_two_sensor_units_are_refused(files):
                                                      "classical", "--max-epochs", "1"]))
     assert line == ("Error: --test recordings in V, --train recordings in mm: each model "
                     "would read the test in another unit; convert them to one unit")
+
+
+def test_train_warns_when_the_timestamps_disagree_with_the_nominal_rate(files):
+    """Another lab's recording says sensor_rate_hz=250 while its frames come at 100 Hz:
+    `record info` noted it, but train set the window up for 250 Hz without a word."""
+    wrong = files["dir"] / "wrong_rate.mcap"
+    rec = shoulder_recording(seconds=3.0, rate=100.0, seed=2)
+    rec.sensor_rate_hz = 250.0
+    write_recording(wrong, rec)
+    result = CliRunner().invoke(main, ["train", "--model", "ann", str(wrong), "--out",
+                                       str(files["dir"] / "wrong.npz"), "--max-epochs", "1"])
+    assert result.exit_code == 0, result.output
+    assert (f"{wrong}: metadata sensor_rate_hz=250 but its timestamps give 100 Hz; the model "
+            "is set up for 250 Hz, so its window spans another time (are the times in "
+            "seconds?)") in result.output
+    good = CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
+                                     str(files["dir"] / "good2.npz"), "--max-epochs", "1"])
+    assert good.exit_code == 0 and "timestamps give" not in good.output
