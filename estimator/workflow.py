@@ -32,7 +32,7 @@ from exohil.estimator.splits import Split, cut_at_segments, time_block_split, tr
 from exohil.estimator.trained import DIRECTION_ANGLES, TrainedEstimator
 from exohil.estimator.training import TrainConfig, train
 from exohil.formats.recording import Recording
-from exohil.formats.recording_metadata import source_entry
+from exohil.formats.recording_metadata import rates_disagree, source_entry
 from exohil.kinematics import OBSERVABLE_ELEVATION_DEG
 
 #: The plane of elevation θ and the elevation φ (the humerus direction's angles).
@@ -102,6 +102,10 @@ def load_recordings(
         raise DatasetError(f"{paths[0]}: {exc}") from None
     rate = float(recs[0].sensor_rate_hz)
     for p, r in zip(paths[1:], recs[1:], strict=True):
+        if r.sensor_units != recs[0].sensor_units:
+            raise DatasetError(f"{p}: sensors in {r.sensor_units}, {paths[0]} in "
+                               f"{recs[0].sensor_units}: one model cannot read both; "
+                               "convert them to one unit")
         if not same_rate(r.sensor_rate_hz, rate):
             raise DatasetError(f"{p}: sensors at {r.sensor_rate_hz:g} Hz, {paths[0]} at "
                                f"{rate:g} Hz: a model's window would span another time in "
@@ -133,8 +137,18 @@ def setting_warnings(data: LoadedData, split: Split, cfg: TrainConfig,
     more frames than a recording holds (its rest value never settles); a sensor that
     reads one value over every training frame (a model learns nothing from it); and a plane
     of elevation without the elevation (trained and scored where the arm hangs and it is
-    undefined)."""
+    undefined); and a recording whose timestamps run at another rate than its metadata's
+    sensor_rate_hz, which the model's window is set up for."""
     lines: list[str] = []
+    for path, rec in zip(data.paths, data.recordings, strict=True):
+        t, seq = rec.sensors.t, rec.sensors.seq
+        if len(t) > 1 and t[-1] > t[0]:
+            measured = float(seq[-1] - seq[0]) / float(t[-1] - t[0])
+            if rates_disagree(rec.sensor_rate_hz, measured):
+                lines.append(f"{path}: metadata sensor_rate_hz={rec.sensor_rate_hz:g} but its "
+                             f"timestamps give {measured:.4g} Hz; the model is set up for "
+                             f"{rec.sensor_rate_hz:g} Hz, so its window spans another time "
+                             "(are the times in seconds?)")
     angles = data.target.angles
     if THETA in angles and PHI not in angles:
         lines.append(f"{THETA} without {PHI}: the plane of elevation is undefined with the arm "

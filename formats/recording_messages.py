@@ -168,8 +168,9 @@ def _check_times(path: Path, topic: str, t: np.ndarray) -> None:
     """Message times (in log-time order) must be finite, ≥ 0 s and never go back."""
     bad = np.flatnonzero(~np.isfinite(t) | (t < 0))
     if bad.size:
-        raise RecordingError(f"{path}: {topic} message {int(bad[0])} has time {t[bad[0]]!r}; "
-                             "times must be finite and >= 0 s")
+        raise RecordingError(f"{path}: {topic} message {int(bad[0])} has time "
+                             f"{float(t[bad[0]]):g} s; times must be finite and >= 0 s "
+                             "(shift the writer's clock to start at 0 or later)")
     back = np.flatnonzero(np.diff(t) < 0)
     if back.size:
         k = int(back[0]) + 1

@@ -136,7 +136,12 @@ def sensor_names(
     frame, else ``ch0, ch1, ...`` (counted in the first message)."""
     text = metadata.get("sensors")
     if text is not None:
-        return tuple(name.strip() for name in text.split(",") if name.strip())
+        names = tuple(name.strip() for name in text.split(",") if name.strip())
+        twice = sorted({name for name in names if names.count(name) > 1})
+        if twice:  # the writer refuses them: a part cut from it could not be written
+            raise RecordingError(f"{path}: metadata sensors {text!r} names "
+                                 f"{', '.join(twice)} twice; each sensor needs its own name")
+        return names
     if not messages:
         return ()
     try:

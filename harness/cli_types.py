@@ -35,8 +35,9 @@ from exohil.formats.atomic import same_file
 SEED_MAX = 2**32 - 1
 #: The longest duration any command takes, s (one day).
 MAX_DURATION_S = 86_400.0
-#: The largest magnitude of a time (a point in a recording, not a duration), s (~31 years).
-MAX_TIME_S = 1e9
+#: The largest magnitude of a time (a point in a recording, not a duration), s (~317 years:
+#: a recording on a Unix-epoch clock, 1.7e9 s in 2024, fits).
+MAX_TIME_S = 1e10
 #: The highest rate any command takes, Hz.
 MAX_RATE_HZ = 100_000.0
 #: The longest name or label, characters.

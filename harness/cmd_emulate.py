@@ -40,6 +40,21 @@ def _load_recording(path: Path):
     return recording
 
 
+def _warn_of_another_rate(path: Path, recording) -> None:
+    """One warning line when the frames' timestamps give another rate than the metadata's
+    sensor_rate_hz, at which the frames are streamed (another tool's recording)."""
+    from exohil.formats.recording_metadata import rates_disagree
+
+    t, seq = recording.sensors.t, recording.sensors.seq
+    if len(t) < 2 or not t[-1] > t[0]:
+        return
+    measured = float(seq[-1] - seq[0]) / float(t[-1] - t[0])
+    if rates_disagree(recording.sensor_rate_hz, measured):
+        click.echo(f"warning: {path}: metadata sensor_rate_hz={recording.sensor_rate_hz:g} but "
+                   f"its timestamps give {measured:.4g} Hz; streaming at "
+                   f"{recording.sensor_rate_hz:g} Hz (--rate to choose)", err=True)
+
+
 def _write_fault_log(path: Path, emulator) -> None:
     write_text(path, "".join(json.dumps({"seq": r.seq, "kind": r.kind, "details": r.details},
                                         default=str) + "\n" for r in emulator.fault_log))
@@ -96,6 +111,8 @@ def emulate_command(recording: Path, rate: float | None, loop: bool, faults: str
     refuse_overwriting_inputs([("--fault-log", fault_log)],
                               [recording, *([Path(faults)] if faults else [])])
     source = _load_recording(recording)
+    if rate is None:
+        _warn_of_another_rate(recording, source)
     try:
         plan = fault_plan(faults)
         check_sensor_count(plan, len(source.sensor_names))

@@ -449,6 +449,11 @@ def table_command(train_paths, test_paths, test_fraction, models, out, section, 
                       data.sensor_names) if test_paths else None
     if test_data is not None:
         _refuse_training_frames(data.sources, test_data.sources)
+        units, test_units = data.recordings[0].sensor_units, test_data.recordings[0].sensor_units
+        if test_units != units:  # as train refuses two units
+            raise click.ClickException(
+                f"--test recordings in {test_units}, --train recordings in {units}: each "
+                "model would read the test in another unit; convert them to one unit")
         if not same_rate(test_data.rate_hz, data.rate_hz):  # as train refuses two rates
             raise click.ClickException(
                 f"--test recordings at {test_data.rate_hz:g} Hz, --train recordings at "

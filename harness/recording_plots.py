@@ -98,9 +98,15 @@ def plot_hysteresis(
     window = window or TimeWindow()
     keep = window.mask(rec.sensors.t) & np.isfinite(angles)
     if not np.any(keep):
-        raise RecordingError("no sensor frames with mocap in the chosen time window"
-                             + _spans_text({"sensor frames": rec.sensors.t,
-                                            f"/mocap/{joint}": rec.mocap[joint].t}))
+        streams = {"sensor frames": rec.sensors.t, f"/mocap/{joint}": rec.mocap[joint].t}
+        if window.spans:
+            raise RecordingError("no sensor frames with mocap in the chosen time window"
+                                 + _spans_text(streams))
+        # no window: the motion capture does not overlap the sensors (or holds no sample)
+        raise RecordingError(f"no sensor frame lies within the /mocap/{joint} samples of "
+                             f"{angle} (" + ", ".join(
+                                 f"{name} {t[0]:.3f} → {t[-1]:.3f} s" if len(t)
+                                 else f"{name}: none" for name, t in streams.items()) + ")")
     t, x, y = rec.sensors.t[keep], angles[keep], rec.sensors.values[keep, column]
     direction = motion_direction(t, x)
     figure = Figure(figsize=(7.0, 5.0), dpi=120, layout="constrained")

@@ -47,9 +47,9 @@ from exohil.formats.atomic import same_file
 from exohil.formats.digest import sha256_file
 from exohil.formats.errors import InputError, RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
-from exohil.formats.recording import Recording
+from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
 from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
-from exohil.formats.wire import SEQ_MODULUS
+from exohil.formats.wire import SEQ_MODULUS, TIME_MODULUS_US
 from exohil.harness.bench import (
     BenchConfig,
     BenchError,
@@ -141,6 +141,27 @@ def reference_path(config: BenchConfig) -> Path | None:
     if isinstance(device, SerialDevice):
         return device.reference
     return None
+
+
+def on_host_clock(reference: Recording) -> Recording:
+    """``reference`` on the clock the host unwraps the device's time to: the wire carries
+    32-bit µs (docs/wire-protocol.md), so an emulator replaying a recording whose first frame
+    lies 2³² µs (71.6 min) or more after 0 (another tool's Unix time, 1.7e9 s; a part cut late
+    from a long session) sends it modulo 2³² µs, and the host's device times start there. Its
+    times are moved back by those whole wraps; a reference that starts before the first wrap
+    is returned as it is."""
+    if not len(reference.sensors):
+        return reference
+    wraps = round(float(reference.sensors.t[0]) * 1e6) // TIME_MODULUS_US
+    if wraps <= 0:
+        return reference
+    shift = wraps * TIME_MODULUS_US / 1e6
+    sensors = SensorStream(reference.sensors.seq, reference.sensors.t - shift,
+                           reference.sensors.values)
+    mocap = {joint: AngleStream(stream.t - shift, stream.names, stream.angles)
+             for joint, stream in reference.mocap.items()}
+    segments = [Segment(seg.name, seg.t0 - shift, seg.t1 - shift) for seg in reference.segments]
+    return replace(reference, sensors=sensors, mocap=mocap, segments=segments)
 
 
 def truth_at(reference: Recording, est: TrainedEstimator, device_time_s: np.ndarray) -> np.ndarray:
@@ -443,6 +464,10 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         reference = None
     elif reference is None:
         reference = read_reference(ref_path)
+    if reference is not None and isinstance(config.device, EmulatorDevice) \
+            and reference.sensor_units != "mm":
+        raise SessionError(f"{ref_path}: sensor values are in {reference.sensor_units!r}; the "
+                           "emulator streams them over the wire protocol, which carries mm")
     if reference is not None:
         try:
             ensure_fits(est, reference, str(ref_path))
@@ -455,8 +480,10 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         left = partial_path(config.record)
         raise SessionError(f"{left} is what a run that was stopped short recorded; recover it "
                            f"(exohil record recover {left} --out FILE) or remove it first")
-    if progress is not None and reference is not None:
-        progress = _with_running_error(progress, reference, est)
+    # the reference as the host's device times see it; the emulator replays it as it is
+    truth_ref = None if reference is None else on_host_clock(reference)
+    if progress is not None and truth_ref is not None:
+        progress = _with_running_error(progress, truth_ref, est)
     rate_hz = device_rate_hz(config, reference)
     robots: list[Any] = []
     sinks: list[Sink] = []
@@ -478,8 +505,8 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 "model_sha256": model.sha256}, sensor_rate_hz=rate_hz))
         coverage = CoverageTally(est)
         observers: list[RowsObserver] = [lambda rows: coverage.add(rows.values)]
-        if reference is not None:
-            scoring = TruthTally(reference, est, teleop=bool(robots))
+        if truth_ref is not None:
+            scoring = TruthTally(truth_ref, est, teleop=bool(robots))
             observers.append(scoring)
         meter = HostLoadMeter()
         with open_device(config.device, len(est.sensor_names), realtime=realtime,
@@ -509,9 +536,9 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                 early = stopped and (seconds is not None or not looped)
             else:
                 end, wall = None, seconds
-                if seconds is None and reference is not None and len(reference.sensors):
-                    t = reference.sensors.t
-                    end = float(t[-1]) - 1.5 / reference.sensor_rate_hz  # its last frame
+                if seconds is None and truth_ref is not None and len(truth_ref.sensors):
+                    t = truth_ref.sensors.t
+                    end = float(t[-1]) - 1.5 / truth_ref.sensor_rate_hz  # its last frame
                     wall = float(t[-1] - t[0]) + 60.0  # a device that never gets there
                 # no idle timeout: an outage shorter than DEVICE_TIMEOUT_S is ridden out (the
                 # reader reconnects), a longer one ends the reader, and so the run
@@ -547,10 +574,10 @@ def run_session(config: BenchConfig, seconds: float | None, *,
                    else None) or device_lost or last_error
         why = f": {problem}" if problem else ""
         raise SessionError(f"no frame arrived from the {config.device.describe()}{hint}{why}")
-    truth = None if reference is None else truth_at(reference, est, run.device_time_s)
+    truth = None if truth_ref is None else truth_at(truth_ref, est, run.device_time_s)
     trace = None if tracer is None else tracer.trace()
-    if trace is not None and reference is not None:
-        angles = truth_at(reference, est, trace.device_time_s)
+    if trace is not None and truth_ref is not None:
+        angles = truth_at(truth_ref, est, trace.device_time_s)
         shoulder = [est.target.angles.index(a) for a in SHOULDER_ANGLES]
         trace = replace(trace, truth_deg=angles[:, shoulder])
     ended_early = "; ".join(why for why in (_stopped_early(run, early),

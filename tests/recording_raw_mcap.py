@@ -151,6 +151,7 @@ BAD_FILE_CASES = {
     "time_goes_back": "time goes back at message 2",
     "deep_segments": "'segments' is not a JSON list",
     "huge_segment_time": "'segments' is not a JSON list",
+    "duplicate_sensor": "metadata sensors 'F,SF,F,R' names F twice; each sensor needs its own",
 }
 """Bad-file case → the text its RecordingError must contain."""
 
@@ -186,6 +187,7 @@ def write_bad_file(path: Path, case: str) -> Path:
             "bad_segments": {**GOOD_METADATA, "segments": "[{name: x}]"},
             "bad_rate": {**GOOD_METADATA, "sensor_rate_hz": "fast"},
             "angle_unit": {**GOOD_METADATA, "units": "mm,rad"},
+            "duplicate_sensor": {**GOOD_METADATA, "sensors": "F,SF,F,R"},
             "deep_segments": {**GOOD_METADATA, "segments": "[" * 100_000 + "]" * 100_000},
             "huge_segment_time": {**GOOD_METADATA,
                                   "segments": '[{"name": "a", "t0": 0, "t1": 1e999}]'},

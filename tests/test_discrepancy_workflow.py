@@ -1,5 +1,6 @@
 """The discrepancy workflow: data preparation, model pieces, CLI contract, calibrated profile."""
 
+import copy
 import json
 import math
 import re
@@ -2707,3 +2708,21 @@ def test_sensor_names_with_dollar_signs_are_drawn_as_written(hysteresis_outcome)
     pngs = plots(odd, workers=1)
     assert set(pngs) == {"residual_time.png", "residual_angle.png"}
     assert all(png.startswith(b"\x89PNG") for png in pngs.values())
+
+
+def test_the_report_shows_times_on_a_unix_epoch_clock_in_full(hysteresis_outcome):
+    """Another lab's recording stamped with Unix time (1.7e9 s): the report's "By time" table
+    read '1.7e+09 to 1.7e+09' on every row, so no block could be told from another."""
+    _, outcome = hysteresis_outcome
+    summary = copy.deepcopy(outcome.summary)
+    for side in ("localisation_before", "localisation_after"):
+        for cell in summary[side]["by_time"]:
+            cell["t0_s"] += 1.7e9
+            cell["t1_s"] += 1.7e9
+    first = summary["localisation_before"]["by_time"][0]
+    report = markdown(summary)
+    assert "e+09" not in report
+    assert f"| {first['t0_s']:.2f} to {first['t1_s']:.2f} |" in report
+    # a clock that starts at 0 reads as before
+    plain = outcome.summary["localisation_before"]["by_time"][0]
+    assert f"| {plain['t0_s']:.4g} to {plain['t1_s']:.4g} |" in markdown(outcome.summary)

@@ -252,3 +252,20 @@ def test_emulate_refuses_faults_that_do_not_fit_before_streaming(spec: str,
     assert len(lines) == 1 and lines[0].startswith("Error") and problem in lines[0], lines
     assert "/dev/" not in result.output and "not supported" not in result.output
 
+
+
+def test_emulate_warns_when_the_timestamps_disagree_with_the_nominal_rate(tmp_path: Path) -> None:
+    """Another lab's recording says sensor_rate_hz=250 while its frames come at 100 Hz:
+    `emulate` streamed it 2.5 times too fast without a word."""
+    k = np.arange(200)
+    values = 300.0 + 50.0 * np.sin(k[:, None] / 20.0 + np.arange(4)[None, :])
+    path = tmp_path / "wrong.mcap"
+    write_recording(path, Recording(("F", "SF", "SR", "R"), SensorStream(k, k / 100.0, values),
+                                    sensor_rate_hz=250.0))
+    result = CliRunner().invoke(main, ["emulate", str(path), "--duration", "0.1"])
+    assert result.exit_code == 0, result.output
+    assert (f"warning: {path}: metadata sensor_rate_hz=250 but its timestamps give 100 Hz; "
+            "streaming at 250 Hz (--rate to choose)") in result.stderr
+    chosen = CliRunner().invoke(main, ["emulate", str(path), "--duration", "0.1",
+                                       "--rate", "100"])
+    assert chosen.exit_code == 0 and "timestamps give" not in chosen.stderr

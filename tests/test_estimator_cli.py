@@ -384,3 +384,47 @@ def test_training_progress_names_the_model_as_the_command_line_does(files, monke
                                        "--max-epochs", "1"])
     assert result.exit_code == 0, result.output
     assert lines and all(line.startswith("[ennet-stateful] epoch ") for line in lines), lines
+
+
+def test_recordings_in_two_sensor_units_are_refused(files):
+    """Another lab's recording in volts trained beside one in mm: the model learned both as
+    one unit (validation RMSE 24-26° against 2-3° in either alone), with no word; evaluate
+    scored such a mix and table tested one on the other alike."""
+    volts = files["dir"] / "volts.mcap"
+    rec = shoulder_recording(seconds=3.0, seed=3)
+    rec.sensors.values *= 0.01
+    rec.sensor_units = "V"
+    write_recording(volts, rec)
+    out = files["dir"] / "mixed.npz"
+    line = _one_line_error(CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]),
+                                                     str(volts), "--out", str(out),
+                                                     "--max-epochs", "1"]))
+    assert line == (f"Error: {volts}: sensors in V, {files['good']} in mm: one model cannot "
+                    "read both; convert them to one unit")
+    assert not out.exists()
+    line = _one_line_error(CliRunner().invoke(main, ["evaluate", str(files["ckpt"]),
+                                                     str(files["good"]), str(volts)]))
+    assert "sensors in V" in line
+    line = _one_line_error(CliRunner().invoke(main, ["table", "--train", str(files["good"]),
+                                                     "--test", str(volts), "--models",
+                                                     "classical", "--max-epochs", "1"]))
+    assert line == ("Error: --test recordings in V, --train recordings in mm: each model "
+                    "would read the test in another unit; convert them to one unit")
+
+
+def test_train_warns_when_the_timestamps_disagree_with_the_nominal_rate(files):
+    """Another lab's recording says sensor_rate_hz=250 while its frames come at 100 Hz:
+    `record info` noted it, but train set the window up for 250 Hz without a word."""
+    wrong = files["dir"] / "wrong_rate.mcap"
+    rec = shoulder_recording(seconds=3.0, rate=100.0, seed=2)
+    rec.sensor_rate_hz = 250.0
+    write_recording(wrong, rec)
+    result = CliRunner().invoke(main, ["train", "--model", "ann", str(wrong), "--out",
+                                       str(files["dir"] / "wrong.npz"), "--max-epochs", "1"])
+    assert result.exit_code == 0, result.output
+    assert (f"{wrong}: metadata sensor_rate_hz=250 but its timestamps give 100 Hz; the model "
+            "is set up for 250 Hz, so its window spans another time (are the times in "
+            "seconds?)") in result.output
+    good = CliRunner().invoke(main, ["train", "--model", "ann", str(files["good"]), "--out",
+                                     str(files["dir"] / "good2.npz"), "--max-epochs", "1"])
+    assert good.exit_code == 0 and "timestamps give" not in good.output

@@ -285,6 +285,17 @@ def test_bad_files_raise_one_clear_error(tmp_path: Path, case: str, problem: str
     assert str(path) in message and "\n" not in message
 
 
+def test_a_negative_time_is_named_in_seconds(tmp_path: Path) -> None:
+    """Another lab's clock that starts at -5 s was refused as 'has time np.float64(-5.0)':
+    numpy's repr, and no word on what to do."""
+    path = write_bad_file(tmp_path / "negative.mcap", "negative_time")
+    with pytest.raises(RecordingError) as info:
+        read_recording(path)
+    message = str(info.value)
+    assert "message 0 has time -1 s; times must be finite and >= 0 s" in message
+    assert "np." not in message and "start at 0 or later" in message
+
+
 def test_missing_file_is_a_recording_error(tmp_path: Path) -> None:
     with pytest.raises(RecordingError, match="cannot read"):
         read_recording(tmp_path / "nope.mcap")

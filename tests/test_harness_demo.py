@@ -539,3 +539,53 @@ def test_a_demo_on_a_looped_bench_streams_the_seconds_asked_for(tmp_path):
     # 2.5 s of frames: the 1 s recording two and a half times (less what the host missed
     # while it attached, logged by the device)
     assert s["frames"]["received"] + s["device_log"].get("not_read", 0) > 2 * frames
+
+
+def test_a_demo_of_a_recording_on_a_unix_epoch_clock_is_scored(tmp_path):
+    """Another lab's recording stamped with Unix time (1.7e9 s): the emulator sends its times
+    modulo the wire's 2³² µs, so the host's device times never met the reference's, and the
+    report said 'accuracy not measured: no reference recording' though it had one."""
+    from exohil.formats.recording import AngleStream, SensorStream
+    from exohil.formats.recording_reader import read_recording
+    from exohil.formats.recording_writer import write_recording
+    from exohil.harness.session import on_host_clock
+
+    part, _ = _fixture_part(tmp_path, "3")
+    rec = read_recording(part)
+    epoch = 1.7e9
+    rec.sensors = SensorStream(rec.sensors.seq, rec.sensors.t + epoch, rec.sensors.values)
+    rec.mocap = {j: AngleStream(s.t + epoch, s.names, s.angles) for j, s in rec.mocap.items()}
+    rec.segments = []
+    late = tmp_path / "epoch.mcap"
+    write_recording(late, rec)
+    moved = on_host_clock(read_recording(late))
+    wire_t0 = round(rec.sensors.t[0] * 1e6) % 2**32 / 1e6
+    assert abs(moved.sensors.t[0] - wire_t0) < 1e-6
+    assert abs(moved.mocap["shoulder"].t[0] - moved.sensors.t[0]) < 0.01
+    result = CliRunner().invoke(main, ["demo", "--recording", str(late), "--seconds", "1",
+                                       "--sink", "none", "--no-faults",
+                                       "--out", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert "no reference recording" not in result.output
+    assert "arm-direction RMSE" in result.output
+
+
+def test_a_demo_of_a_recording_in_volts_names_the_file(tmp_path):
+    """Another lab's recording in V: the demo refused it with 'sensor values are in 'V'; the
+    wire protocol carries mm', naming no file (the model, or the recording?)."""
+    from exohil.formats.recording_reader import read_recording
+    from exohil.formats.recording_writer import write_recording
+
+    part, _ = _fixture_part(tmp_path, "2")
+    rec = read_recording(part)
+    rec.sensors.values *= 0.01
+    rec.sensor_units = "V"
+    volts = tmp_path / "volts.mcap"
+    write_recording(volts, rec)
+    result = CliRunner().invoke(main, ["demo", "--recording", str(volts), "--seconds", "1",
+                                       "--sink", "none", "--no-faults",
+                                       "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    errors = [line for line in result.output.splitlines() if line.startswith("Error")]
+    assert errors == [f"Error: {volts}: sensor values are in 'V'; the emulator streams them "
+                      "over the wire protocol, which carries mm"], result.output

@@ -492,3 +492,38 @@ def test_simulated_real_motion_carries_the_notes_beside_its_mot(tmp_path: Path) 
                  tmp_path / "b.mcap")
     assert result.exit_code == 0, result.output
     assert "warning: no LICENSE or SOURCE file beside trial.mot" in result.output
+
+
+@pytest.mark.parametrize("kind", ["hysteresis", "timeseries"])
+def test_plot_window_on_a_unix_epoch_clock(tmp_path: Path, kind: str) -> None:
+    """Another lab's tool stamps frames with Unix time (1.7e9 s): `plot --t0/--t1` take times
+    on the recording's clock, but refused any beyond ±1e9 s, and the empty-window error of
+    `--t0 10` told the user to pass the 1.7e9 s times the option refused."""
+    rec_path, image = tmp_path / "epoch.mcap", tmp_path / "p.png"
+    epoch = 1.7e9
+    t = epoch + np.arange(2500) / 250.0
+    mt = epoch + np.arange(1200) / 120.0
+    values = np.column_stack([np.sin(t - epoch), np.cos(t - epoch)])
+    angles = 30 + 20 * np.sin(mt - epoch)[:, None]
+    write_recording(rec_path, Recording(("F", "SF"), SensorStream(np.arange(2500), t, values),
+                                        {"shoulder": AngleStream(mt, ("shoulder_elv",), angles)}))
+    result = run("plot", rec_path, "--kind", kind, "--t0", f"{epoch + 2:.0f}",
+                 "--t1", f"{epoch + 6:.0f}", "--out", image)
+    assert result.exit_code == 0, result.output
+    assert image.stat().st_size > 0
+
+
+def test_a_hysteresis_plot_without_overlapping_mocap_says_so_not_a_window(tmp_path: Path) -> None:
+    """A part cut where another lab's motion capture had not started yet (its /mocap/shoulder
+    holds no sample) was refused with 'no sensor frames with mocap in the chosen time window',
+    though no window was chosen, and the empty stream went unnamed."""
+    part = tmp_path / "part.mcap"
+    t = np.arange(500) / 250.0
+    write_recording(part, Recording(("F", "SF"), SensorStream(np.arange(500), t,
+                                                              np.ones((500, 2))),
+                                    {"shoulder": AngleStream(np.zeros(0), ("shoulder_elv",),
+                                                             np.zeros((0, 1)))}))
+    line = assert_one_line_error(run("plot", part, "--kind", "hysteresis",
+                                     "--out", tmp_path / "p.png"))
+    assert line == ("Error: no sensor frame lies within the /mocap/shoulder samples of "
+                    "shoulder_elv (sensor frames 0.000 → 1.996 s, /mocap/shoulder: none)")

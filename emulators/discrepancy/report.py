@@ -391,6 +391,13 @@ def _before_after(head: str, rows: list[tuple[str, float | None, float | None]]
     return out
 
 
+def _clock(t_s: float) -> str:
+    """A time on the recording's clock: 4 significant digits, as the other figures, below
+    10,000 s; a later clock (another tool's Unix time, 1.7e9 s) in full to the hundredth,
+    where 4 digits read '1.7e+09' for every block."""
+    return f"{t_s:.4g}" if abs(t_s) < 1e4 else f"{t_s:.2f}"
+
+
 def _localisation_lines(summary: dict) -> list[str]:
     """Where the residual was before and after the added effects: by direction of motion,
     speed, holds, time and each angle."""
@@ -413,7 +420,7 @@ def _localisation_lines(summary: dict) -> list[str]:
               f"{_figure(ha['rms'])}; while moving: {_figure(hb.get('moving_rms'))} → "
               f"{_figure(ha.get('moving_rms'))}.", "", "By time:", ""]
     lines += _before_after("time (s)", [
-        (f"{b['t0_s']:.4g} to {b['t1_s']:.4g}", b["rms"], a["rms"])
+        (f"{_clock(b['t0_s'])} to {_clock(b['t1_s'])}", b["rms"], a["rms"])
         for b, a in zip(lb["by_time"], la["by_time"], strict=True)])
     for name, cells in lb["by_angle"].items():
         lines += ["", f"By {name}:", ""]
@@ -448,7 +455,7 @@ def _step_lines(before: list[dict], after: list[dict], units: str, angles: list[
               f"({units}) | median joint speed (deg/s) | largest: time (s), size, "
               f"{', '.join(angles)} (deg), speed (deg/s) |", "|---|---|---|---|---|---|---|"]
     for e in after:
-        biggest = "; ".join(f"{x['t_s']:.4g} s, {x['size']:+.4g}, "
+        biggest = "; ".join(f"{_clock(x['t_s'])} s, {x['size']:+.4g}, "
                             + "/".join(f"{a:.4g}" for a in x["angles_deg"])
                             + f", {x['speed_deg_s']:.4g}" for x in e["largest"][:3])
         lines.append(f"| {e['sensor']} | {counts.get(e['sensor'], 0)} | {e['count']} | "
