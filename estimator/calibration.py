@@ -123,6 +123,8 @@ def calibrate(
                     *({**s, "role": "calibration"} for s in (sources or []))],
         # the end of each block of its training recordings that the base model never saw
         "test_fraction": base_info.get("test_fraction", 0.0),
+        # the base model's reading unit, which the calibration recordings were checked against
+        **({"sensor_units": base_info["sensor_units"]} if "sensor_units" in base_info else {}),
         "calibration": {
             "method": METHOD,
             "base_checkpoint": base_source or {},

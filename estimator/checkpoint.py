@@ -106,12 +106,20 @@ def load_checkpoint(path: str | Path) -> TrainedEstimator:
 
 
 def ensure_fits(est: TrainedEstimator, rec: Recording, source: str = "recording") -> None:
-    """Raise CheckpointError unless ``rec`` has the checkpoint's sensors and target angles."""
+    """Raise CheckpointError unless ``rec`` has the checkpoint's sensors, in the unit it was
+    trained on (``info.sensor_units``; checkpoints written before it was recorded are not
+    checked for it), and its target angles."""
     if tuple(rec.sensor_names) != est.sensor_names:
         raise CheckpointError(
             f"checkpoint expects {len(est.sensor_names)} sensors {list(est.sensor_names)}, "
             f"{source} has {len(rec.sensor_names)} {list(rec.sensor_names)}"
         )
+    units = est.info.get("sensor_units")
+    if units is not None and rec.sensor_units != units:
+        raise CheckpointError(
+            f"checkpoint was trained on sensor readings in {units}, {source} has them in "
+            f"{rec.sensor_units}: it would read them as {units} (train a model on "
+            f"recordings in {rec.sensor_units})")
     stream = rec.mocap.get(est.target.joint)
     missing = [a for a in est.target.angles if stream is None or a not in stream.names]
     if missing:

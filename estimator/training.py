@@ -92,10 +92,13 @@ def train(
     sensor_rate_hz: float = 250.0,
     sources: list[dict] | None = None,
     progress: Callable[[str], None] | None = None,
+    sensor_units: str | None = None,
 ) -> TrainedEstimator:
     """Fit one estimator on ``split.train`` with early stopping on ``split.val``.
 
-    ``sources`` (e.g. ``[{"path": ..., "sha256": ...}]``) is stored in the checkpoint info.
+    ``sources`` (e.g. ``[{"path": ..., "sha256": ...}]``) is stored in the checkpoint info,
+    and so is ``sensor_units``, the unit of the training readings (``info.sensor_units``:
+    :func:`~exohil.estimator.checkpoint.ensure_fits` refuses readings in another).
     ``progress`` receives one-line status strings (the CLI draws them on stderr).
     """
     if cfg.kind not in ALL_KINDS:
@@ -133,6 +136,7 @@ def train(
         fit_info = _fit_network(est, split, cfg, progress)
     est.info = {
         "sources": sources or [],
+        **({} if sensor_units is None else {"sensor_units": sensor_units}),
         "split": split.description,
         "seed": cfg.seed,
         "train_config": {k: getattr(cfg, k) for k in cfg.__dataclass_fields__},

@@ -69,6 +69,11 @@ class LoadedData:
     rate_hz: float
     sources: list[dict] = field(default_factory=list)
 
+    @property
+    def units(self) -> str:
+        """The recordings' sensor unit (one for all: :func:`load_recordings` refuses two)."""
+        return self.recordings[0].sensor_units
+
     def blocks(self, offset_frames: int, indices: list[int] | None = None) -> list[Block]:
         """Segment-cut blocks of the chosen recordings (all by default)."""
         chosen = range(len(self.recordings)) if indices is None else indices
@@ -203,7 +208,8 @@ def compare_models(
     for kind in kinds:
         cfg = model_config(kind, base, data.rate_hz)
         est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
-                    sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress)
+                    sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress,
+                    sensor_units=data.units)
         test = evaluate(est, split.test)
         coverage = block_coverage(est, split.test)
         test["training_coverage"] = coverage.to_dict()

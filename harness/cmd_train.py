@@ -231,7 +231,8 @@ def train_command(kind, recordings, out, hidden, test_fraction, seed, time_budge
     for line in wf.setting_warnings(data, split, cfg, offset_frames):
         click.echo(f"warning: {line}", err=True)
     est = train(split, data.sensor_names, data.target, cfg, offset_frames=offset_frames,
-                sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress_printer())
+                sensor_rate_hz=data.rate_hz, sources=data.sources, progress=progress_printer(),
+                sensor_units=data.units)
     if split.test:
         est.info.setdefault("metrics", {})["test"] = evaluate(est, split.test)
     est.info["command"] = _command_line()

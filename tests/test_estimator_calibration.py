@@ -3,6 +3,7 @@ refusals, and the calibrated checkpoint in evaluate and the conformance suite.""
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -88,6 +89,12 @@ def test_calibrated_info_names_what_it_came_from(base):
     assert cal["input_mean"] == pytest.approx(x.mean(axis=0).tolist())
     assert cal["input_std"] == pytest.approx(x.std(axis=0).tolist())
     assert block_coverage(est, part).outside == 0
+    # the base model's reading unit goes on (the calibration recordings were checked
+    # against it); a base that does not record one gives a model that does not either
+    assert "sensor_units" not in base.info and "sensor_units" not in est.info
+    in_mm = copy.copy(base)
+    in_mm.info = {**base.info, "sensor_units": "mm"}
+    assert calibrate(in_mm, part, FAST).info["sensor_units"] == "mm"
 
 
 def test_the_jitter_is_the_largest_within_one_standard_error_of_the_best(base):

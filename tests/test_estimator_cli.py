@@ -412,6 +412,36 @@ def test_recordings_in_two_sensor_units_are_refused(files):
                     "would read the test in another unit; convert them to one unit")
 
 
+def test_a_model_refuses_readings_in_another_unit_than_it_was_trained_on(files):
+    """A checkpoint did not record its readings' unit: an mm model evaluated on another lab's
+    recording in volts drew only the "outside the training readings" warning and scored 138°
+    (the same motion in mm: a few degrees). The unit is now in info.sensor_units, checked
+    wherever a checkpoint meets a recording (evaluate, calibrate, run, demo)."""
+    from exohil.estimator.checkpoint import load_checkpoint
+
+    assert load_checkpoint(files["ckpt"]).info["sensor_units"] == "mm"
+    volts = files["dir"] / "volts-only.mcap"
+    rec = shoulder_recording(seconds=3.0, seed=4)
+    rec.sensors.values *= 0.01
+    rec.sensor_units = "V"
+    write_recording(volts, rec)
+    for command in (["evaluate", str(files["ckpt"]), str(volts)],
+                    ["calibrate", str(files["ckpt"]), str(volts), "--out",
+                     str(files["dir"] / "cal-v.npz")]):
+        line = _one_line_error(CliRunner().invoke(main, command))
+        assert line == (f"Error: checkpoint was trained on sensor readings in mm, {volts} has "
+                        "them in V: it would read them as mm (train a model on recordings in "
+                        "V)"), command
+    assert not (files["dir"] / "cal-v.npz").exists()
+    # a model trained in volts records volts and reads them
+    v_model = files["dir"] / "ann-v.npz"
+    result = CliRunner().invoke(main, ["train", "--model", "ann", str(volts), "--out",
+                                       str(v_model), "--max-epochs", "1"])
+    assert result.exit_code == 0, result.output
+    assert load_checkpoint(v_model).info["sensor_units"] == "V"
+    assert CliRunner().invoke(main, ["evaluate", str(v_model), str(volts)]).exit_code == 0
+
+
 def test_train_warns_when_the_timestamps_disagree_with_the_nominal_rate(files):
     """Another lab's recording says sensor_rate_hz=250 while its frames come at 100 Hz:
     `record info` noted it, but train set the window up for 250 Hz without a word."""

@@ -55,6 +55,7 @@ def test_reference_model_records_its_held_out_part_and_lineage(kind):
 
     est = load_checkpoint(MODELS / f"{kind}.npz")
     assert est.info.get("test_fraction") == 0.3
+    assert est.info.get("sensor_units") == "mm"  # a recording in volts is refused
     assert all("cut_from" in source for source in est.info["sources"])
     scored = load_recordings([FIXTURE]).sources
     assert training_frame_warnings(est.info, scored, 0.3) == []
