@@ -459,6 +459,11 @@ def run_session(config: BenchConfig, seconds: float | None, *,
     if config.sensor_names is not None and tuple(config.sensor_names) != est.sensor_names:
         raise SessionError(f"the bench's sensors {list(config.sensor_names)} are not the "
                            f"model's {list(est.sensor_names)}")
+    units = est.info.get("sensor_units")
+    if units is not None and units != "mm":  # a device's frames come over the wire in mm
+        raise SessionError(f"{config.model}: the model reads sensors in {units}; a device "
+                           "streams wire protocol v1, which carries mm (train a model on "
+                           "recordings in mm)")
     ref_path = reference_path(config)
     if ref_path is None:
         reference = None

@@ -440,6 +440,13 @@ def test_a_model_refuses_readings_in_another_unit_than_it_was_trained_on(files):
     assert result.exit_code == 0, result.output
     assert load_checkpoint(v_model).info["sensor_units"] == "V"
     assert CliRunner().invoke(main, ["evaluate", str(v_model), str(volts)]).exit_code == 0
+    # ...but not from a device: the wire carries mm
+    result = CliRunner().invoke(main, ["run", "loop://", "--model", str(v_model),
+                                       "--duration", "1", "--sink", "none"])
+    assert result.exit_code == 1, result.output
+    assert result.output.strip().splitlines()[-1] == (
+        f"Error: {v_model}: the model reads sensors in V; a device streams wire protocol v1, "
+        "which carries mm (train a model on recordings in mm)")
 
 
 def test_train_warns_when_the_timestamps_disagree_with_the_nominal_rate(files):
