@@ -32,7 +32,7 @@ from exohil.estimator.splits import Split, cut_at_segments, time_block_split, tr
 from exohil.estimator.trained import DIRECTION_ANGLES, TrainedEstimator
 from exohil.estimator.training import TrainConfig, train
 from exohil.formats.recording import Recording
-from exohil.formats.recording_metadata import rates_disagree, source_entry
+from exohil.formats.recording_metadata import rate_the_times_give, source_entry
 from exohil.kinematics import OBSERVABLE_ELEVATION_DEG
 
 #: The plane of elevation θ and the elevation φ (the humerus direction's angles).
@@ -146,14 +146,12 @@ def setting_warnings(data: LoadedData, split: Split, cfg: TrainConfig,
     sensor_rate_hz, which the model's window is set up for."""
     lines: list[str] = []
     for path, rec in zip(data.paths, data.recordings, strict=True):
-        t, seq = rec.sensors.t, rec.sensors.seq
-        if len(t) > 1 and t[-1] > t[0]:
-            measured = float(seq[-1] - seq[0]) / float(t[-1] - t[0])
-            if rates_disagree(rec.sensor_rate_hz, measured):
-                lines.append(f"{path}: metadata sensor_rate_hz={rec.sensor_rate_hz:g} but its "
-                             f"timestamps give {measured:.4g} Hz; the model is set up for "
-                             f"{rec.sensor_rate_hz:g} Hz, so its window spans another time "
-                             "(are the times in seconds?)")
+        measured = rate_the_times_give(rec)
+        if measured is not None:
+            lines.append(f"{path}: metadata sensor_rate_hz={rec.sensor_rate_hz:g} but its "
+                         f"timestamps give {measured:.4g} Hz; the model is set up for "
+                         f"{rec.sensor_rate_hz:g} Hz, so its window spans another time "
+                         "(are the times in seconds?)")
     angles = data.target.angles
     if THETA in angles and PHI not in angles:
         lines.append(f"{THETA} without {PHI}: the plane of elevation is undefined with the arm "

@@ -39,6 +39,12 @@ class SensorStream:
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
+    def rate_from_times(self) -> float:
+        """The frame rate the timestamps give: sequence span over time span, Hz (frames
+        missing from the sequence count); NaN with under two frames or no time span."""
+        span = float(self.t[-1] - self.t[0]) if len(self) >= 2 else 0.0
+        return float(self.seq[-1] - self.seq[0]) / span if span > 0 else float("nan")
+
 
 @dataclass
 class AngleStream:

@@ -175,6 +175,17 @@ def rates_disagree(nominal_hz: float, measured_hz: float) -> bool:
     return not 1 / RATE_DISAGREEMENT < nominal_hz / measured_hz < RATE_DISAGREEMENT
 
 
+def rate_the_times_give(rec: Recording) -> float | None:
+    """The sensor rate ``rec``'s timestamps give (Hz) where it disagrees with its nominal
+    ``sensor_rate_hz`` (:func:`rates_disagree`: times in another unit than seconds, most
+    likely), else None."""
+    measured = rec.sensors.rate_from_times()
+    if math.isfinite(measured) and measured > 0 and rates_disagree(rec.sensor_rate_hz,
+                                                                   measured):
+        return measured
+    return None
+
+
 def cut_lineage(metadata: dict[str, str]) -> list[str]:
     """The sha256 of every recording a recording was cut from (``exohil record cut``
     writes ``cut.source_sha256``, and ``cut.origins_sha256`` for a part of a part),

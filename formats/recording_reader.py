@@ -146,9 +146,7 @@ def scan_recording(path: str | Path) -> RecordingScan:
         joint: decode_angles(path, joint, messages, mocap_schemas.get(joint))
         for joint, messages in mocap_messages.items()
     }
-    sensor_estimate = (
-        _span_rate(float(sensors.seq[-1] - sensors.seq[0]), sensors.t) if len(sensors) else math.nan
-    )
+    sensor_estimate = sensors.rate_from_times()
     first_mocap = next(iter(mocap.values()), None)
     mocap_estimate = (
         _span_rate(len(first_mocap) - 1.0, first_mocap.t) if first_mocap is not None else math.nan

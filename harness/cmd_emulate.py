@@ -43,13 +43,10 @@ def _load_recording(path: Path):
 def _warn_of_another_rate(path: Path, recording) -> None:
     """One warning line when the frames' timestamps give another rate than the metadata's
     sensor_rate_hz, at which the frames are streamed (another tool's recording)."""
-    from exohil.formats.recording_metadata import rates_disagree
+    from exohil.formats.recording_metadata import rate_the_times_give
 
-    t, seq = recording.sensors.t, recording.sensors.seq
-    if len(t) < 2 or not t[-1] > t[0]:
-        return
-    measured = float(seq[-1] - seq[0]) / float(t[-1] - t[0])
-    if rates_disagree(recording.sensor_rate_hz, measured):
+    measured = rate_the_times_give(recording)
+    if measured is not None:
         click.echo(f"warning: {path}: metadata sensor_rate_hz={recording.sensor_rate_hz:g} but "
                    f"its timestamps give {measured:.4g} Hz; streaming at "
                    f"{recording.sensor_rate_hz:g} Hz (--rate to choose)", err=True)
