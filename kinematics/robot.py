@@ -26,6 +26,7 @@ from exohil.kinematics.rotations import (
     intrinsic_euler_from_first_two,
     quat_to_matrix,
     wrap_angle,
+    wrap_angle_above,
 )
 
 Side = Literal["right", "left"]
@@ -91,7 +92,7 @@ def _pitch_of(hint, shape: tuple[int, ...]) -> np.ndarray:
         raise ValueError(f"hint must be finite joint angles (..., 3), radians (the previous "
                          f"unclamped), got shape {h.shape}")
     try:
-        return -wrap_angle(-np.broadcast_to(h[..., 0], shape))  # (−π, π], as pitch is
+        return wrap_angle_above(np.broadcast_to(h[..., 0], shape))  # as pitch is
     except ValueError:
         raise ValueError(f"hint of shape {h.shape} does not fit commands of shape "
                          f"{shape + (3,)}") from None
@@ -143,7 +144,7 @@ def humerus_to_nao(q, side: Side = "right", hint=None, hysteresis: float = 0.0) 
     pitch_hint = np.broadcast_to(0.0 if hint is None else _pitch_of(hint, roll.shape),
                                  roll.shape)
     pitch = np.where(cos_r < SINGULAR_EPS, pitch_hint,  # atan2 gives ±π; keep (−π, π]
-                     -wrap_angle(-np.arctan2(-direction[..., 2], direction[..., 0])))
+                     wrap_angle_above(np.arctan2(-direction[..., 2], direction[..., 0])))
     exact = intrinsic_euler_from_first_two(m, (Y, Z, X), pitch, roll)
     # The left arm is the mirror image: solve in right-arm angles with mirrored limits.
     mirror = np.array([1.0, -1.0, -1.0]) if side == "left" else np.ones(3)

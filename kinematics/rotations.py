@@ -59,6 +59,11 @@ def wrap_angle(a) -> np.ndarray:
     return np.where(wrapped >= np.pi, -np.pi, wrapped)[()]
 
 
+def wrap_angle_above(a) -> np.ndarray:
+    """Wrap angles to (−π, π]: :func:`wrap_angle`'s range with the other end kept."""
+    return -wrap_angle(-np.asarray(a, dtype=float))
+
+
 def axis_angle_quat(axis, angle) -> np.ndarray:
     """Quaternion ``(..., 4)`` of a rotation by ``angle`` about the (normalised) ``axis``."""
     axis = np.asarray(axis, dtype=float)
