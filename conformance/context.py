@@ -567,13 +567,11 @@ def figures_baseline(path: Path, reference_sha256: str | None,
             f"{path}: its figures were measured on another reference recording "
             f"({data.get('reference')}, sha256 {str(theirs)[:12]}) than this run's; "
             "measure the baseline on the same recording")
-    values = {m["name"]: float(m["value"])
-              for check in data.get("checks", []) if check.get("name") == "accuracy"
-              for m in check.get("measurements", [])
+    accuracy = [m for check in data.get("checks", []) if check.get("name") == "accuracy"
+                for m in check.get("measurements", [])]
+    values = {m["name"]: float(m["value"]) for m in accuracy
               if m.get("unit") == "deg" and isinstance(m.get("value"), (int, float))}
-    theirs_scored = next((m.get("value") for check in data.get("checks", [])
-                          if check.get("name") == "accuracy"
-                          for m in check.get("measurements", [])
+    theirs_scored = next((m.get("value") for m in accuracy
                           if m.get("name") == "accuracy.frames_scored"), None)
     if (frames_scored is not None and isinstance(theirs_scored, (int, float))
             and abs(theirs_scored - frames_scored)
