@@ -1,7 +1,9 @@
 """A recording as the discrepancy workflow sees it: sensors and angles on one uniform grid.
 
 The grid is the device's frame counter: frame ``seq`` sits at index ``seq − seq₀``, so dropped
-frames (sequence gaps) are grid points marked invalid instead of a silently shorter series.
+frames (sequence gaps) are grid points marked invalid instead of a silently shorter series;
+where the frames' times disagree with the counter about a gap, the times place it
+(:func:`frame_grid`).
 Their times are interpolated from the neighbouring frames; the mocap angles, made continuous
 across wraps and low-passed (:func:`smooth_angles`), are interpolated at every grid time.
 Filters and history-dependent effects then run on a uniform clock.
@@ -44,6 +46,13 @@ MOCAP_FILTER_ORDER = 4
 MOCAP_FILTER_MAX_NYQUIST = 0.8
 #: A sensor frame grid may hold at most this many points per frame received (90 % dropped).
 MAX_GRID_PER_FRAME = 10
+#: The frame period is measured over spans of this many frames (:func:`frame_grid`).
+PERIOD_SPAN = 64
+#: A gap between frames that the counter and the frames' times put this far apart, s, or
+#: further, is placed by the times; each side's clock offset is its median over
+#: ``JUMP_WINDOW_S`` of frames next to the gap.
+JUMP_DISAGREE_S = 0.5
+JUMP_WINDOW_S = 1.0
 #: ``Trial.placed_by`` when seq is a plain frame counter (one per frame).
 FRAME_COUNTER = "frame counter"
 #: A sensor with readings on fewer frames than this share is left out of the analysis.
@@ -203,13 +212,12 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     joint = _joint(rec)
     stream = rec.mocap[joint]
     t_frames = np.asarray(rec.sensors.t, dtype=np.float64)
-    index, placed_by = frame_grid(np.asarray(rec.sensors.seq, dtype=np.int64))
+    index, placed_by = frame_grid(np.asarray(rec.sensors.seq, dtype=np.int64), t_frames)
     n = int(index[-1]) + 1
     if n > MAX_GRID_PER_FRAME * len(index):
         raise DiscrepancyError(
             f"{name}: the {len(index)} sensor frames are spread over {n} frame times ({placed_by}):"
-            f" over {1 - 1 / MAX_GRID_PER_FRAME:.0%} of the frames are missing"
-            + _times_run_on(np.asarray(rec.sensors.seq, dtype=np.int64), t_frames))
+            f" over {1 - 1 / MAX_GRID_PER_FRAME:.0%} of the frames are missing")
     grid = np.arange(n)
     t = np.interp(grid, index, t_frames)
     present = np.zeros(n, dtype=bool)
@@ -307,25 +315,7 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
-def _times_run_on(seq: np.ndarray, t: np.ndarray) -> str:
-    """Where the frames' times hold under half the frame periods their sequence numbers
-    count: the words that say where the numbers jump (a counter that jumped or was
-    reset), else nothing. ``seq``, ``t`` (s): the frames in order; the frame period is
-    the median time per count between consecutive frames."""
-    counts = np.diff(seq)
-    period = float(np.median(np.diff(t) / counts)) if counts.size else 0.0
-    if period <= 0:
-        return ""
-    periods = (t[-1] - t[0]) / period + 1
-    if periods > (seq[-1] - seq[0] + 1) / 2:
-        return ""
-    k = int(np.argmax(counts))
-    return (f"; but by their times they span {periods:.0f} frame periods: the sequence "
-            f"numbers jump by {seq[k + 1] - seq[k]} between frames {k} and {k + 1} (t "
-            f"{t[k]:.6g} → {t[k + 1]:.6g} s), a counter that jumped or was reset")
-
-
-def frame_grid(seq: np.ndarray) -> tuple[np.ndarray, str]:
+def frame_grid(seq: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, str]:
     """Each frame's index on the uniform grid, and how it was placed (a short phrase).
 
     The grid step is the most common increment of ``seq``: 1 for a frame counter (dropped
@@ -335,18 +325,68 @@ def frame_grid(seq: np.ndarray) -> tuple[np.ndarray, str]:
     millisecond clock). The grid then runs at the device's sampling rate and a dropped
     frame is an empty grid point, whatever the counter counts.
 
+    Where the counter and the frames' times disagree about a gap by ``JUMP_DISAGREE_S`` or
+    more (:func:`_gaps_by_time`), the times place the frames after it: a counter that
+    jumped leaves no empty grid points, and a device that paused while its counter did not
+    count leaves as many as the pause lasted.
+
     Args:
         seq: (N,) strictly increasing sequence numbers.
+        t: (N,) s, the frames' times, increasing.
     """
     increments, counts = np.unique(np.diff(seq), return_counts=True)
     step = int(increments[np.argmax(counts)]) if increments.size else 1
     index = np.round((seq - seq[0]) / step).astype(np.int64)
     order = np.arange(len(seq))
     index = np.maximum.accumulate(index - order) + order  # at least one step per frame
-    if step == 1:
-        return index, FRAME_COUNTER
-    exact = bool(np.all((seq - seq[0]) % step == 0))
-    return index, f"seq counting {step} per frame" + ("" if exact else ", rounded")
+    placed_by = FRAME_COUNTER if step == 1 else f"seq counting {step} per frame" + (
+        "" if np.all((seq - seq[0]) % step == 0) else ", rounded")
+    steps, moved = _gaps_by_time(index, np.asarray(t, dtype=np.float64))
+    if not moved:
+        return index, placed_by
+    return (np.concatenate([[0], np.cumsum(steps)]).astype(np.int64),
+            f"{placed_by}, {moved} gap{'s' if moved > 1 else ''} by the frames' times")
+
+
+def _gaps_by_time(index: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, int]:
+    """(N − 1,) grid steps between consecutive frames, with the gaps the frames' times put
+    elsewhere than ``index`` does, and how many of those there are.
+
+    The frame period is the median time per grid step over spans of ``PERIOD_SPAN`` frames.
+    Each gap that ``index`` or the times make ``JUMP_DISAGREE_S`` or longer is measured
+    on the times: the offset ``t − period × index`` is taken as its median over
+    ``JUMP_WINDOW_S`` of frames on either side, and the gap is its step there in frame
+    periods plus the step ``index`` takes. Medians over a second keep frames stamped on a
+    host's clock as they arrive, late and bunched after the host stalled, from moving the
+    gap: they are a minority of either window. The gap is moved when the two disagree by
+    ``JUMP_DISAGREE_S`` or more and by a factor of two (a counter that jumped by 1,000 while
+    4 ms passed; a pause of a second while it counted one).
+
+    Args:
+        index: (N,) grid indices placed by the counter, strictly increasing.
+        t: (N,) s, the frames' times.
+    """
+    steps = np.diff(index)
+    n = len(index)
+    if n < 3 or not np.all(np.isfinite(t)):
+        return steps, 0
+    span = min(PERIOD_SPAN, n - 1)
+    period = float(np.median((t[span:] - t[:-span]) / (index[span:] - index[:-span])))
+    if not period > 0:
+        return steps, 0
+    shortest = JUMP_DISAGREE_S / period
+    offset = t - period * index
+    width = max(1, int(round(JUMP_WINDOW_S / period)))
+    moved = 0
+    for k in np.flatnonzero((steps >= shortest) | (np.diff(t) >= JUMP_DISAGREE_S)):
+        before = np.median(offset[max(0, k + 1 - width):k + 1])
+        after = np.median(offset[k + 1:k + 1 + width])
+        by_time = steps[k] + (after - before) / period
+        if (abs(by_time - steps[k]) >= shortest
+                and not steps[k] / 2 <= by_time <= 2 * steps[k]):
+            steps[k] = max(1, int(round(by_time)))
+            moved += 1
+    return steps, moved
 
 
 def continuous_angles(raw: np.ndarray) -> np.ndarray:
