@@ -7,6 +7,7 @@ stays fast.
 from __future__ import annotations
 
 import os
+import sys
 from importlib.metadata import entry_points
 from typing import IO, Any
 
@@ -53,7 +54,8 @@ class _Group(click.Group):
     * bad input found anywhere in a command (:class:`InputError`: a recording, a checkpoint, a
       profile that does not fit the job) is ``Error: message`` with exit code 1;
     * an operating-system error anywhere in a command (a file that vanished, a full disk, a
-      permission) is ``Error: FILE: reason`` with exit code 1;
+      permission) is ``Error: FILE: reason`` with exit code 1, and so is a command started
+      with its standard output closed (Python then drops every line printed);
     * any other unexpected exception is ``Error: <type>: message`` with exit code 1
       (``EXOHIL_TRACEBACK=1`` shows the traceback instead).
     """
@@ -65,6 +67,9 @@ class _Group(click.Group):
             raise _one_line(err) from None
 
     def invoke(self, ctx: click.Context):
+        if sys.stdout is None:  # started with fd 1 closed: click would drop every line
+            raise OneLineError("standard output is closed (started with >&-?): nothing this "
+                               "command prints would be seen; send it to a file or /dev/null")
         try:
             return super().invoke(ctx)
         except click.ClickException as err:

@@ -109,3 +109,17 @@ def test_python_dash_m_runs_the_same_command_line(module):
     bad = subprocess.run([sys.executable, "-m", module, "convert", "--from", "ms", "--to",
                           "isb", "0", "nan", "0"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "Error" in bad.stderr
+
+
+def test_a_command_started_with_stdout_closed_says_so():
+    """`exohil convert ... >&-` printed nothing and exited 0: with fd 1 closed Python sets
+    sys.stdout to None and click drops every line, so a script took it for success."""
+    import os
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "exohil", "convert", "--from", "ms", "--to",
+                           "isb", "0", "90", "0"], stderr=subprocess.PIPE, text=True,
+                          timeout=120, preexec_fn=lambda: os.close(1))
+    assert done.returncode == 1
+    assert done.stderr.startswith("Error: standard output is closed")
