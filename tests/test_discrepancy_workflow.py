@@ -382,6 +382,27 @@ def test_a_pause_the_counter_did_not_count_leaves_empty_grid_points():
     assert placed_by == "frame counter, 1 gap by the frames' times"
 
 
+def test_frames_stamped_in_a_hosts_bursts_are_read_at_steady_times():
+    """Frames stamped as a host received them, four every 16 ms, were read at those times,
+    so the angles for each reading came from up to 16 ms after it was taken: 4.6 ms RMS
+    of scatter the suit never made. The grid now takes steady times, a constant delay
+    behind the device's; times without bursts stay as recorded."""
+    rec = make_recording(Case("hysteresis", "lib", 2, seed=3, duration_s=30.0))
+    device_t = rec.sensors.t
+    host_t = np.ceil(device_t / 0.016) * 0.016 + 0.001 + np.arange(len(device_t)) * 1e-9
+    stamped = prepare_trial(replace(rec, sensors=replace(rec.sensors, t=host_t)))
+    plain = prepare_trial(rec)
+    assert stamped.times_steady and stamped.time_scatter_s > 0.004
+    delay = stamped.t - plain.t
+    assert np.ptp(delay) < 1e-5 and 0.005 <= np.median(delay) <= 0.009  # 7.5 µs: the ramp
+    assert not plain.times_steady
+    np.testing.assert_array_equal(plain.t, device_t)
+    irregular = device_t + np.random.default_rng(0).uniform(-1.5e-3, 1.5e-3, len(device_t))
+    kept = prepare_trial(replace(rec, sensors=replace(rec.sensors, t=irregular)))
+    assert not kept.times_steady  # a device may stamp irregular samples exactly
+    np.testing.assert_array_equal(kept.t, irregular)
+
+
 def test_frames_stamped_by_a_host_as_they_arrive_keep_their_counter():
     """A host stamps frames as USB delivers them, four every 16 ms; it stalls for 0.6 s
     (the frames queued then arrive at once), and later loses 300 frames in a stall of

@@ -53,6 +53,10 @@ PERIOD_SPAN = 64
 #: ``JUMP_WINDOW_S`` of frames next to the gap.
 JUMP_DISAGREE_S = 0.5
 JUMP_WINDOW_S = 1.0
+#: Frame times of which this share or more, between consecutive frames, are closer than a
+#: quarter of the frame period were stamped by a host as the frames arrived in bursts:
+#: the grid takes steady times instead (:func:`grid_times`).
+BUNCHED_SHARE = 0.1
 #: ``Trial.placed_by`` when seq is a plain frame counter (one per frame).
 FRAME_COUNTER = "frame counter"
 #: A sensor with readings on fewer frames than this share is left out of the analysis.
@@ -134,6 +138,9 @@ class Trial:
             over ``RESAMPLED_SPREAD``, a stream resampled from a slower sensor, whose floor is
             measured over several frames (:func:`noise_floor`).
         placed_by: how frames were put on the grid (:func:`frame_grid`), for the messages.
+        time_scatter_s: how far the recorded frame times scatter about a steady rate, s RMS.
+        times_steady: whether ``t`` is that steady rate's times, the recorded ones having
+            been stamped on arrival (:func:`grid_times`).
         mocap_late_s: s, how much later than the sensors' clock the motion capture stamps
             its samples (a clock offset); ``angles`` are read that much later.
         mocap_skew: s per s, how much faster the motion capture's clock runs than the
@@ -163,6 +170,8 @@ class Trial:
     spikes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     resampled: np.ndarray = field(default_factory=lambda: np.zeros(0))
     placed_by: str = FRAME_COUNTER
+    time_scatter_s: float = 0.0
+    times_steady: bool = False
     mocap_late_s: float = 0.0
     mocap_low_pass_hz: float | None = None
     mocap_skew: float = 0.0
@@ -213,6 +222,7 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     stream = rec.mocap[joint]
     t_frames = np.asarray(rec.sensors.t, dtype=np.float64)
     index, placed_by = frame_grid(np.asarray(rec.sensors.seq, dtype=np.int64), t_frames)
+    t_frames, time_scatter, steady = grid_times(index, t_frames)
     n = int(index[-1]) + 1
     if n > MAX_GRID_PER_FRAME * len(index):
         raise DiscrepancyError(
@@ -275,7 +285,8 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
                   sensor_names=tuple(rec.sensor_names[j] for j in keep),
                   units=rec.sensor_units, rate_hz=rate, blocks=blocks,
                   scored=valid.copy(), ignored=ignored, spikes=spiked.sum(axis=0),
-                  placed_by=placed_by, mocap_late_s=mocap_late_s,
+                  placed_by=placed_by, time_scatter_s=time_scatter, times_steady=steady,
+                  mocap_late_s=mocap_late_s,
                   mocap_low_pass_hz=low_pass_hz, mocap_skew=mocap_skew, resampled=spread)
     trial.noise = noise_floor(trial)
     return trial
@@ -367,11 +378,7 @@ def _gaps_by_time(index: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, int]:
         t: (N,) s, the frames' times.
     """
     steps = np.diff(index)
-    n = len(index)
-    if n < 3 or not np.all(np.isfinite(t)):
-        return steps, 0
-    span = min(PERIOD_SPAN, n - 1)
-    period = float(np.median((t[span:] - t[:-span]) / (index[span:] - index[:-span])))
+    period = frame_period(index, t)
     if not period > 0:
         return steps, 0
     shortest = JUMP_DISAGREE_S / period
@@ -387,6 +394,57 @@ def _gaps_by_time(index: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, int]:
             steps[k] = max(1, int(round(by_time)))
             moved += 1
     return steps, moved
+
+
+def frame_period(index: np.ndarray, t: np.ndarray) -> float:
+    """The time per grid step, s: the median over spans of ``PERIOD_SPAN`` frames, so a
+    dropout or a jump of the counter moves it by nothing and a host's bursts by little;
+    NaN for fewer than three frames or non-finite times.
+
+    Args:
+        index: (N,) grid indices, strictly increasing; t: (N,) s, the frames' times.
+    """
+    n = len(index)
+    if n < 3 or not np.all(np.isfinite(t)):
+        return float("nan")
+    span = min(PERIOD_SPAN, n - 1)
+    return float(np.median((t[span:] - t[:-span]) / (index[span:] - index[:-span])))
+
+
+def grid_times(index: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, float, bool]:
+    """(N,) s, the frames' times as the grid takes them; how far the recorded ones scatter
+    about a steady rate, s RMS; and whether the steady times replaced them.
+
+    A device samples at a steady rate. A host that stamps frames as they arrive (a USB link
+    delivers them in bursts) writes many frames with next to the same time and then a
+    step: when at least ``BUNCHED_SHARE`` of consecutive frames are stamped within a
+    quarter of the frame period of each other, the times are arrival times and the grid
+    takes the steady ones instead, ``period × index`` plus an offset that is the straight
+    line through the median offsets of the two halves of the recording (so a host clock
+    running at another rate, or a stall, moves it by nothing). The motion capture is then
+    read at the times the readings were taken, a constant delay before they arrived. A
+    hysteresis recording stamped in 16 ms bursts kept 0.197 mm after hysteresis and lag
+    (the host's delay, a lag the data cannot tell from one), 0.179 mm with the steady
+    times, as with the device's own. Times without bunching are kept as recorded, even
+    when they scatter: a device may stamp irregular samples exactly.
+
+    Args:
+        index: (N,) grid indices (:func:`frame_grid`); t: (N,) s, the frames' times.
+    """
+    period = frame_period(index, t)
+    if not period > 0:
+        return t, 0.0, False
+    offset = t - period * index
+    half = len(index) // 2
+    i1, i2 = np.median(index[:half]), np.median(index[half:])
+    o1, o2 = np.median(offset[:half]), np.median(offset[half:])
+    trend = o1 + (o2 - o1) / (i2 - i1) * (index - i1)
+    scatter = float(np.sqrt(np.mean((offset - trend) ** 2)))
+    consecutive = np.diff(index) == 1
+    bunched = np.diff(t)[consecutive] < period / 4
+    if not consecutive.any() or bunched.mean() < BUNCHED_SHARE:
+        return t, scatter, False
+    return period * index + trend, scatter, True
 
 
 def continuous_angles(raw: np.ndarray) -> np.ndarray:

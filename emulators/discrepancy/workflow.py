@@ -640,6 +640,10 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
              f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
+    if trial.times_steady:
+        scatter_ms = 1e3 * trial.time_scatter_s
+        progress(f"    the frames were stamped as they arrived, in bursts ({scatter_ms:.2g} ms "
+                 "RMS about a steady rate): the grid takes the steady times")
     other_rate = rate_words(trial.rate_hz, rec.sensor_rate_hz)
     if other_rate:
         progress(f"    {other_rate}")
@@ -782,6 +786,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "rate_hz": round(trial.rate_hz, 4),
         "frames": trial.n,
         "frames_placed_by": trial.placed_by,
+        "frame_time_scatter_s": significant(trial.time_scatter_s),
+        "frame_times": "steady rate" if trial.times_steady else "as recorded",
         "invalid_frames": int((~trial.valid).sum()),
         "spikes": trial.spikes.tolist(),
         "resampled_sensors": resampled,
