@@ -12,6 +12,7 @@ against 1.5× (no timing is asserted to pass on these machines).
 from __future__ import annotations
 
 import json
+import re
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -708,8 +709,10 @@ def test_a_segment_shorter_than_the_profile_asks_for_is_not_passed(tmp_path, fas
                                    target=short)
     assert code != 0 and verdicts(report)["latency"] == verdicts(report)["link"] == "skip", \
         output
-    line = last_line(output)  # the frames lost to the profile's faults vary
-    assert "the real-time segment covered 1.99 s of device time (" in line
+    line = last_line(output)  # the frames lost to the profile's faults vary, and with
+    # them the span: 1.99 s, or "2" where the last frame before the cut came through
+    covered = re.search(r"the real-time segment covered ([0-9.]+) s of device time \(", line)
+    assert covered and 1.9 <= float(covered.group(1)) <= 2.0, line
     assert "frames) where 3 s are asked for: the recording ends before that" in line
 
 
