@@ -156,7 +156,9 @@ def scan_recording(path: str | Path) -> RecordingScan:
         sensors=sensors,
         mocap=mocap,
         sensor_units=sensor_units(path, metadata),
-        sensor_rate_hz=rate(path, metadata, "sensor_rate_hz", sensor_estimate, notes),
+        # a recording without sensors has no sensor rate: its absence is not worth a note
+        sensor_rate_hz=rate(path, metadata, "sensor_rate_hz", sensor_estimate,
+                            notes if names else []),
         mocap_rate_hz=rate(path, metadata, "mocap_rate_hz", mocap_estimate, notes),
         segments=segments(path, metadata),
         metadata=metadata,
