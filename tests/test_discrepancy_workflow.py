@@ -2090,6 +2090,9 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     assert second["gap_before"] < 1.05 * summary["gap_after"]  # its effects fitted again
 
 
+NO_RATE = "rate_hz must be a positive number of Hz from 1 to 100000"
+
+
 @pytest.mark.parametrize(("pattern", "replacement", "problem"), [
     (r"noise_sigma = [^\n]+", "noise_sigma = -0.2", "noise_sigma must be >= 0"),
     (r"noise_sigma = [^\n]+", "noise_sigma = nan", "noise_sigma must be finite"),
@@ -2097,6 +2100,13 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     (r"angle_lo_deg = \[[^,\]]+", "angle_lo_deg = [nan", "angle_lo_deg must be finite"),
     (r"rate_hz = [^\n]+", "rate_hz = -250.0", "rate_hz must be a positive number"),
     (r"rate_hz = [^\n]+", "rate_hz = 0.0", "rate_hz must be a positive number"),
+    # positive, but no sampling rate: 1e-9 Hz simulated no frame ('unexpected IndexError'),
+    # 1e9 Hz tried to allocate hundreds of GiB ('unexpected MemoryError')
+    (r"rate_hz = [^\n]+", "rate_hz = 1e-9", NO_RATE),
+    (r"rate_hz = [^\n]+", "rate_hz = 0.5", NO_RATE),
+    (r"rate_hz = [^\n]+", "rate_hz = 1e9", NO_RATE),
+    (r"rate_hz = [^\n]+", "rate_hz = inf", NO_RATE),
+    (r"rate_hz = [^\n]+", "rate_hz = nan", NO_RATE),
     (r"\nlag_s = [^\n]+", "\nlag_s = -0.03", "lag_s must be times >= 0 s"),
     (r"creep_tau_s = \[\]", "creep_tau_s = [nan]", "creep_tau_s must be times >= 0 s"),
 ])
@@ -2120,6 +2130,22 @@ def test_a_calibrated_profile_with_numbers_it_cannot_simulate_is_refused_at_load
                                        str(tmp_path / "x.mcap")])
     assert result.exit_code == 1 and problem in result.output, result.output
     assert "unexpected" not in result.output and not (tmp_path / "x.mcap").exists()
+
+
+@pytest.mark.parametrize("rate", [1.0, 100_000.0])
+def test_a_calibrated_profile_rate_at_either_end_of_its_range_is_read(
+        hysteresis_outcome, tmp_path, rate):
+    """The ends of the range rate_hz may take are sampling rates, and the top one is the
+    most any --rate option takes (MAX_RATE_HZ, which emulators cannot import)."""
+    from exohil.emulators.discrepancy.profile import PROFILE_RATE_HZ, write_calibrated_profile
+    from exohil.harness.cli_types import MAX_RATE_HZ
+
+    assert PROFILE_RATE_HZ == (1.0, MAX_RATE_HZ)
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(hysteresis_outcome[1], "t"))
+    text = re.sub(r"rate_hz = [^\n]+", f"rate_hz = {rate!r}", (tmp_path / "p.toml").read_text(),
+                  count=1)
+    (tmp_path / "edge.toml").write_text(text)
+    assert load_calibrated_profile(tmp_path / "edge.toml").rate_hz == rate
 
 
 def test_simulate_takes_the_calibrated_profile_the_workflow_writes(hysteresis_outcome, tmp_path):
