@@ -73,7 +73,8 @@ REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
 @click.option("--baseline", type=InputFile(), default=None,
               help="Baseline: a checkpoint (accuracy and latency must not regress beyond "
                    "the profile's margin and factor) or an earlier run's conformance.json on "
-                   "the same reference (accuracy only).")
+                   "the same reference (accuracy only; not that of a run in which a check "
+                   "failed).")
 @click.option("--reference", type=InputFile(), default=None,
               help="Ground truth recording for a serial device (aligned by device time); "
                    "without it the accuracy checks are skipped, never passed.")

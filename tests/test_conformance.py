@@ -11,6 +11,7 @@ against 1.5× (no timing is asserted to pass on these machines).
 
 from __future__ import annotations
 
+import copy
 import json
 import time
 import xml.etree.ElementTree as ET
@@ -413,6 +414,45 @@ def test_a_figures_baseline_of_another_recording_or_no_report_is_refused(tmp_pat
                                 "-k", "regression")
     assert verdicts(out)["regression"] == "fail"
     assert f"{path}: not a conformance report" in last_line(output)
+
+
+def test_a_figures_baseline_from_a_failed_run_is_refused(tmp_path, fast_profile):
+    """The conformance.json of a run that failed was taken as a baseline: its figures became
+    the bar, though that run did not meet it. Refused, naming the checks it failed; a run
+    that only left checks out (-k; its overall verdict is fail, no check failed) is taken."""
+    from exohil.conformance.context import figures_baseline
+    from exohil.harness.session import SessionError
+
+    stored = json.loads((Path(__file__).parents[1] / "conformance" / "baselines" /
+                         "ci.json").read_text(encoding="utf-8"))
+    reference = stored["reference_sha256"]
+    assert figures_baseline_ok(figures_baseline, tmp_path, stored, reference)
+    subset = copy.deepcopy(stored)
+    subset["verdict"] = "fail"
+    for check in subset["checks"]:
+        if check["name"] != "accuracy":
+            check.update(verdict="skip", message="not run", measurements=[])
+    assert figures_baseline_ok(figures_baseline, tmp_path, subset, reference)
+    failed = copy.deepcopy(stored)
+    failed["verdict"] = "fail"
+    for check in failed["checks"]:
+        if check["name"] in ("accuracy", "latency"):
+            check["verdict"] = "fail"
+    path = tmp_path / "failed.json"
+    path.write_text(json.dumps(failed), encoding="utf-8")
+    with pytest.raises(SessionError, match=r"that run failed \(accuracy, latency\), so its "
+                                           r"figures are no baseline"):
+        figures_baseline(path, reference)
+    code, output, report = conform(tmp_path / "run", fast_profile, "--baseline", str(path),
+                                   "-k", "regression")
+    assert code == 1 and verdicts(report)["regression"] == "fail"
+    assert f"{path}: that run failed (accuracy, latency)" in last_line(output)
+
+
+def figures_baseline_ok(figures_baseline, tmp_path: Path, report: dict, reference: str) -> bool:
+    path = tmp_path / "ok.json"
+    path.write_text(json.dumps(report), encoding="utf-8")
+    return bool(figures_baseline(path, reference)[0])
 
 
 def test_a_candidate_slower_than_its_baseline_fails_regression(tmp_path, fast_profile,
