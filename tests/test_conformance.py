@@ -223,6 +223,31 @@ def test_the_reference_ennet_passes_and_writes_every_report(tmp_path, fast_profi
 
     with open(tmp_path / "run.mcap", "rb") as fh:
         assert sum(1 for _ in make_reader(fh).iter_messages()) == 4 * frames
+    from exohil.conformance.report import JUNIT_FILE, REPORT_FILES
+
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted((JUNIT_FILE, *REPORT_FILES))
+
+
+def test_the_files_a_run_writes_are_listed_once(tmp_path):
+    """`exohil conform` and the plugin each kept a list of the files a run writes, the same
+    three (and junit.xml); one list, beside the code that writes them, serves both. --out
+    refuses a folder where any of them is an input, junit.xml included."""
+    import shutil
+
+    from exohil.conformance import cmd_conform, plugin
+    from exohil.conformance.report import JUNIT_FILE, REPORT_FILES
+
+    assert not hasattr(cmd_conform, "REPORT_FILES") and not hasattr(plugin, "REPORT_FILES")
+    for name in (JUNIT_FILE, *REPORT_FILES):
+        out = tmp_path / name.replace(".", "_")
+        out.mkdir()
+        shutil.copyfile(ENNET, out / name)  # the model under test sits where a report goes
+        result = CliRunner().invoke(main, ["conform", "--target", f"emulator:{HELDOUT}",
+                                           "--model", str(out / name), "--profile", "ci",
+                                           "--out", str(out)])
+        assert result.exit_code == 2, (name, result.output)
+        assert "refusing to overwrite" in result.output, (name, result.output)
+        assert (out / name).read_bytes() == ENNET.read_bytes()
 
 
 def test_the_same_suite_runs_as_plain_pytest(tmp_path, fast_profile):
