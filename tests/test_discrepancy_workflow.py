@@ -2088,6 +2088,9 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     assert second["already_in_model"] == summary["effects"]
     assert not set(second["effects"]) & set(summary["effects"])
     assert second["gap_before"] < 1.05 * summary["gap_after"]  # its effects fitted again
+    # the same recording again: the name was 'calibrated+measured+measured'
+    assert load_calibrated_profile(tmp_path / "b" / "suit_profile.toml").name == \
+        load_calibrated_profile(out / "suit_profile.toml").name == "calibrated+measured"
 
 
 NO_RATE = "rate_hz must be a positive number of Hz from 1 to 100000"
@@ -2130,6 +2133,21 @@ def test_a_calibrated_profile_with_numbers_it_cannot_simulate_is_refused_at_load
                                        str(tmp_path / "x.mcap")])
     assert result.exit_code == 1 and problem in result.output, result.output
     assert "unexpected" not in result.output and not (tmp_path / "x.mcap").exists()
+
+
+@pytest.mark.parametrize(("base", "stem", "name"), [
+    ("calibrated", "hyst", "calibrated+hyst"),
+    ("calibrated+hyst", "hyst", "calibrated+hyst"),  # was calibrated+hyst+hyst
+    ("calibrated+hyst+walk", "hyst", "calibrated+hyst+walk"),
+    ("calibrated+hyst", "walk", "calibrated+hyst+walk"),  # another recording is added
+    ("default", "default", "default+default"),  # the starting profile's name is no recording
+    ("calibrated+a+b", "a+b", "calibrated+a+b"),
+    ("calibrated+hyst2", "hyst", "calibrated+hyst2+hyst"),
+])
+def test_the_profile_name_holds_each_recording_once(base, stem, name):
+    from exohil.harness.cmd_discrepancy import profile_name
+
+    assert profile_name(base, stem) == name
 
 
 @pytest.mark.parametrize("rate", [1.0, 100_000.0])
