@@ -54,10 +54,6 @@ class KeywordExpression(Name):
         return text
 
 
-#: What a run writes into --out.
-REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
-
-
 @click.command("conform")
 @click.option("--target", type=Target(), default=None,
               help="emulator:RECORDING[?faults=SPEC&seed=N] (the emulator on a pty, in "
@@ -73,7 +69,8 @@ REPORT_FILES = ("junit.xml", "conformance.json", "summary.md", "run.mcap")
 @click.option("--baseline", type=InputFile(), default=None,
               help="Baseline: a checkpoint (accuracy and latency must not regress beyond "
                    "the profile's margin and factor) or an earlier run's conformance.json on "
-                   "the same reference (accuracy only).")
+                   "the same reference (accuracy only; not that of a run in which a check "
+                   "failed).")
 @click.option("--reference", type=InputFile(), default=None,
               help="Ground truth recording for a serial device (aligned by device time); "
                    "without it the accuracy checks are skipped, never passed.")
@@ -97,19 +94,22 @@ def conform(target: str | None, model: Path | None, bench_file: Path | None, pro
 
     import pytest
 
+    from exohil.conformance.report import JUNIT_FILE, REPORT_FILES
+
     if bench_file is None and (target is None or model is None):
         raise click.UsageError("give --target and --model, or a --bench file naming them")
     target_file = Path(target[len("emulator:"):].partition("?")[0]) if target and \
         target.startswith("emulator:") else None
-    refuse_overwriting_inputs([("--out", out_dir / name) for name in REPORT_FILES],
+    # what a run writes into --out: the plugin's reports and pytest's junit.xml
+    refuse_overwriting_inputs([("--out", out_dir / name) for name in (JUNIT_FILE, *REPORT_FILES)],
                               [target_file, model, bench_file, baseline, reference])
     out_dir.mkdir(parents=True, exist_ok=True)
     # an earlier run's junit.xml must not pass for this run's if this one is killed (the
     # plugin clears the other reports the same way)
-    (out_dir / "junit.xml").unlink(missing_ok=True)
+    (out_dir / JUNIT_FILE).unlink(missing_ok=True)
     args = ["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
             "-o", "junit_family=xunit1", "-W", "ignore::pytest.PytestAssertRewriteWarning",
-            f"--junitxml={out_dir / 'junit.xml'}", "--exohil-profile", profile,
+            f"--junitxml={out_dir / JUNIT_FILE}", "--exohil-profile", profile,
             "--exohil-out", str(out_dir)]
     for option, value in (("--exohil-target", target), ("--exohil-model", model),
                           ("--exohil-bench", bench_file), ("--exohil-backend", backend),

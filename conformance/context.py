@@ -548,8 +548,10 @@ def figures_baseline(path: Path, reference_sha256: str | None,
                      frames_scored: float | None = None) -> tuple[dict[str, float], str]:
     """The accuracy figures (measurement name → degrees) of an earlier run's
     ``conformance.json`` at ``path``, and how the notes name them ("baseline <model
-    sha256[:12]>"). SessionError where the file is no such report, holds no accuracy
-    figure, was measured on another reference recording than ``reference_sha256``, or
+    sha256[:12]>"). SessionError where the file is no such report, is that of a run in
+    which a check failed (a run that only left checks out, ``-k``, is taken: its checks
+    that ran passed), holds no accuracy figure, was measured on another reference
+    recording than ``reference_sha256``, or
     scored other frames of it than ``frames_scored`` (this run's count; within
     :data:`FRAMES_SCORED_TOLERANCE`): its profile scored a real-time segment
     (``replay`` not "full"), where the regression check scores the whole replay."""
@@ -561,6 +563,12 @@ def figures_baseline(path: Path, reference_sha256: str | None,
         raise SessionError(f"{path}: not a conformance report to compare with ({exc})") from None
     if not isinstance(data, dict) or data.get("schema") != SCHEMA:
         raise SessionError(f"{path}: not a conformance report (schema {SCHEMA}) to compare with")
+    failed = [str(check.get("name")) for check in data.get("checks", [])
+              if isinstance(check, dict) and check.get("verdict") == "fail"]
+    if failed:  # its figures would lower the bar to a run that did not meet it
+        raise SessionError(
+            f"{path}: that run failed ({', '.join(failed)}), so its figures are no baseline; "
+            "compare with a run whose checks passed (`make conform-baseline` stores one)")
     theirs = data.get("reference_sha256")
     if theirs is None or theirs != reference_sha256:
         raise SessionError(

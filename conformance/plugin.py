@@ -117,16 +117,13 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
     config.stash[_RESULTS] = []
 
 
-#: What the plugin writes into --exohil-out (``exohil conform`` adds junit.xml).
-REPORT_FILES = ("conformance.json", "summary.md", "run.mcap")
-
-
 def _clear_earlier_reports(out: Path, run, bench_file: str | None) -> None:
     """Refuse an --exohil-out whose reports would replace one of the run's inputs (a
     baseline ``conformance.json`` in the same folder, the target recording, the model, the
     bench file or the profile), then remove an earlier run's reports there: a run killed
     before it writes leaves no report of another run looking like its own, and a run whose
     real-time segment did not run leaves no earlier ``run.mcap`` beside its reports."""
+    from exohil.conformance.report import REPORT_FILES
     from exohil.formats.atomic import same_file
     from exohil.harness.bench import EmulatorDevice
 

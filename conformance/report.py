@@ -29,6 +29,10 @@ from exohil.formats.measurement import Verdict
 from exohil.harness.machine import machine
 
 SCHEMA = "exohil-conformance/1"
+#: The files :func:`write_reports` writes into a run's report folder (the plugin's
+#: --exohil-out; ``exohil conform`` adds :data:`JUNIT_FILE`, which pytest writes).
+REPORT_FILES = ("conformance.json", "summary.md", "run.mcap")
+JUNIT_FILE = "junit.xml"
 #: The message of a check the session left out (``-k``, a node id).
 NOT_RUN = "not run: left out of this session (-k or a node id)"
 #: The message of a check an interrupted run (Ctrl-C) never reached.

@@ -61,7 +61,8 @@ def metadata_record(
     extra: Mapping[str, str] | None,
 ) -> dict[str, str]:
     """The record a writer stores: ``extra`` (str → str, reserved keys dropped) plus the
-    reserved keys computed from the arguments (segments are added at close)."""
+    reserved keys computed from the arguments (segments are added at close); without
+    sensors the default ``sensor_rate_hz`` is left out, as no sensor was sampled at it."""
     for what, rate in (("sensor_rate_hz", sensor_rate_hz), ("mocap_rate_hz", mocap_rate_hz)):
         if isinstance(rate, bool) or not isinstance(rate, numbers.Real) \
                 or not math.isfinite(rate) or not rate > 0:
@@ -85,6 +86,10 @@ def metadata_record(
             "mocap_rate_hz": format_number(mocap_rate_hz),
         }
     )
+    if not sensor_names and sensor_rate_hz == DEFAULT_SENSOR_RATE_HZ:
+        # no sensors (imported motion), no sensor rate to claim; a reader falls back to this
+        # same default, so leaving it out loses nothing (a rate given otherwise is kept)
+        del record["sensor_rate_hz"]
     return record
 
 

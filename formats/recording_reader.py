@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 from mcap.exceptions import EndOfFile
-from mcap.records import Channel, Message, Metadata, Schema
+from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from exohil.formats.errors import RecordingError
@@ -74,8 +74,12 @@ class RecordingScan:
     channels: list[ChannelSummary]
     notes: list[str] = field(default_factory=list)
     #: bytes after the last complete record of a file that was never closed (no footer), which
-    #: are lost; None for a complete file
+    #: are lost; None for a complete file, and for one whose footer is there but whose closing
+    #: magic is cut off (every record is in it; a note says so)
     lost_bytes: int | None = None
+    #: bytes of the closing MCAP magic missing after the footer (0 when it is whole, or when
+    #: the file was cut before its footer)
+    magic_missing: int = 0
 
 
 def read_recording(path: str | Path) -> Recording:
@@ -89,7 +93,17 @@ def scan_recording(path: str | Path) -> RecordingScan:
     data = _read_mcap_bytes(path)
     raw = _read_records(path, data)
     notes: list[str] = []
-    if raw.cut_at is not None:
+    magic_missing = 0
+    if raw.cut_at is not None and raw.footer_seen:
+        # closed by its writer (the footer is the last record), then cut inside the 8 bytes
+        # of MCAP magic that follow it: no record is missing
+        magic_missing = len(_MAGIC) - (len(data) - raw.cut_at)
+        which = ("its closing MCAP magic (8 bytes) is" if magic_missing == len(_MAGIC) else
+                 f"the last {magic_missing} of the 8 bytes of its closing MCAP magic are")
+        notes.append(f"cut short after its footer: {which} missing (other MCAP readers may "
+                     "refuse it); it was closed and every record is there, so nothing is "
+                     "lost; `exohil record recover` writes a clean copy")
+    elif raw.cut_at is not None:
         if not any(record.name == METADATA_NAME for record in raw.metadata):
             raise RecordingError(f"{path}: truncated MCAP file (cut at byte {len(data)}, last "
                                  f"complete record at {raw.cut_at}) before any "
@@ -156,13 +170,16 @@ def scan_recording(path: str | Path) -> RecordingScan:
         sensors=sensors,
         mocap=mocap,
         sensor_units=sensor_units(path, metadata),
-        sensor_rate_hz=rate(path, metadata, "sensor_rate_hz", sensor_estimate, notes),
+        # a recording without sensors has no sensor rate: its absence is not worth a note
+        sensor_rate_hz=rate(path, metadata, "sensor_rate_hz", sensor_estimate,
+                            notes if names else []),
         mocap_rate_hz=rate(path, metadata, "mocap_rate_hz", mocap_estimate, notes),
         segments=segments(path, metadata),
         metadata=metadata,
     )
-    lost = None if raw.cut_at is None else len(data) - raw.cut_at
-    return RecordingScan(recording=recording, channels=channels, notes=notes, lost_bytes=lost)
+    lost = None if raw.cut_at is None or raw.footer_seen else len(data) - raw.cut_at
+    return RecordingScan(recording=recording, channels=channels, notes=notes, lost_bytes=lost,
+                         magic_missing=magic_missing)
 
 
 def _read_mcap_bytes(path: Path) -> bytes:
@@ -189,6 +206,7 @@ class _RawFile:
     messages: dict[int, list[tuple[int, bytes]]] = field(default_factory=dict)
     metadata: list[Metadata] = field(default_factory=list)
     cut_at: int | None = None  #: byte offset where a cut-short file stops parsing
+    footer_seen: bool = False  #: whether the footer record (written at close) was read
 
 
 def _read_records(path: Path, data: bytes) -> _RawFile:
@@ -210,6 +228,8 @@ def _read_records(path: Path, data: bytes) -> _RawFile:
                 raw.schemas.setdefault(record.id, record)
             elif isinstance(record, Metadata):
                 raw.metadata.append(record)
+            elif isinstance(record, Footer):
+                raw.footer_seen = True
             complete = stream.tell()
     except (EndOfFile, struct.error):
         # A short read: the file stops inside a record (or a length field is corrupt).

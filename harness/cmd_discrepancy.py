@@ -160,7 +160,17 @@ def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
                       progress=lambda line: click.echo(line, err=True), workers=workers)
     except (RecordingError, DiscrepancyError) as exc:
         raise click.ClickException(str(exc)) from exc
-    return outcome.summary, write_outputs(outcome, out_dir, f"{name}+{measured.stem}", workers)
+    return outcome.summary, write_outputs(outcome, out_dir, profile_name(name, measured.stem),
+                                          workers)
+
+
+def profile_name(base: str, stem: str) -> str:
+    """The written profile's name: the name of the profile the run started from (or
+    "calibrated") and ``+`` the recording's stem, unless that recording is among those its
+    name already holds: a run on top of a calibrated profile named itself
+    ``calibrated+hyst+hyst``, one ``+hyst`` more with each run. The profile's
+    ``description`` names the recording of the last run."""
+    return base if f"+{stem}+" in f"{base}+" else f"{base}+{stem}"
 
 
 COMMANDS: list[click.Command] = [discrepancy]

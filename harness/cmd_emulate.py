@@ -101,34 +101,59 @@ def emulate_command(recording: Path, rate: float | None, loop: bool, faults: str
       exohil emulate fixtures/paper_protocol.mcap --loop
       exohil emulate rec.mcap --faults 'drop:rate=0.01,burst=3;stall:every_s=5,duration_ms=40'
     """
-    from exohil.emulators.arduino import ArduinoEmulator
-    from exohil.emulators.fault_spec import check_sensor_count, fault_plan
+    # SIGTERM stops it as Ctrl-C does, from the start: reading a long recording takes seconds
+    # (a SIGTERM then ended it with status 143 and no word); the previous handler comes back
+    # when the command returns
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        _emulate(recording, rate, loop, faults, seed, duration, spin_ms, realtime, fault_log)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
-    # a --faults FILE.toml is an input too: the fault log must not replace it
-    refuse_overwriting_inputs([("--fault-log", fault_log)],
-                              [recording, *([Path(faults)] if faults else [])])
-    source = _load_recording(recording)
-    if rate is None:
-        _warn_of_another_rate(recording, source)
+
+def _done(generated: int, written: int, faults: str) -> None:
+    click.echo(f"done: {generated} frames generated, {written} handed to the host; "
+               f"faults: {faults}", err=True)
+
+
+def _emulate(recording: Path, rate: float | None, loop: bool, faults: str | None, seed: int,
+             duration: float | None, spin_ms: float, realtime: bool,
+             fault_log: Path | None) -> None:
+    checked = False  # whether --fault-log may be written: it replaces no input
     try:
-        plan = fault_plan(faults)
-        check_sensor_count(plan, len(source.sensor_names))
-    except (ValueError, OSError) as exc:
-        raise click.BadParameter(str(exc), param_hint="--faults") from exc
+        from exohil.emulators.arduino import ArduinoEmulator
+        from exohil.emulators.fault_spec import check_sensor_count, fault_plan
+
+        # a --faults FILE.toml is an input too: the fault log must not replace it
+        refuse_overwriting_inputs([("--fault-log", fault_log)],
+                                  [recording, *([Path(faults)] if faults else [])])
+        checked = True
+        source = _load_recording(recording)
+        if rate is None:
+            _warn_of_another_rate(recording, source)
+        try:
+            plan = fault_plan(faults)
+            check_sensor_count(plan, len(source.sensor_names))
+        except (ValueError, OSError) as exc:
+            raise click.BadParameter(str(exc), param_hint="--faults") from exc
+        try:
+            # from the recording: its own sequence numbers and clock, as the in-process
+            # emulator
+            emulator = ArduinoEmulator(source, rate_hz=rate or source.sensor_rate_hz,
+                                       loop=loop, duration_s=duration, faults=plan, seed=seed,
+                                       spin_s=spin_ms / 1000.0, realtime=realtime)
+        except ValueError as exc:
+            raise click.ClickException(str(exc)) from exc
+    except KeyboardInterrupt:  # stopped before streaming: the end a later stop has, at 0
+        if fault_log is not None and checked:
+            write_text(fault_log, "")
+        _done(0, 0, "none")
+        return
     try:
-        # from the recording: its own sequence numbers and clock, as the in-process emulator
-        emulator = ArduinoEmulator(source, rate_hz=rate or source.sensor_rate_hz, loop=loop,
-                                   duration_s=duration,
-                                   faults=plan, seed=seed, spin_s=spin_ms / 1000.0,
-                                   realtime=realtime)
-    except ValueError as exc:
-        raise click.ClickException(str(exc)) from exc
-    signal.signal(signal.SIGTERM, _raise_interrupt)
-    try:
-        emulator.start()
-    except RuntimeError as exc:
-        raise click.ClickException(str(exc)) from exc
-    try:
+        try:
+            emulator.start()
+        except RuntimeError as exc:
+            raise click.ClickException(str(exc)) from exc
         click.echo(emulator.port)
         sys.stdout.flush()
         if emulator.realtime_error:
@@ -151,9 +176,8 @@ def emulate_command(recording: Path, rate: float | None, loop: bool, faults: str
     if emulator.error is not None:
         raise click.ClickException(f"emulator failed: {emulator.error}")
     counts = Counter(record.kind for record in emulator.fault_log)
-    summary = ", ".join(f"{kind} {n}" for kind, n in sorted(counts.items())) or "none"
-    click.echo(f"done: {emulator.frames_generated} frames generated, "
-               f"{emulator.frames_written} handed to the host; faults: {summary}", err=True)
+    _done(emulator.frames_generated, emulator.frames_written,
+          ", ".join(f"{kind} {n}" for kind, n in sorted(counts.items())) or "none")
 
 
 COMMANDS = [emulate_command]

@@ -182,7 +182,10 @@ def recover_command(file: Path, out: Path) -> None:
             else "")
     click.echo(f"recovered {len(rec.sensors)} sensor frames{span} and {mocap} mocap samples "
                f"into {out}")
-    if scan.lost_bytes is None:
+    if scan.lost_bytes is None and scan.magic_missing:
+        click.echo(f"lost: nothing (every record was there, up to the footer; only the last "
+                   f"{scan.magic_missing} bytes of the closing MCAP magic were missing)")
+    elif scan.lost_bytes is None:
         click.echo("lost: nothing (the file was complete)")
     else:  # a durable file killed between its syncs ends after a complete record: 0 bytes
         cut = (f"the {scan.lost_bytes} bytes after the last complete record" if scan.lost_bytes

@@ -11,6 +11,7 @@ against 1.5× (no timing is asserted to pass on these machines).
 
 from __future__ import annotations
 
+import copy
 import json
 import re
 import time
@@ -223,6 +224,31 @@ def test_the_reference_ennet_passes_and_writes_every_report(tmp_path, fast_profi
 
     with open(tmp_path / "run.mcap", "rb") as fh:
         assert sum(1 for _ in make_reader(fh).iter_messages()) == 4 * frames
+    from exohil.conformance.report import JUNIT_FILE, REPORT_FILES
+
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted((JUNIT_FILE, *REPORT_FILES))
+
+
+def test_the_files_a_run_writes_are_listed_once(tmp_path):
+    """`exohil conform` and the plugin each kept a list of the files a run writes, the same
+    three (and junit.xml); one list, beside the code that writes them, serves both. --out
+    refuses a folder where any of them is an input, junit.xml included."""
+    import shutil
+
+    from exohil.conformance import cmd_conform, plugin
+    from exohil.conformance.report import JUNIT_FILE, REPORT_FILES
+
+    assert not hasattr(cmd_conform, "REPORT_FILES") and not hasattr(plugin, "REPORT_FILES")
+    for name in (JUNIT_FILE, *REPORT_FILES):
+        out = tmp_path / name.replace(".", "_")
+        out.mkdir()
+        shutil.copyfile(ENNET, out / name)  # the model under test sits where a report goes
+        result = CliRunner().invoke(main, ["conform", "--target", f"emulator:{HELDOUT}",
+                                           "--model", str(out / name), "--profile", "ci",
+                                           "--out", str(out)])
+        assert result.exit_code == 2, (name, result.output)
+        assert "refusing to overwrite" in result.output, (name, result.output)
+        assert (out / name).read_bytes() == ENNET.read_bytes()
 
 
 def test_the_same_suite_runs_as_plain_pytest(tmp_path, fast_profile):
@@ -414,6 +440,45 @@ def test_a_figures_baseline_of_another_recording_or_no_report_is_refused(tmp_pat
                                 "-k", "regression")
     assert verdicts(out)["regression"] == "fail"
     assert f"{path}: not a conformance report" in last_line(output)
+
+
+def test_a_figures_baseline_from_a_failed_run_is_refused(tmp_path, fast_profile):
+    """The conformance.json of a run that failed was taken as a baseline: its figures became
+    the bar, though that run did not meet it. Refused, naming the checks it failed; a run
+    that only left checks out (-k; its overall verdict is fail, no check failed) is taken."""
+    from exohil.conformance.context import figures_baseline
+    from exohil.harness.session import SessionError
+
+    stored = json.loads((Path(__file__).parents[1] / "conformance" / "baselines" /
+                         "ci.json").read_text(encoding="utf-8"))
+    reference = stored["reference_sha256"]
+    assert figures_baseline_ok(figures_baseline, tmp_path, stored, reference)
+    subset = copy.deepcopy(stored)
+    subset["verdict"] = "fail"
+    for check in subset["checks"]:
+        if check["name"] != "accuracy":
+            check.update(verdict="skip", message="not run", measurements=[])
+    assert figures_baseline_ok(figures_baseline, tmp_path, subset, reference)
+    failed = copy.deepcopy(stored)
+    failed["verdict"] = "fail"
+    for check in failed["checks"]:
+        if check["name"] in ("accuracy", "latency"):
+            check["verdict"] = "fail"
+    path = tmp_path / "failed.json"
+    path.write_text(json.dumps(failed), encoding="utf-8")
+    with pytest.raises(SessionError, match=r"that run failed \(accuracy, latency\), so its "
+                                           r"figures are no baseline"):
+        figures_baseline(path, reference)
+    code, output, report = conform(tmp_path / "run", fast_profile, "--baseline", str(path),
+                                   "-k", "regression")
+    assert code == 1 and verdicts(report)["regression"] == "fail"
+    assert f"{path}: that run failed (accuracy, latency)" in last_line(output)
+
+
+def figures_baseline_ok(figures_baseline, tmp_path: Path, report: dict, reference: str) -> bool:
+    path = tmp_path / "ok.json"
+    path.write_text(json.dumps(report), encoding="utf-8")
+    return bool(figures_baseline(path, reference)[0])
 
 
 def test_a_candidate_slower_than_its_baseline_fails_regression(tmp_path, fast_profile,

@@ -2150,6 +2150,12 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     assert second["already_in_model"] == summary["effects"]
     assert not set(second["effects"]) & set(summary["effects"])
     assert second["gap_before"] < 1.05 * summary["gap_after"]  # its effects fitted again
+    # the same recording again: the name was 'calibrated+measured+measured'
+    assert load_calibrated_profile(tmp_path / "b" / "suit_profile.toml").name == \
+        load_calibrated_profile(out / "suit_profile.toml").name == "calibrated+measured"
+
+
+NO_RATE = "rate_hz must be a positive number of Hz from 1 to 100000"
 
 
 @pytest.mark.parametrize(("pattern", "replacement", "problem"), [
@@ -2159,6 +2165,13 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
     (r"angle_lo_deg = \[[^,\]]+", "angle_lo_deg = [nan", "angle_lo_deg must be finite"),
     (r"rate_hz = [^\n]+", "rate_hz = -250.0", "rate_hz must be a positive number"),
     (r"rate_hz = [^\n]+", "rate_hz = 0.0", "rate_hz must be a positive number"),
+    # positive, but no sampling rate: 1e-9 Hz simulated no frame ('unexpected IndexError'),
+    # 1e9 Hz tried to allocate hundreds of GiB ('unexpected MemoryError')
+    (r"rate_hz = [^\n]+", "rate_hz = 1e-9", NO_RATE),
+    (r"rate_hz = [^\n]+", "rate_hz = 0.5", NO_RATE),
+    (r"rate_hz = [^\n]+", "rate_hz = 1e9", NO_RATE),
+    (r"rate_hz = [^\n]+", "rate_hz = inf", NO_RATE),
+    (r"rate_hz = [^\n]+", "rate_hz = nan", NO_RATE),
     (r"\nlag_s = [^\n]+", "\nlag_s = -0.03", "lag_s must be times >= 0 s"),
     (r"creep_tau_s = \[\]", "creep_tau_s = [nan]", "creep_tau_s must be times >= 0 s"),
 ])
@@ -2182,6 +2195,37 @@ def test_a_calibrated_profile_with_numbers_it_cannot_simulate_is_refused_at_load
                                        str(tmp_path / "x.mcap")])
     assert result.exit_code == 1 and problem in result.output, result.output
     assert "unexpected" not in result.output and not (tmp_path / "x.mcap").exists()
+
+
+@pytest.mark.parametrize(("base", "stem", "name"), [
+    ("calibrated", "hyst", "calibrated+hyst"),
+    ("calibrated+hyst", "hyst", "calibrated+hyst"),  # was calibrated+hyst+hyst
+    ("calibrated+hyst+walk", "hyst", "calibrated+hyst+walk"),
+    ("calibrated+hyst", "walk", "calibrated+hyst+walk"),  # another recording is added
+    ("default", "default", "default+default"),  # the starting profile's name is no recording
+    ("calibrated+a+b", "a+b", "calibrated+a+b"),
+    ("calibrated+hyst2", "hyst", "calibrated+hyst2+hyst"),
+])
+def test_the_profile_name_holds_each_recording_once(base, stem, name):
+    from exohil.harness.cmd_discrepancy import profile_name
+
+    assert profile_name(base, stem) == name
+
+
+@pytest.mark.parametrize("rate", [1.0, 100_000.0])
+def test_a_calibrated_profile_rate_at_either_end_of_its_range_is_read(
+        hysteresis_outcome, tmp_path, rate):
+    """The ends of the range rate_hz may take are sampling rates, and the top one is the
+    most any --rate option takes (MAX_RATE_HZ, which emulators cannot import)."""
+    from exohil.emulators.discrepancy.profile import PROFILE_RATE_HZ, write_calibrated_profile
+    from exohil.harness.cli_types import MAX_RATE_HZ
+
+    assert PROFILE_RATE_HZ == (1.0, MAX_RATE_HZ)
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(hysteresis_outcome[1], "t"))
+    text = re.sub(r"rate_hz = [^\n]+", f"rate_hz = {rate!r}", (tmp_path / "p.toml").read_text(),
+                  count=1)
+    (tmp_path / "edge.toml").write_text(text)
+    assert load_calibrated_profile(tmp_path / "edge.toml").rate_hz == rate
 
 
 def test_simulate_takes_the_calibrated_profile_the_workflow_writes(hysteresis_outcome, tmp_path):

@@ -269,3 +269,45 @@ def test_emulate_warns_when_the_timestamps_disagree_with_the_nominal_rate(tmp_pa
     chosen = CliRunner().invoke(main, ["emulate", str(path), "--duration", "0.1",
                                        "--rate", "100"])
     assert chosen.exit_code == 0 and "timestamps give" not in chosen.stderr
+
+
+_TERM_WHILE_READING = """
+import os, signal, sys
+import exohil.harness.cmd_emulate as cmd
+read = cmd._load_recording
+def reading(path):  # a SIGTERM arrives while the recording is read (the slow start-up)
+    os.kill(os.getpid(), signal.SIGTERM)
+    return read(path)
+cmd._load_recording = reading
+from exohil.harness.cli import main
+main(sys.argv[1:], prog_name="exohil")
+"""
+
+
+def test_a_sigterm_while_emulate_starts_up_ends_it_as_a_later_one_does(tmp_path: Path) -> None:
+    """SIGTERM in emulate's first seconds (reading the recording, before its handler was
+    installed) ended it with status 143 and no word; it ends as a later SIGTERM does: the
+    done line (nothing generated), status 0, and the fault log written."""
+    recording = _synthetic_recording(tmp_path / "r.mcap")
+    log = tmp_path / "faults.jsonl"
+    proc = subprocess.run([sys.executable, "-c", _TERM_WHILE_READING, "emulate", str(recording),
+                           "--fault-log", str(log)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr)
+    assert proc.stdout == ""  # no port was made
+    assert proc.stderr.strip().splitlines()[-1] == \
+        "done: 0 frames generated, 0 handed to the host; faults: none", proc.stderr
+    assert log.read_text() == ""
+
+
+def test_emulate_gives_back_the_sigterm_handler_it_found(tmp_path: Path) -> None:
+    """Run in-process (click's runner), emulate left its SIGTERM handler behind it, also
+    when it failed (it is installed before the recording is read)."""
+    import signal
+
+    before = signal.getsignal(signal.SIGTERM)
+    recording = _synthetic_recording(tmp_path / "r.mcap")
+    result = CliRunner().invoke(main, ["emulate", str(recording), "--duration", "0.1"])
+    assert result.exit_code == 0, result.output
+    assert signal.getsignal(signal.SIGTERM) is before
+    failed = CliRunner().invoke(main, ["emulate", str(tmp_path / "missing.mcap")])
+    assert failed.exit_code != 0 and signal.getsignal(signal.SIGTERM) is before

@@ -209,6 +209,20 @@ def test_import_mot_makes_a_mocap_only_recording(tmp_path: Path) -> None:
     assert sensors == ["sensors   none (a mocap-only recording)"], text  # no rate of nothing
 
 
+def test_import_mot_claims_no_sensor_rate(tmp_path: Path) -> None:
+    """A recording without sensors stored sensor_rate_hz = 250, a rate of no sensor; the key
+    is left out, and reading it back (and cutting it) notes nothing about it."""
+    source, out, part = tmp_path / "trial.mot", tmp_path / "trial.mcap", tmp_path / "part.mcap"
+    source.write_text(MOT_TEXT)
+    assert run("import", "mot", source, "--out", out).exit_code == 0
+    info = json.loads(run("record", "info", out, "--json").output)
+    assert "sensor_rate_hz" not in info["metadata"]
+    assert info["metadata"]["mocap_rate_hz"] == "100"
+    assert not [note for note in info["notes"] if "sensor_rate_hz" in note], info["notes"]
+    assert run("record", "cut", out, "--start", "0.01", "--out", part).exit_code == 0
+    assert "sensor_rate_hz" not in read_recording(part).metadata
+
+
 def test_import_mot_without_shoulder_coordinates_is_one_line(tmp_path: Path) -> None:
     source = tmp_path / "knee.mot"
     source.write_text("endheader\ntime\tknee_angle\n0\t1\n0.01\t2\n")

@@ -96,6 +96,35 @@ def test_recover_refuses_a_file_cut_before_its_first_record(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("cut_bytes", [8, 3])
+def test_a_file_cut_only_in_its_closing_magic_says_its_footer_is_there(tmp_path, cut_bytes):
+    """A closed recording whose trailing magic alone is cut: `record info` said it was never
+    closed "(no footer)", and recover that segments were lost, though the footer and every
+    record before it (segments included) were there."""
+    from exohil.formats.recording import Segment
+
+    whole, cut = tmp_path / "whole.mcap", tmp_path / "cut.mcap"
+    with RecordingWriter(whole, SENSORS) as writer:
+        writer.add_sensor_frames(np.arange(500), np.arange(500) / RATE_HZ, np.ones((500, 4)))
+        writer.add_segment(Segment("all", 0.0, 1.0))
+    cut.write_bytes(whole.read_bytes()[:-cut_bytes])
+    scan = scan_recording(cut)
+    assert scan.lost_bytes is None and scan.magic_missing == cut_bytes
+    assert len(scan.recording.sensors) == 500 and [s.name for s in scan.recording.segments] \
+        == ["all"]
+    info = CliRunner().invoke(main, ["record", "info", str(cut)])
+    assert info.exit_code == 0, info.output
+    assert "no footer" not in info.output and "never closed" not in info.output
+    assert "cut short after its footer" in info.output and "nothing is lost" in info.output
+    out = tmp_path / "clean.mcap"
+    result = CliRunner().invoke(main, ["record", "recover", str(cut), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "never closed" not in result.output
+    assert f"lost: nothing (every record was there, up to the footer; only the last " \
+           f"{cut_bytes} bytes of the closing MCAP magic were missing)" in result.output
+    assert out.read_bytes() == whole.read_bytes()
+
+
 @pytest.mark.slow
 def test_sigkill_during_a_recorded_demo_leaves_a_readable_recording(tmp_path):
     target = tmp_path / "k.mcap"

@@ -49,6 +49,12 @@ LAG_KINDS = ("none", "first_order", "delay", "first_order_delay", "rate_limit")
 #: (:func:`outside_calibration`): about the reach within which the workflow counts a pose
 #: as covered by the calibration (``COVER_RADIUS``, a chord of 0.1, 5.7° of arm direction).
 RANGE_TOLERANCE_DEG = 5.0
+#: The sensor rates a calibrated profile may hold, Hz. Above: the most any rate option of
+#: exohil takes (``harness.cli_types.MAX_RATE_HZ``, which this layer cannot import). Below: the
+#: model's time terms (lag time constants of tens of ms, a 0.5 s speed window, 1 s holds)
+#: need several frames a second; a rate under 1 Hz (e.g. a hand-edited 1e-9) would simulate
+#: no frame of a minute-long movement, and failed there with an unexpected IndexError.
+PROFILE_RATE_HZ = (1.0, 100_000.0)
 
 
 @dataclass(frozen=True)
@@ -351,10 +357,13 @@ def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inpu
 
 def _check_numbers(suit: CalibratedSuit) -> None:
     """ValueError naming the first number the suit cannot be simulated with: a rate that is
-    not a positive finite number, a nan or inf among the map's numbers (every reading would
-    be NaN, found only when the recording is written), a noise sigma below 0."""
-    if not (math.isfinite(suit.rate_hz) and suit.rate_hz > 0):
-        raise ValueError(f"rate_hz must be a positive number, not {suit.rate_hz!r}")
+    not a number of Hz in :data:`PROFILE_RATE_HZ`, a nan or inf among the map's numbers
+    (every reading would be NaN, found only when the recording is written), a noise sigma
+    below 0."""
+    lo, hi = PROFILE_RATE_HZ
+    if not lo <= suit.rate_hz <= hi:  # also false for nan
+        raise ValueError(f"rate_hz must be a positive number of Hz from {lo:g} to {hi:g} "
+                         f"(a sensor's sampling rate), not {suit.rate_hz!r}")
     numbers = {"coef": suit.coef, "input_coef": suit.inputs.static_coef,
                "play_thresholds": suit.inputs.thresholds, "static_centre": suit.inputs.centre,
                "angle_lo_deg": suit.inputs.angle_lo, "angle_hi_deg": suit.inputs.angle_hi,
