@@ -97,8 +97,8 @@ def print_short_of_half(summaries: dict[Case, dict]) -> None:
         print(f"  {case.label:<30} {s['gap_before']:.3f} -> {s['gap_after']:.3f}; clean control "
               f"{control_gap}; half {0.5 * s['gap_before']:.3f} against {s['noise_floor']:.3f}")
     hopeless = sum(s["gap_before"] < 2.0 * s["noise_floor"] for _, s in short)
-    print(f"of these {len(short)}, {hopeless} have a gap before under twice the noise floor: "
-          f"no model can halve them")
+    print(f"of these {len(short)}, {hopeless} {'has' if hopeless == 1 else 'have'} a gap "
+          "before under twice the noise floor: no model can halve them")
 
 
 def print_confusion(title: str, rows: list[tuple[str, str, float]]) -> None:

@@ -100,7 +100,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     remains ... none of the five effects explains", the written profile is the best fit
     found, not a faithful model of the suit. Exit status: 0 done (whatever was named), 1
     unusable recording or profile, 2 wrong command line, 130 stopped with Ctrl-C (the output
-    folder left as it was) (docs/discrepancy.md: every output).
+    folder left as it was). Every output: docs/discrepancy.md, "Outputs".
 
     Time and memory grow with the recording: a four-minute trial with seven tendons takes
     30-65 s on two cores (the machine's hour moves it), a thirty-minute one ten minutes and
