@@ -40,3 +40,29 @@ def test_every_environment_installs_the_pins_on_python_3_11():
         if section.startswith("testenv:"):
             assert "base_python" not in config[section], section
             assert "install_command" not in config[section], section
+
+
+def make_recipe(target: str) -> list[str]:
+    """The commands of a Makefile target, continuation lines joined and $(GATE) expanded."""
+    text = (ROOT / "Makefile").read_text(encoding="utf-8").replace("\\\n", " ")
+    gate = re.search(r"^GATE = (.*)$", text, re.M)
+    recipe = re.search(rf"^{target}:.*\n((?:\t.*\n)+)", text, re.M)
+    assert gate and recipe, target
+    return [" ".join(line.replace("$(GATE)", gate.group(1)).split())
+            for line in recipe.group(1).splitlines()]
+
+
+def tox_commands(env: str) -> list[str]:
+    config = tox_ini()
+    section = config[f"testenv:{env}"] if f"testenv:{env}" in config else config["testenv"]
+    commands = section.get("commands", config["testenv"]["commands"])
+    return [" ".join(line.split()) for line in commands.replace("\\\n", " ").splitlines()
+            if line.strip()]
+
+
+def test_the_conformance_environment_runs_the_gate_of_make_conform():
+    """The same target, model, profile and baseline, and the report where the docs and make
+    conform put it (it was in .tox/conformance/tmp/, emptied by the next run)."""
+    [make] = make_recipe("conform")
+    [tox] = tox_commands("conformance")
+    assert make.replace("$(BIN)/", "") + " {posargs}" == tox.replace("{toxinidir}/", "")
