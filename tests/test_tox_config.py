@@ -66,3 +66,16 @@ def test_the_conformance_environment_runs_the_gate_of_make_conform():
     [make] = make_recipe("conform")
     [tox] = tox_commands("conformance")
     assert make.replace("$(BIN)/", "") + " {posargs}" == tox.replace("{toxinidir}/", "")
+
+
+def test_the_other_environments_run_what_their_make_targets_run():
+    """py311's pytest is the environment's own (the installed package, not the checkout that
+    `python -m pytest` puts first), with make test's arguments."""
+    assert [make.replace("$(BIN)/python -m pytest", "pytest") + " {posargs}"
+            for make in make_recipe("test")] == tox_commands("py311")
+    assert [make.replace("$(BIN)/", "").replace(" .", " {toxinidir}")
+            for make in make_recipe("lint")] == tox_commands("lint")
+    assert [make.replace("$(BIN)/", "") + " {posargs}"
+            for make in make_recipe("bench")] == tox_commands("bench")
+    assert tox_ini()["testenv"]["setenv"].split() == ["HYPOTHESIS_PROFILE", "=", "ci"]
+    assert "HYPOTHESIS_PROFILE=ci" in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
