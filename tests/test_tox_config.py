@@ -33,6 +33,7 @@ def test_every_environment_installs_the_pins_on_python_3_11():
     torch==2.13.0 is no local CPU wheel but a download with several GB of CUDA packages; a
     missing python3.11 skipped py311 and let the rest pass."""
     config = tox_ini()
+    assert config["tox"]["minversion"] == "4.0"  # tox 3 ignores base_python
     assert config["tox"]["skip_missing_interpreters"] == "false"
     assert config["testenv"]["base_python"] == "python3.11"
     assert "-c {toxinidir}/constraints.txt" in config["testenv"]["install_command"]
