@@ -1,4 +1,5 @@
-"""Run every benchmark in turn with its defaults: ``python -m benchmarks`` (or ``make bench``).
+"""Run every benchmark in turn with its defaults: ``python -m benchmarks`` (or ``make bench``;
+``python -m benchmarks bench_sim bench_inference`` runs only those, in that order).
 
 Each prints its measurements and the machine (:mod:`benchmarks.report`); the emulator
 benchmark streams for 60 s and the pipeline benchmark for 600 s, so the whole run takes about
@@ -36,11 +37,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=description(__doc__))
     ap.add_argument("--json", type=json_file, metavar="FILE",
                     help="write every benchmark's measurements and machine to FILE (JSON)")
+    ap.add_argument("names", nargs="*", metavar="NAME",
+                    help=f"run only these, in this order (default: all: {' '.join(BENCHMARKS)})")
     args = ap.parse_args()
+    unknown = [name for name in args.names if name not in BENCHMARKS]
+    if unknown:
+        ap.error(f"unknown benchmark {unknown[0]}: choose from {', '.join(BENCHMARKS)}")
     failed: list[str] = []
     documents: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as folder:
-        for name in BENCHMARKS:
+        for name in args.names or BENCHMARKS:
             print(f"\n=== benchmarks.{name} ===", flush=True)
             out = Path(folder) / f"{name}.json"
             if subprocess.call([sys.executable, "-m", f"benchmarks.{name}", "--json",

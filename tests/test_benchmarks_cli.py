@@ -314,3 +314,34 @@ def test_unseen_suits_checks_model_names_and_shows_a_failed_commands_stderr(monk
     with pytest.raises(BenchmarkError, match=r"-c 'import sys; sys.exit\(\"boom\"\)' exited 1: "
                                              r"boom"):
         _exohil([sys.executable, "-c", 'import sys; sys.exit("boom")'])
+
+
+def test_the_runner_refuses_an_unknown_benchmark_before_any_runs():
+    """`python -m benchmarks NAME...` (`tox -e bench -- NAME...`) runs only those; a misspelt
+    name is refused before the first one starts."""
+    result = run_module("benchmarks", "bench_simm", "bench_sim")
+    refused(result, "unknown benchmark bench_simm: choose from bench_sim, bench_recording_io")
+    assert "=== benchmarks." not in result.stdout
+
+
+def test_the_runner_runs_the_benchmarks_named_in_their_order(report_module, monkeypatch,
+                                                             capsys):
+    import json
+
+    import benchmarks.__main__ as runner
+
+    ran: list[str] = []
+
+    def call(command: list[str]) -> int:  # each benchmark's process, not started here
+        ran.append(command[2])
+        Path(command[-1]).write_text(json.dumps({"benchmark": command[2], "measurements": []}))
+        return 0
+
+    monkeypatch.setattr(runner.subprocess, "call", call)
+    monkeypatch.setattr(sys, "argv", ["benchmarks", "bench_robot", "bench_sim"])
+    assert runner.main() == 0
+    assert ran == ["benchmarks.bench_robot", "benchmarks.bench_sim"]
+    monkeypatch.setattr(sys, "argv", ["benchmarks"])
+    ran.clear()
+    assert runner.main() == 0
+    assert ran == [f"benchmarks.{name}" for name in runner.BENCHMARKS]

@@ -360,8 +360,11 @@ def test_fixture_check_fails_on_a_wrong_hash(tmp_path):
         (fixtures / "SHA256SUMS").read_text().replace("a", "b", 1), encoding="utf-8")
     for name in ("paper_protocol.mcap", "real_motion_abd_flx.mcap"):
         (tmp_path / name).write_bytes((fixtures / name).read_bytes())
-    result = CliRunner().invoke(main, ["fixtures", "build", "--check", "--dir", str(tmp_path)])
-    assert result.exit_code == 1
+    # the real motion named as needs_shoulder_ik found it: the command's default lies beside
+    # the package, where an installed one (tox) has none
+    result = CliRunner().invoke(main, ["fixtures", "build", "--check", "--dir", str(tmp_path),
+                                       "--shoulder-ik", str(SHOULDER_IK)])
+    assert result.exit_code == 1, result.output
     assert "MISMATCH paper_protocol.mcap: rebuilt sha256" in result.output  # its "a" changed
     # one not copied: was "committed file differs from its rebuild"
     assert f"MISMATCH paper_protocol_heldout.mcap: missing from {tmp_path}" in result.output
