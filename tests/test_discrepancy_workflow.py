@@ -401,6 +401,13 @@ def test_frames_stamped_in_a_hosts_bursts_are_read_at_steady_times():
     kept = prepare_trial(replace(rec, sensors=replace(rec.sensors, t=irregular)))
     assert not kept.times_steady  # a device may stamp irregular samples exactly
     np.testing.assert_array_equal(kept.t, irregular)
+    seq = rec.sensors.seq.copy()
+    seq[3000:] += 1000
+    summary = run(replace(rec, sensors=replace(rec.sensors, seq=seq, t=host_t)), "host").summary
+    assert summary["frame_times"] == "steady rate" and summary["frame_time_scatter_s"] > 0.004
+    assert re.search(r"frames at 2(50\.0|49\.99\d*) Hz \(placed by frame counter, 1 gap by the "
+                     r"frames' times; stamped as they arrived, in bursts \(4\.\d ms RMS about a "
+                     r"steady rate\), so read at steady times\)", markdown(summary))
 
 
 def test_frames_stamped_by_a_host_as_they_arrive_keep_their_counter():

@@ -14,7 +14,7 @@ from typing import cast
 
 import numpy as np
 
-from exohil.emulators.discrepancy.data import spike_counts
+from exohil.emulators.discrepancy.data import FRAME_COUNTER, spike_counts
 from exohil.emulators.discrepancy.localise import (
     SAME_POSE_DEG,
     SIGNATURES,
@@ -186,6 +186,19 @@ def _sentence(words: str) -> str:
     """``words`` with its first letter a capital (the rest as written: sensor names keep
     their case)."""
     return words[:1].upper() + words[1:]
+
+
+def _placed_words(summary: dict) -> str:
+    """How the frames were put on the grid and timed, where that is not a plain frame
+    counter with the times recorded: a parenthesis, or nothing."""
+    words = []
+    if summary["frames_placed_by"] != FRAME_COUNTER:
+        words.append(f"placed by {summary['frames_placed_by']}")
+    if summary["frame_times"] == "steady rate":
+        scatter_ms = 1e3 * summary["frame_time_scatter_s"]
+        words.append(f"stamped as they arrived, in bursts ({scatter_ms:.2g} ms RMS about a "
+                     "steady rate), so read at steady times")
+    return f" ({'; '.join(words)})" if words else ""
 
 
 def _filter_sentence(summary: dict, units: str) -> str:
@@ -500,7 +513,8 @@ def markdown(summary: dict) -> str:
     lines = [f"# Discrepancy report: {summary['recording']}", "",
              f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
              f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
-             f"at {summary['rate_hz']} Hz, {summary['invalid_frames']} invalid (dropped, "
+             f"at {summary['rate_hz']} Hz{_placed_words(summary)}, "
+             f"{summary['invalid_frames']} invalid (dropped, "
              "outside motion capture or in its dropouts, or holding an isolated spike: "
              f"{spike_counts(summary['sensors'], summary['spikes'])})." + "".join(
                  f" Left out: {item['sensor']} {item['reason']}."
