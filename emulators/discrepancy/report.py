@@ -32,7 +32,12 @@ from exohil.emulators.discrepancy.timing import (
     skew_words,
 )
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
-from exohil.emulators.discrepancy.workflow import Outcome, map_words, resampled_words
+from exohil.emulators.discrepancy.workflow import (
+    Outcome,
+    map_words,
+    resampled_words,
+    stamped_words,
+)
 from exohil.emulators.protocols import ANGLE_NAMES
 from exohil.formats.atomic import temporary_name, write_bytes
 
@@ -195,9 +200,7 @@ def _placed_words(summary: dict) -> str:
     if summary["frames_placed_by"] != FRAME_COUNTER:
         words.append(f"placed by {summary['frames_placed_by']}")
     if summary["frame_times"] == "steady rate":
-        scatter_ms = 1e3 * summary["frame_time_scatter_s"]
-        words.append(f"stamped as they arrived, in bursts ({scatter_ms:.2g} ms RMS about a "
-                     "steady rate), so read at steady times")
+        words.append(f"{stamped_words(summary['frame_time_scatter_s'])}, so read at steady times")
     return f" ({'; '.join(words)})" if words else ""
 
 

@@ -394,6 +394,13 @@ def _resampled(trial: Trial) -> list[dict]:
             if r > RESAMPLED_SPREAD]
 
 
+def stamped_words(scatter_s: float) -> str:
+    """Frames a host stamped on arrival (``Trial.times_steady``), their times scattering
+    ``scatter_s`` s RMS about a steady rate, in words, for the progress line and the
+    report."""
+    return f"stamped as they arrived, in bursts ({1e3 * scatter_s:.2g} ms RMS about a steady rate)"
+
+
 def resampled_words(resampled: list[dict]) -> str:
     """The sensors of ``resampled_sensors`` in words, for the progress line and the report."""
     spreads = ", ".join("without limit" if item["spread"] is None else f"{item['spread']:.3g}"
@@ -641,9 +648,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
              f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
              f"{floor:.4g} {trial.units}")
     if trial.times_steady:
-        scatter_ms = 1e3 * trial.time_scatter_s
-        progress(f"    the frames were stamped as they arrived, in bursts ({scatter_ms:.2g} ms "
-                 "RMS about a steady rate): the grid takes the steady times")
+        progress(f"    the frames were {stamped_words(trial.time_scatter_s)}: the grid takes the "
+                 "steady times")
     other_rate = rate_words(trial.rate_hz, rec.sensor_rate_hz)
     if other_rate:
         progress(f"    {other_rate}")
