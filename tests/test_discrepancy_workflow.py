@@ -115,16 +115,24 @@ from exohil.emulators.discrepancy.rules import (
     stops_leave_curve_nothing,
 )
 from exohil.emulators.discrepancy.stops import Stops
-from exohil.emulators.discrepancy.timing import clock_offset, filter_words
+from exohil.emulators.discrepancy.timing import (
+    SEARCH_BEHIND_S,
+    clock_offset,
+    clock_words,
+    filter_words,
+    late_words,
+    lead_search,
+)
 from exohil.emulators.discrepancy.workflow import (
     _against_curve,
     _conclusion,
     _counted_refined,
     _static_map,
 )
-from exohil.emulators.effects import Signal
-from exohil.emulators.protocols import Trajectory
-from exohil.emulators.suit_profile import ProfileError
+from exohil.emulators.effects import EffectChain, Noise, Signal
+from exohil.emulators.protocols import Trajectory, calibration_protocol
+from exohil.emulators.simulate import simulate
+from exohil.emulators.suit_profile import ProfileError, load_default_profile
 from exohil.formats.alignment import in_mocap_gap
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
@@ -1059,6 +1067,104 @@ def test_readings_ahead_of_the_motion_capture_are_a_clock_offset_not_an_effect(c
     assert outcome.summary["effects"] == []
     assert outcome.before.gap < 1.02 * gap_on_time
     assert "ahead of the motion capture, which no suit can do" in markdown(outcome.summary)
+
+
+def _static_and_clock(rec: Recording) -> tuple[Fit, Fit, dict | None]:
+    """The static map of ``rec`` as the workflow calibrates it, and what
+    :func:`clock_offset` makes of its readings' timing: the map it keeps and the evidence."""
+    trial = prepare_trial(rec, "rec")
+    floor = pooled_noise(trial)
+    scaled = make_inputs(trial)
+    restrict_to_coverage(trial, scaled.u)
+    static = _static_map(trial, scaled, floor)
+    _, _, kept, clock = clock_offset(rec, "rec", trial, scaled, static, floor,
+                                     lambda tr, inp: _static_map(tr, inp, floor))
+    return static, kept, clock
+
+
+@pytest.fixture(scope="module")
+def default_suit_calibration():
+    """The default suit's geometry with noise alone (0.15 mm), following the 60 s
+    calibration protocol (seed 3): brisk reaches, where a clock seconds off leaves readings
+    that no longer resemble the motion's derivative."""
+    return simulate(calibration_protocol(3), load_default_profile(), 3,
+                    EffectChain([Noise(sigma_mm=0.15)]))
+
+
+def _stamped_late(rec: Recording, late_s: float) -> Recording:
+    """``rec`` with its motion capture stamped ``late_s`` s late (negative: early)."""
+    stream = rec.mocap["shoulder"]
+    return replace(rec, mocap={"shoulder": replace(stream, t=stream.t + late_s)})
+
+
+def test_a_clock_seconds_late_is_found_by_a_search_and_read_away(default_suit_calibration):
+    """Motion capture stamped 3 s late: the first order (the residual's slope on dŝ/dt)
+    read nothing there, and the static map was left at 41.6 mm against 0.157 with the
+    clocks aligned. A search over leads finds 3 s, the first order refines it, and the map
+    leaves what it leaves on time."""
+    on_time, _, clock = _static_and_clock(default_suit_calibration)
+    assert clock is None
+    static, kept, clock = _static_and_clock(_stamped_late(default_suit_calibration, 3.0))
+    assert static.gap > 100 * on_time.gap
+    assert clock is not None and clock["applied"]
+    assert clock["mocap_late_s"] == pytest.approx(3.0, abs=0.001)
+    assert clock["searched"]["lead_s"] == pytest.approx(3.0, abs=0.02)
+    assert clock["searched"]["share"] > 0.99
+    assert kept.gap < 1.01 * on_time.gap
+    words = clock_words(clock, "mm")
+    assert "run 3 s ahead of the motion capture" in words and "taken as 3 s late" in words
+
+
+def test_a_clock_seconds_early_is_found_by_the_search_and_read_away(
+        default_suit_calibration):
+    """Motion capture stamped 1.5 s early: the readings run behind it, which a suit's lag
+    does too, and the first order reads nothing ahead. No suit lags its pose by a second, so
+    a lead behind of ``SEARCH_BEHIND_S`` or more that removes half of what the search's
+    cubic leaves is the clock: read 1.5 s early, the map leaves what it leaves on time.
+    Before, the clock was left as stamped and the static map at 41.0 mm against 0.157."""
+    on_time, _, _ = _static_and_clock(default_suit_calibration)
+    early = _stamped_late(default_suit_calibration, -1.5)
+    found = lead_search(early, prepare_trial(early, "early"))
+    assert found["behind"]["lead_s"] == pytest.approx(-1.5, abs=0.02)
+    assert found["behind"]["share"] > 0.99
+    static, kept, clock = _static_and_clock(early)
+    assert static.gap > 100 * on_time.gap
+    assert clock is not None and clock["applied"]
+    assert clock["mocap_late_s"] == pytest.approx(-1.5, abs=0.001)
+    assert kept.gap < 1.01 * on_time.gap
+    words = clock_words(clock, "mm")
+    assert "run 1.5 s behind the motion capture" in words and "taken as 1.5 s early" in words
+
+
+def test_readings_a_lag_behind_the_motion_capture_are_not_read_as_a_clock(
+        default_suit_calibration):
+    """The default suit with its effects (its lag a 30 ms low-pass and 8 ms of delay): the
+    readings run behind the motion capture by the lag, which the search finds but does not
+    take for a clock (under ``SEARCH_BEHIND_S``), so nothing is read early."""
+    rec = simulate(calibration_protocol(3), load_default_profile(), 3)
+    found = lead_search(rec, prepare_trial(rec, "default suit"))
+    assert -SEARCH_BEHIND_S < found["behind"]["lead_s"] < 0.0
+    _, _, clock = _static_and_clock(rec)
+    assert clock is None or clock["mocap_late_s"] >= 0.0
+
+
+def test_no_lead_is_searched_where_the_motion_capture_covers_under_half_the_readings(
+        default_suit_calibration):
+    """Motion capture kept for the first 40 % of the recording only: at its stamped times
+    it covers under half of the frames, so what a cubic leaves there is no yardstick for
+    leads that cover other frames, and nothing is searched either way."""
+    stream = default_suit_calibration.mocap["shoulder"]
+    head = stream.t <= stream.t[0] + 0.4 * (stream.t[-1] - stream.t[0])
+    rec = replace(default_suit_calibration, mocap={"shoulder": replace(
+        stream, t=stream.t[head], angles=stream.angles[head])})
+    found = lead_search(rec, prepare_trial(rec, "partly tracked"))
+    assert found == {"ahead": {"lead_s": 0.0, "share": 0.0},
+                     "behind": {"lead_s": 0.0, "share": 0.0}}
+
+
+def test_a_clock_offset_is_said_in_milliseconds_under_a_second_else_in_seconds():
+    assert [late_words(s) for s in (0.0419, 0.5, -0.012, 2.942, 150.4)] == [
+        "41.9 ms", "500 ms", "-12 ms", "2.94 s", "150 s"]
 
 
 def _clock_rate(rec: Recording, ppm: float) -> Recording:

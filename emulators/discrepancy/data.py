@@ -21,7 +21,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from exohil.formats.alignment import MOCAP_GAP_INTERVALS, in_mocap_gap, mocap_step
 from exohil.formats.errors import InputError
-from exohil.formats.recording import Recording
+from exohil.formats.recording import AngleStream, Recording
 
 #: Folds of the blocked cross-validation.
 N_BLOCKS = 8
@@ -193,6 +193,18 @@ def _joint(rec: Recording) -> str:
     return max(rec.mocap, key=lambda name: len(rec.mocap[name]))
 
 
+def mocap_samples(stream: AngleStream) -> tuple[np.ndarray, np.ndarray]:
+    """A joint's tracked samples in time order: times (M,) s and angles (M, A) degrees made
+    continuous across wraps (:func:`continuous_angles`). Samples with a NaN angle (markers
+    lost) or time are left out."""
+    order = np.argsort(stream.t, kind="stable")
+    t_mocap = np.asarray(stream.t, dtype=np.float64)[order]
+    raw = np.asarray(stream.angles, dtype=np.float64)[order]
+    tracked = np.all(np.isfinite(raw), axis=1) & np.isfinite(t_mocap)
+    kept = raw[tracked]
+    return t_mocap[tracked], (continuous_angles(kept) if len(kept) else kept)
+
+
 def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float = 0.0,
                   mocap_low_pass_hz: float | None = None, mocap_skew: float = 0.0) -> Trial:
     """Put a recording on its uniform frame grid and split it into held-out blocks.
@@ -241,15 +253,11 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
             if sensor not in {s for s, _ in ignored}]
     values = values[:, keep]
     y = np.column_stack([np.interp(grid, index, values[:, j]) for j in range(values.shape[1])])
-    order = np.argsort(stream.t, kind="stable")
-    t_mocap = np.asarray(stream.t, dtype=np.float64)[order]
-    raw = np.asarray(stream.angles, dtype=np.float64)[order]
-    tracked = np.all(np.isfinite(raw), axis=1) & np.isfinite(t_mocap)  # NaN: markers lost
-    t_mocap, raw = t_mocap[tracked], raw[tracked]
+    t_mocap, raw = mocap_samples(stream)
     if len(t_mocap) < 2:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} has fewer than two samples "
                                "with finite angles")
-    raw, low_pass_hz = smooth_angles(t_mocap, continuous_angles(raw), mocap_low_pass_hz)
+    raw, low_pass_hz = smooth_angles(t_mocap, raw, mocap_low_pass_hz)
     if t_mocap[0] > t[-1] or t_mocap[-1] < t[0]:
         raise DiscrepancyError(
             f"{name}: motion capture ({t_mocap[0]:.6g}–{t_mocap[-1]:.6g} s) and sensors "

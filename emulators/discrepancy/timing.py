@@ -16,7 +16,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from exohil.emulators.discrepancy.data import MOCAP_CUTOFF_HZ, Trial, prepare_trial
+from exohil.emulators.discrepancy.data import (
+    MOCAP_CUTOFF_HZ,
+    Trial,
+    mocap_samples,
+    prepare_trial,
+    smooth_angles,
+)
 from exohil.emulators.discrepancy.figures import significant
 from exohil.emulators.discrepancy.folds import block_mse
 from exohil.emulators.discrepancy.model import (
@@ -24,10 +30,13 @@ from exohil.emulators.discrepancy.model import (
     Inputs,
     Spec,
     fit,
+    legendre_products,
     make_inputs,
+    map_inputs,
     restrict_to_coverage,
 )
 from exohil.emulators.discrepancy.rules import rules_on_blocks
+from exohil.formats.alignment import in_mocap_gap
 from exohil.formats.recording import Recording
 
 #: A static map chosen for a trial and its scaled inputs (the workflow's calibration step).
@@ -37,6 +46,23 @@ MapFit = Callable[[Trial, Inputs], Fit]
 #: noise, found in at most ``CLOCK_STEPS`` static refits.
 CLOCK_SHARE = 0.5
 CLOCK_STEPS = 3
+#: A lead too long for the first order to read (:func:`lead_search`): leads up to
+#: ``SEARCH_MAX_S`` (and a quarter of the recording) each way are tried every
+#: ``SEARCH_STEP_S``, then every ``SEARCH_FINE_S`` about the best, each scored by a
+#: polynomial of degree ``SEARCH_DEGREE`` in the map's inputs (one less for more than three
+#: inputs) fitted to a frame every ``SEARCH_ROW_S``. A lead ahead of ``SEARCH_MIN_S`` or more
+#: that removes at least ``CLOCK_SHARE`` of what that polynomial leaves at the stamped times
+#: is where :func:`clock_offset` starts reading the clock.
+SEARCH_MAX_S = 30.0
+SEARCH_STEP_S = 0.1
+SEARCH_FINE_S = 0.01
+SEARCH_ROW_S = 0.1
+SEARCH_DEGREE = 3
+SEARCH_MIN_S = 0.1
+#: Readings the search finds this much behind the motion capture or more are where
+#: :func:`clock_offset` starts reading its clock early: no suit lags its pose by a second
+#: (the lag candidates' longest low-pass and delay are 0.2 and 0.15 s).
+SEARCH_BEHIND_S = 1.0
 
 
 def lead_s(trial: Trial, model: Fit) -> tuple[float, np.ndarray]:
@@ -99,6 +125,72 @@ def held_out_trend(trial: Trial, model: Fit, floor: float) -> dict:
         line[out] = d0 + d1 * tau[out]
     return rules_on_blocks(block_mse(trial, model.residual - constant[:, None] * slope),
                            block_mse(trial, model.residual - line[:, None] * slope), floor)
+
+
+def lead_search(rec: Recording, trial: Trial) -> dict:
+    """Where a coarse search finds the readings match the motion capture best when it is read
+    later than ``trial`` reads it (``ahead``: the readings lead) and when it is read earlier
+    (``behind``): for each, ``lead_s``, s (negative behind), and ``share``, the part of what
+    a cubic map leaves at ``trial``'s reading that reading it so removes (0 … 1).
+
+    The first order (:func:`lead_s`) reads a lead of tens of milliseconds; a clock that
+    is a second off leaves readings that no longer resemble the motion's derivative, and it
+    reads nothing there. The search needs no model of the suit: at each lead tried, the
+    readings of a frame every ``SEARCH_ROW_S`` are fitted by a polynomial of degree
+    ``SEARCH_DEGREE`` in the static map's inputs (:func:`~.model.map_inputs`; degree
+    ``SEARCH_DEGREE`` − 1 for more than three, as with the axial rotation), each sensor
+    scaled to unit variance, and the lead whose fit leaves least is kept. Leads that
+    leave less than half of the frames with motion capture are not tried, and where the
+    stamped times do, nothing is searched (``lead_s`` and ``share`` 0): what is left at
+    leads over other frames is no measure of what reading so removes.
+    """
+    stream = rec.mocap[trial.joint]
+    t_mocap, raw = mocap_samples(stream)
+    raw, _ = smooth_angles(t_mocap, raw, trial.mocap_low_pass_hz)
+    raw = raw[:, [stream.names.index(angle) for angle in trial.angle_names]]
+    lo, hi = raw.min(axis=0), raw.max(axis=0)
+    rows = np.arange(0, len(trial.t), max(1, round(trial.rate_hz * SEARCH_ROW_S)))
+    rows = rows[np.all(np.isfinite(trial.y[rows]), axis=1)]
+    t = trial.t[rows]
+    read0 = t + trial.mocap_late_s + trial.mocap_skew * (t - trial.t[0])
+
+    def left(lead: float) -> float:
+        """What the polynomial leaves with the motion capture read ``lead`` s later: mean
+        square over frames and sensors in units of each sensor's variance; inf where less
+        than half the frames are covered."""
+        read = read0 + lead
+        inside = (read >= t_mocap[0]) & (read <= t_mocap[-1]) & ~in_mocap_gap(read, t_mocap)
+        if 2 * int(inside.sum()) < len(rows):
+            return np.inf
+        angles = np.column_stack([np.interp(read[inside], t_mocap, raw[:, k])
+                                  for k in range(raw.shape[1])])
+        u = map_inputs(angles, trial.angle_names, lo, hi)[0]
+        basis = legendre_products(u, SEARCH_DEGREE - (u.shape[1] > 3))[0]
+        y = trial.y[rows[inside]]
+        y = y - y.mean(axis=0)
+        scale = y.std(axis=0)
+        y = y[:, scale > 0] / scale[scale > 0]
+        gram = basis.T @ basis  # normal equations: a least-squares solver is 10x slower
+        gram[np.diag_indices_from(gram)] += 1e-9 * np.trace(gram) / len(gram)
+        coef = np.linalg.solve(gram, basis.T @ y)
+        return float(np.mean((y - basis @ coef) ** 2))
+
+    stamped = left(0.0)
+    longest = min(SEARCH_MAX_S, 0.25 * float(trial.t[-1] - trial.t[0]))
+    coarse = np.arange(SEARCH_STEP_S, longest + 1e-9, SEARCH_STEP_S)
+
+    def best(sign: float) -> dict:
+        """The best lead on one side (``sign``: +1 ahead, −1 behind) and its share."""
+        if not coarse.size or not 0.0 < stamped < np.inf:
+            return {"lead_s": 0.0, "share": 0.0}
+        found = sign * float(coarse[int(np.argmin([left(sign * lead) for lead in coarse]))])
+        fine = np.arange(found - SEARCH_STEP_S, found + SEARCH_STEP_S + 1e-9, SEARCH_FINE_S)
+        fine = fine[sign * fine > 0.0]
+        scores = [left(lead) for lead in fine]
+        return {"lead_s": round(float(fine[int(np.argmin(scores))]), 3),
+                "share": round(max(0.0, 1.0 - min(scores) / stamped), 4)}
+
+    return {"ahead": best(1.0), "behind": best(-1.0)}
 
 
 def first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
@@ -203,37 +295,66 @@ def reread_evidence(without: Fit, reread: Fit, floor: float) -> dict:
             "share_of_excess": round(share, 4), **rules}
 
 
-def offset_evidence(late: float, without: Fit, later: Fit, floor: float) -> dict:
+def offset_evidence(late: float, without: Fit, later: Fit, floor: float,
+                    earliest: float = 0.0) -> dict:
     """:func:`reread_evidence` for the motion capture read ``late`` s late (``later``),
-    kept only where it is read later."""
+    kept only where that is later than ``earliest``, s: its stamps, or the offset already
+    found where the search read it earlier (:func:`_searched_clocks`)."""
     evidence = reread_evidence(without, later, floor)
     return {"mocap_late_s": round(late, 6), **evidence,
-            "applied": bool(late > 0.0 and evidence["applied"])}
+            "applied": bool(late > earliest and evidence["applied"])}
+
+
+def _searched_clocks(searched: dict) -> list[dict]:
+    """The leads of the search (:func:`lead_search`) that :func:`clock_offset` reads the
+    clock from: ahead by ``SEARCH_MIN_S`` or more, or behind by ``SEARCH_BEHIND_S`` or
+    more, each removing at least ``CLOCK_SHARE`` of what its cubic map leaves."""
+    ahead, behind = searched["ahead"], searched["behind"]
+    return [lead for lead, shortest in ((ahead, SEARCH_MIN_S), (behind, SEARCH_BEHIND_S))
+            if abs(lead["lead_s"]) >= shortest and lead["share"] >= CLOCK_SHARE]
 
 
 def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
                  floor: float, static_map: MapFit) -> tuple[Trial, Inputs, Fit, dict | None]:
     """The trial read with the motion capture's clock offset where the readings run ahead
-    of it, with its scaled inputs and static map (``static_map``, refitted on the trial read
-    later); the evidence (None: nothing ahead; ``floor``: the pooled noise floor).
+    of it (or a second or more behind it), with its scaled inputs and static map
+    (``static_map``, refitted on the trial so read); the evidence (None: nothing found;
+    ``floor``: the pooled noise floor).
 
     A suit cannot answer a move before it is made, so readings ahead of the motion capture
     mean its samples are stamped late: calibration, like a gain or an offset, not an effect
     of the suit. (Readings behind it are a lag or a clock offset the other way, which the
-    data cannot tell apart: ``lag`` is the candidate for both.) The lead is estimated from
-    the static map's residual (:func:`lead_s`); where removing it to first order clears
-    rules 1 and 2, the motion capture is read that much later and the map refitted
-    (:func:`read_later`). The offset is kept where the refitted map clears rules 1 and 2
+    data cannot tell apart: ``lag`` is the candidate for both, up to ``SEARCH_BEHIND_S``,
+    longer than any suit lags its pose.) Where the search over leads (:func:`lead_search`)
+    finds one ahead by ``SEARCH_MIN_S`` or more, or behind by ``SEARCH_BEHIND_S`` or more,
+    that removes at least ``CLOCK_SHARE`` of what its cubic map leaves
+    (:func:`_searched_clocks`; the larger share first), the motion capture
+    is read that much later (or earlier) and the map refitted, refining it to first order
+    (:func:`read_later`); where that is not kept, or the search found nothing, the lead is
+    estimated from the static map's residual (:func:`lead_s`), and where removing it to
+    first order clears rules 1 and 2, the motion capture is read that much later and the map
+    refitted the same way. The offset is kept where the refitted map clears rules 1 and 2
     over the first and explains at least ``CLOCK_SHARE`` of what the first map left above
     the noise: an offset moves every sensor by its own speed alike and, where it is the
     cause, explains nearly all of it, while an effect whose loop reads a little ahead (a
-    Bouc–Wen loop on the hidden suite reads 7 ms ahead) keeps most of its residual.
+    Bouc–Wen loop on the hidden suite reads 7 ms ahead) keeps most of its residual. The
+    evidence holds the search's ``searched`` where it led the way.
     """
+    tried = None
+    searched = _searched_clocks(lead_search(rec, trial))
+    for found in sorted(searched, key=lambda lead: -lead["share"]):
+        shifted, inputs, refit = read_later(rec, name, trial, found["lead_s"], None,
+                                            static_map)
+        tried = {**offset_evidence(shifted.mocap_late_s, static, refit, floor, -np.inf),
+                 "searched": found}
+        if tried["applied"]:
+            return shifted, inputs, refit, tried
     lead = first_order_lead(trial, static, floor)
     if lead is None:
-        return trial, scaled, static, None
+        return trial, scaled, static, tried
     shifted, inputs, refit = read_later(rec, name, trial, lead, None, static_map)
-    evidence = offset_evidence(shifted.mocap_late_s, static, refit, floor)
+    evidence = offset_evidence(shifted.mocap_late_s, static, refit, floor,
+                               min(0.0, trial.mocap_late_s))
     if evidence["applied"]:
         return shifted, inputs, refit, evidence
     return trial, scaled, static, evidence
@@ -293,8 +414,8 @@ def read_at_rate(rec: Recording, name: str, trial: Trial, model: Fit, spec: Spec
     late, skew = trial.mocap_late_s, trial.mocap_skew
     span = float(trial.t[-1] - trial.t[0])
 
-    def moved(late: float, d0: float) -> float:
-        return late + d0 if earlier else max(late + d0, 0.0)
+    def moved(late: float, d0: float) -> float:  # never earlier than stamped or found
+        return late + d0 if earlier else max(late + d0, min(0.0, trial.mocap_late_s))
 
     for _ in range(CLOCK_STEPS):
         late = moved(late, d0)
@@ -319,11 +440,12 @@ def skew_words(skew: dict, units: str) -> str:
         head += (f" (found once the effects were modelled: read so, the model explained "
                  f"{later['share_of_excess']:.0%} of what it left above the noise)")
     if skew["applied"]:
-        start = 1000.0 * skew["mocap_late_s"]
         gaps = (f" (the static map's held-out gap {skew['gap_without']:.4g} -> "
                 f"{skew['gap_with']:.4g} {units})" if "gap_without" in skew else "")
-        return (f"{head}, and is read at that rate from {start:.3g} ms late at the "
-                f"start{gaps}; the recording's timing, not the suit's")
+        late_s = skew["mocap_late_s"]
+        return (f"{head}, and is read at that rate from {late_words(abs(late_s))} "
+                f"{'late' if late_s >= 0.0 else 'early'} at the start{gaps}; the recording's "
+                f"timing, not the suit's")
     return (f"{head} to first order, but read so the static map explains "
             f"{skew['share_of_excess']:.0%} of what it left above the noise "
             f"({skew['blocks_improved']} blocks improved of {skew['blocks_needed']} needed): "
@@ -345,7 +467,8 @@ def lead_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floo
         return None
     shifted, _, refit = read_later(rec, name, trial, lead, final.spec,
                                    lambda tr, inp: fit(tr, inp, final.spec))
-    return offset_evidence(shifted.mocap_late_s, final, refit, floor)
+    return offset_evidence(shifted.mocap_late_s, final, refit, floor,
+                           min(0.0, trial.mocap_late_s))
 
 
 def rate_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floor: float
@@ -376,8 +499,7 @@ def after_effects_words(key: str, found: dict, units: str) -> str:
     from "the readings" on: how far the motion capture would be read, and whether that was
     kept."""
     if key == "clock_offset":
-        head = (f"the readings run {1000.0 * found['mocap_late_s']:.3g} ms ahead of the motion "
-                f"capture")
+        head = f"the readings run {side_words(found['mocap_late_s'])} the motion capture"
     else:
         ppm = found["mocap_skew_ppm"]
         head = (f"the readings' lead over the motion capture changes with time: its clock runs "
@@ -401,8 +523,16 @@ def after_effects_words(key: str, found: dict, units: str) -> str:
 def clock_words(clock: dict, units: str) -> str:
     """The clock offset's evidence (:func:`clock_offset`, :func:`lead_after_effects`) as
     one sentence."""
-    ms = 1000.0 * clock["mocap_late_s"]
-    head = f"the readings run {ms:.3g} ms ahead of the motion capture"
+    late_s = clock["mocap_late_s"]
+    late = late_words(abs(late_s))
+    head = f"the readings run {side_words(late_s)} the motion capture"
+    searched = clock.get("searched")
+    if searched is not None:
+        head += (f" (a search over leads found the readings best matched "
+                 f"{late_words(abs(searched['lead_s']))} "
+                 f"{'ahead' if searched['lead_s'] > 0 else 'behind'}, removing "
+                 f"{searched['share']:.0%} of what a cubic map leaves at the stamped times; "
+                 f"refined to first order)")
     later = clock.get("after_effects")
     if later is not None:
         head += (f" (found once the effects were modelled: read so late, the model explained "
@@ -410,13 +540,33 @@ def clock_words(clock: dict, units: str) -> str:
     if clock["applied"]:
         gaps = (f" (the static map's held-out gap {clock['gap_without']:.4g} -> "
                 f"{clock['gap_with']:.4g} {units})" if "gap_without" in clock else "")
-        return (f"{head}, which no suit can do: its clock is taken as {ms:.3g} ms late and "
-                f"read so{gaps}; the recording's timing, not the suit's")
+        why = ("which no suit can do" if late_s >= 0.0 else
+               "longer than any suit lags its pose")
+        return (f"{head}, {why}: its clock is taken as {late} "
+                f"{'late' if late_s >= 0.0 else 'early'} and read so{gaps}; the recording's "
+                f"timing, not the suit's")
     if clock["share_of_excess"] < CLOCK_SHARE:
-        why = (f"reading the motion capture so much later explains only "
-               f"{clock['share_of_excess']:.0%} of what the static map leaves above the noise")
+        why = (f"reading the motion capture so much {'later' if late_s >= 0.0 else 'earlier'} "
+               f"explains only {clock['share_of_excess']:.0%} of what the static map leaves "
+               f"above the noise")
     else:
-        why = (f"reading the motion capture so much later does not clear rules 1 and 2 "
-               f"(removed RMS {clock['removed_rms']:.4g} {units}, {clock['blocks_improved']} "
-               f"blocks improved of {clock['blocks_needed']} needed)")
-    return f"{head} to first order, but {why}: left to the effects"
+        why = (f"reading the motion capture so much {'later' if late_s >= 0.0 else 'earlier'} "
+               f"does not clear rules 1 and 2 (removed RMS {clock['removed_rms']:.4g} "
+               f"{units}, {clock['blocks_improved']} blocks improved of "
+               f"{clock['blocks_needed']} needed)")
+    return f"{head}{'' if searched else ' to first order'}, but {why}: left to the effects"
+
+
+def side_words(late_s: float) -> str:
+    """How far the readings run ahead of (``late_s`` ≥ 0) or behind the motion capture read
+    ``late_s`` s late, e.g. "42 ms ahead of", "3.06 s behind"."""
+    return (f"{late_words(late_s)} ahead of" if late_s >= 0.0
+            else f"{late_words(-late_s)} behind")
+
+
+def late_words(seconds: float) -> str:
+    """A clock offset in words: milliseconds under a second (3 significant digits), else
+    seconds."""
+    if abs(seconds) < 1.0:
+        return f"{1000.0 * seconds:.3g} ms"
+    return f"{seconds:.3g} s" if abs(seconds) < 100.0 else f"{seconds:.0f} s"
