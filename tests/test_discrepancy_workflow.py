@@ -32,6 +32,7 @@ from exohil.emulators.discrepancy.data import (
     N_BLOCKS,
     RESAMPLED_SPREAD,
     SKIPPED_RUN_S,
+    Trial,
     frame_grid,
     held_out_blocks,
     quantisation_step,
@@ -1069,17 +1070,18 @@ def test_readings_ahead_of_the_motion_capture_are_a_clock_offset_not_an_effect(c
     assert "ahead of the motion capture, which no suit can do" in markdown(outcome.summary)
 
 
-def _static_and_clock(rec: Recording) -> tuple[Fit, Fit, dict | None]:
-    """The static map of ``rec`` as the workflow calibrates it, and what
-    :func:`clock_offset` makes of its readings' timing: the map it keeps and the evidence."""
+def _static_and_clock(rec: Recording) -> tuple[Trial, Fit, Trial, Fit, dict | None]:
+    """``rec``'s trial and static map as the workflow calibrates them, and what
+    :func:`clock_offset` makes of its readings' timing: the trial and map it keeps and the
+    evidence."""
     trial = prepare_trial(rec, "rec")
     floor = pooled_noise(trial)
     scaled = make_inputs(trial)
     restrict_to_coverage(trial, scaled.u)
     static = _static_map(trial, scaled, floor)
-    _, _, kept, clock = clock_offset(rec, "rec", trial, scaled, static, floor,
-                                     lambda tr, inp: _static_map(tr, inp, floor))
-    return static, kept, clock
+    kept_trial, _, kept, clock = clock_offset(rec, "rec", trial, scaled, static, floor,
+                                              lambda tr, inp: _static_map(tr, inp, floor))
+    return trial, static, kept_trial, kept, clock
 
 
 @pytest.fixture(scope="module")
@@ -1102,9 +1104,9 @@ def test_a_clock_seconds_late_is_found_by_a_search_and_read_away(default_suit_ca
     read nothing there, and the static map was left at 41.6 mm against 0.157 with the
     clocks aligned. A search over leads finds 3 s, the first order refines it, and the map
     leaves what it leaves on time."""
-    on_time, _, clock = _static_and_clock(default_suit_calibration)
+    _, on_time, _, _, clock = _static_and_clock(default_suit_calibration)
     assert clock is None
-    static, kept, clock = _static_and_clock(_stamped_late(default_suit_calibration, 3.0))
+    _, static, _, kept, clock = _static_and_clock(_stamped_late(default_suit_calibration, 3.0))
     assert static.gap > 100 * on_time.gap
     assert clock is not None and clock["applied"]
     assert clock["mocap_late_s"] == pytest.approx(3.0, abs=0.001)
@@ -1122,12 +1124,12 @@ def test_a_clock_seconds_early_is_found_by_the_search_and_read_away(
     a lead behind of ``SEARCH_BEHIND_S`` or more that removes half of what the search's
     cubic leaves is the clock: read 1.5 s early, the map leaves what it leaves on time.
     Before, the clock was left as stamped and the static map at 41.0 mm against 0.157."""
-    on_time, _, _ = _static_and_clock(default_suit_calibration)
+    _, on_time, _, _, _ = _static_and_clock(default_suit_calibration)
     early = _stamped_late(default_suit_calibration, -1.5)
     found = lead_search(early, prepare_trial(early, "early"))
     assert found["behind"]["lead_s"] == pytest.approx(-1.5, abs=0.02)
     assert found["behind"]["share"] > 0.99
-    static, kept, clock = _static_and_clock(early)
+    _, static, _, kept, clock = _static_and_clock(early)
     assert static.gap > 100 * on_time.gap
     assert clock is not None and clock["applied"]
     assert clock["mocap_late_s"] == pytest.approx(-1.5, abs=0.001)
@@ -1144,7 +1146,7 @@ def test_readings_a_lag_behind_the_motion_capture_are_not_read_as_a_clock(
     rec = simulate(calibration_protocol(3), load_default_profile(), 3)
     found = lead_search(rec, prepare_trial(rec, "default suit"))
     assert -SEARCH_BEHIND_S < found["behind"]["lead_s"] < 0.0
-    _, _, clock = _static_and_clock(rec)
+    clock = _static_and_clock(rec)[-1]
     assert clock is None or clock["mocap_late_s"] >= 0.0
 
 
@@ -1224,13 +1226,7 @@ def test_a_relaxation_that_reads_ahead_is_left_to_the_effects(clean_101):
     y = rec.sensors.values
     relaxing = replace(rec, sensors=replace(rec.sensors, values=y + 0.1 * (y - low_pass(
         y, 1.0, 250.0))))
-    trial = prepare_trial(relaxing)
-    floor = pooled_noise(trial)
-    scaled = make_inputs(trial)
-    restrict_to_coverage(trial, scaled.u)
-    static = _static_map(trial, scaled, floor)
-    kept, _, fitted, clock = clock_offset(relaxing, "relaxing", trial, scaled, static, floor,
-                                          lambda tr, inp: _static_map(tr, inp, floor))
+    trial, static, kept, fitted, clock = _static_and_clock(relaxing)
     assert clock is not None and clock["mocap_late_s"] > 0.01 and clock["significant"]
     assert not clock["applied"] and clock["share_of_excess"] < 0.4
     assert kept is trial and fitted is static
