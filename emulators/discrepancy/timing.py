@@ -48,17 +48,20 @@ CLOCK_SHARE = 0.5
 CLOCK_STEPS = 3
 #: A lead too long for the first order to read (:func:`lead_search`): leads up to
 #: ``SEARCH_MAX_S`` (and a quarter of the recording) each way are tried every
-#: ``SEARCH_STEP_S``, then every ``SEARCH_FINE_S`` about the best, each scored by a
-#: polynomial of degree ``SEARCH_DEGREE`` in the map's inputs (one less for more than three
-#: inputs) fitted to a frame every ``SEARCH_ROW_S``. A lead ahead of ``SEARCH_MIN_S`` or more
-#: that removes at least ``CLOCK_SHARE`` of what that polynomial leaves at the stamped times
-#: is where :func:`clock_offset` starts reading the clock.
+#: ``SEARCH_STEP_S``, then every ``SEARCH_FINE_S`` about the shortest of the best, each
+#: scored by a polynomial of degree ``SEARCH_DEGREE`` in the map's inputs (one less for more
+#: than three inputs) fitted to a frame every ``SEARCH_ROW_S``. A lead ahead of
+#: ``SEARCH_MIN_S`` or more that removes at least ``CLOCK_SHARE`` of what that polynomial
+#: leaves at the stamped times is where :func:`clock_offset` starts reading the clock.
 SEARCH_MAX_S = 30.0
 SEARCH_STEP_S = 0.1
 SEARCH_FINE_S = 0.01
 SEARCH_ROW_S = 0.1
 SEARCH_DEGREE = 3
 SEARCH_MIN_S = 0.1
+#: Leads whose cubic leaves at most this many times the least are as good as the best to
+#: :func:`lead_search`, which keeps the shortest of them.
+SEARCH_ALIAS = 1.25
 #: Readings the search finds this much behind the motion capture or more are where
 #: :func:`clock_offset` starts reading its clock early: no suit lags its pose by a second
 #: (the lag candidates' longest low-pass and delay are 0.2 and 0.15 s).
@@ -129,9 +132,9 @@ def held_out_trend(trial: Trial, model: Fit, floor: float) -> dict:
 
 def lead_search(rec: Recording, trial: Trial) -> dict:
     """Where a coarse search finds the readings match the motion capture best when it is read
-    later than ``trial`` reads it (``ahead``: the readings lead) and when it is read earlier
-    (``behind``): for each, ``lead_s``, s (negative behind), and ``share``, the part of what
-    a cubic map leaves at ``trial``'s reading that reading it so removes (0 … 1).
+    later (or earlier) than ``trial`` reads it: ``lead_s``, s (positive: the readings run
+    ahead of it; negative: behind), and ``share``, the part of what a cubic map leaves at
+    ``trial``'s reading that reading it so removes (0 … 1).
 
     The first order (:func:`lead_s`) reads a lead of tens of milliseconds; a clock that
     is a second off leaves readings that no longer resemble the motion's derivative, and it
@@ -139,10 +142,13 @@ def lead_search(rec: Recording, trial: Trial) -> dict:
     readings of a frame every ``SEARCH_ROW_S`` are fitted by a polynomial of degree
     ``SEARCH_DEGREE`` in the static map's inputs (:func:`~.model.map_inputs`; degree
     ``SEARCH_DEGREE`` − 1 for more than three, as with the axial rotation), each sensor
-    scaled to unit variance, and the lead whose fit leaves least is kept. Leads that
-    leave less than half of the frames with motion capture are not tried, and where the
-    stamped times do, nothing is searched (``lead_s`` and ``share`` 0): what is left at
-    leads over other frames is no measure of what reading so removes.
+    scaled to unit variance. Of the leads whose fit leaves at most ``SEARCH_ALIAS`` times
+    the least, the shortest is kept (then refined every ``SEARCH_FINE_S``): a movement that
+    repeats matches its motion capture a period later nearly as well, and a suit's lag of
+    tens of milliseconds must not be read as a clock a period off. Leads that leave less
+    than half of the frames with motion capture are not tried, and where the stamped times
+    do, nothing is searched (``lead_s`` and ``share`` 0): what is left at leads over other
+    frames is no measure of what reading so removes.
     """
     stream = rec.mocap[trial.joint]
     t_mocap, raw = mocap_samples(stream)
@@ -176,21 +182,20 @@ def lead_search(rec: Recording, trial: Trial) -> dict:
         return float(np.mean((y - basis @ coef) ** 2))
 
     stamped = left(0.0)
-    longest = min(SEARCH_MAX_S, 0.25 * float(trial.t[-1] - trial.t[0]))
-    coarse = np.arange(SEARCH_STEP_S, longest + 1e-9, SEARCH_STEP_S)
-
-    def best(sign: float) -> dict:
-        """The best lead on one side (``sign``: +1 ahead, −1 behind) and its share."""
-        if not coarse.size or not 0.0 < stamped < np.inf:
-            return {"lead_s": 0.0, "share": 0.0}
-        found = sign * float(coarse[int(np.argmin([left(sign * lead) for lead in coarse]))])
-        fine = np.arange(found - SEARCH_STEP_S, found + SEARCH_STEP_S + 1e-9, SEARCH_FINE_S)
-        fine = fine[sign * fine > 0.0]
-        scores = [left(lead) for lead in fine]
-        return {"lead_s": round(float(fine[int(np.argmin(scores))]), 3),
-                "share": round(max(0.0, 1.0 - min(scores) / stamped), 4)}
-
-    return {"ahead": best(1.0), "behind": best(-1.0)}
+    steps = int(min(SEARCH_MAX_S, 0.25 * float(trial.t[-1] - trial.t[0])) / SEARCH_STEP_S
+                + 1e-9)
+    if steps < 1 or not 0.0 < stamped < np.inf:
+        return {"lead_s": 0.0, "share": 0.0}
+    coarse = SEARCH_STEP_S * np.arange(-steps, steps + 1)
+    scores = np.array([stamped if lead == 0.0 else left(lead) for lead in coarse])
+    near = coarse[scores <= SEARCH_ALIAS * scores.min()]
+    pick = float(near[int(np.argmin(np.abs(near)))])
+    fine = pick + SEARCH_FINE_S * np.arange(-round(SEARCH_STEP_S / SEARCH_FINE_S),
+                                            round(SEARCH_STEP_S / SEARCH_FINE_S) + 1)
+    fine_scores = [stamped if abs(lead) < 1e-12 else left(lead) for lead in fine]
+    best = int(np.argmin(fine_scores))
+    return {"lead_s": round(float(fine[best]), 3),
+            "share": round(max(0.0, 1.0 - fine_scores[best] / stamped), 4)}
 
 
 def first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
@@ -299,19 +304,20 @@ def offset_evidence(late: float, without: Fit, later: Fit, floor: float,
                     earliest: float = 0.0) -> dict:
     """:func:`reread_evidence` for the motion capture read ``late`` s late (``later``),
     kept only where that is later than ``earliest``, s: its stamps, or the offset already
-    found where the search read it earlier (:func:`_searched_clocks`)."""
+    found where the search read it earlier (:func:`_searched_clock`)."""
     evidence = reread_evidence(without, later, floor)
     return {"mocap_late_s": round(late, 6), **evidence,
             "applied": bool(late > earliest and evidence["applied"])}
 
 
-def _searched_clocks(searched: dict) -> list[dict]:
-    """The leads of the search (:func:`lead_search`) that :func:`clock_offset` reads the
-    clock from: ahead by ``SEARCH_MIN_S`` or more, or behind by ``SEARCH_BEHIND_S`` or
-    more, each removing at least ``CLOCK_SHARE`` of what its cubic map leaves."""
-    ahead, behind = searched["ahead"], searched["behind"]
-    return [lead for lead, shortest in ((ahead, SEARCH_MIN_S), (behind, SEARCH_BEHIND_S))
-            if abs(lead["lead_s"]) >= shortest and lead["share"] >= CLOCK_SHARE]
+def _searched_clock(searched: dict) -> bool:
+    """Whether :func:`clock_offset` reads the clock from the search's lead
+    (:func:`lead_search`): ahead by ``SEARCH_MIN_S`` or more, or behind by
+    ``SEARCH_BEHIND_S`` or more, removing at least ``CLOCK_SHARE`` of what its cubic map
+    leaves."""
+    lead = searched["lead_s"]
+    return (lead >= SEARCH_MIN_S or lead <= -SEARCH_BEHIND_S) and (
+        searched["share"] >= CLOCK_SHARE)
 
 
 def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
@@ -328,7 +334,7 @@ def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static
     longer than any suit lags its pose.) Where the search over leads (:func:`lead_search`)
     finds one ahead by ``SEARCH_MIN_S`` or more, or behind by ``SEARCH_BEHIND_S`` or more,
     that removes at least ``CLOCK_SHARE`` of what its cubic map leaves
-    (:func:`_searched_clocks`; the larger share first), the motion capture
+    (:func:`_searched_clock`), the motion capture
     is read that much later (or earlier) and the map refitted, refining it to first order
     (:func:`read_later`); where that is not kept, or the search found nothing, the lead is
     estimated from the static map's residual (:func:`lead_s`), and where removing it to
@@ -340,13 +346,12 @@ def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static
     Bouc–Wen loop on the hidden suite reads 7 ms ahead) keeps most of its residual. The
     evidence holds the search's ``searched`` where it led the way.
     """
-    tried = None
-    searched = _searched_clocks(lead_search(rec, trial))
-    for found in sorted(searched, key=lambda lead: -lead["share"]):
-        shifted, inputs, refit = read_later(rec, name, trial, found["lead_s"], None,
+    tried, searched = None, lead_search(rec, trial)
+    if _searched_clock(searched):
+        shifted, inputs, refit = read_later(rec, name, trial, searched["lead_s"], None,
                                             static_map)
         tried = {**offset_evidence(shifted.mocap_late_s, static, refit, floor, -np.inf),
-                 "searched": found}
+                 "searched": searched}
         if tried["applied"]:
             return shifted, inputs, refit, tried
     lead = first_order_lead(trial, static, floor)
