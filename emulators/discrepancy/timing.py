@@ -300,11 +300,17 @@ def reread_evidence(without: Fit, reread: Fit, floor: float) -> dict:
             "share_of_excess": round(share, 4), **rules}
 
 
+def earliest_reading(trial: Trial) -> float:
+    """How early, s late, the motion capture of ``trial`` may be read by a screen that
+    finds it ahead or moves it with a clock rate: never earlier than stamped, nor than an
+    offset the search already read it early by (:func:`_searched_clock`)."""
+    return min(0.0, trial.mocap_late_s)
+
+
 def offset_evidence(late: float, without: Fit, later: Fit, floor: float,
                     earliest: float = 0.0) -> dict:
     """:func:`reread_evidence` for the motion capture read ``late`` s late (``later``),
-    kept only where that is later than ``earliest``, s: its stamps, or the offset already
-    found where the search read it earlier (:func:`_searched_clock`)."""
+    kept only where that is later than ``earliest``, s (:func:`earliest_reading`)."""
     evidence = reread_evidence(without, later, floor)
     return {"mocap_late_s": round(late, 6), **evidence,
             "applied": bool(late > earliest and evidence["applied"])}
@@ -359,7 +365,7 @@ def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static
         return trial, scaled, static, tried
     shifted, inputs, refit = read_later(rec, name, trial, lead, None, static_map)
     evidence = offset_evidence(shifted.mocap_late_s, static, refit, floor,
-                               min(0.0, trial.mocap_late_s))
+                               earliest_reading(trial))
     if evidence["applied"]:
         return shifted, inputs, refit, evidence
     return trial, scaled, static, evidence
@@ -379,8 +385,9 @@ def clock_skew(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: 
     blocks over removing a constant lead (:func:`held_out_trend`; the first order can fall
     well short of what reading the motion capture so would remove, so rule 1 waits for the
     refit), the motion capture is read with that rate (its offset at the start moved with
-    it, but never read earlier than stamped, as in :func:`clock_offset`: readings behind
-    the motion capture may be a lag), the map
+    it, but never read earlier than stamped, or than an offset found early, as in
+    :func:`clock_offset` (:func:`earliest_reading`): readings behind the motion capture may
+    be a lag), the map
     refitted, up to ``CLOCK_STEPS`` times until what remains is within a tenth of a frame
     at the recording's ends. The rate is kept where the refitted map clears rules 1
     and 2 over the first and explains at least ``CLOCK_SHARE`` of what it left above the
@@ -413,14 +420,15 @@ def read_at_rate(rec: Recording, name: str, trial: Trial, model: Fit, spec: Spec
     (:func:`lead_trend`), and refitted (``refit``, on inputs scaled for ``spec``), up to
     ``CLOCK_STEPS`` times, each adding the line that remains, until it is within a tenth of
     a frame at the recording's ends. ``earlier``: whether the motion capture may be read
-    earlier than it is stamped (never before any effect: readings behind it may be a lag;
+    earlier than :func:`earliest_reading` (never before any effect: readings behind it may
+    be a lag;
     once a lag is modelled, it took the line's mean, so the line is read whole)."""
     d0, d1 = lead_trend(trial, model)
     late, skew = trial.mocap_late_s, trial.mocap_skew
     span = float(trial.t[-1] - trial.t[0])
 
-    def moved(late: float, d0: float) -> float:  # never earlier than stamped or found
-        return late + d0 if earlier else max(late + d0, min(0.0, trial.mocap_late_s))
+    def moved(late: float, d0: float) -> float:
+        return late + d0 if earlier else max(late + d0, earliest_reading(trial))
 
     for _ in range(CLOCK_STEPS):
         late = moved(late, d0)
@@ -473,7 +481,7 @@ def lead_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floo
     shifted, _, refit = read_later(rec, name, trial, lead, final.spec,
                                    lambda tr, inp: fit(tr, inp, final.spec))
     return offset_evidence(shifted.mocap_late_s, final, refit, floor,
-                           min(0.0, trial.mocap_late_s))
+                           earliest_reading(trial))
 
 
 def rate_after_effects(rec: Recording, name: str, trial: Trial, final: Fit, floor: float
@@ -550,15 +558,14 @@ def clock_words(clock: dict, units: str) -> str:
         return (f"{head}, {why}: its clock is taken as {late} "
                 f"{'late' if late_s >= 0.0 else 'early'} and read so{gaps}; the recording's "
                 f"timing, not the suit's")
+    reading = f"reading the motion capture so much {'later' if late_s >= 0.0 else 'earlier'}"
     if clock["share_of_excess"] < CLOCK_SHARE:
-        why = (f"reading the motion capture so much {'later' if late_s >= 0.0 else 'earlier'} "
-               f"explains only {clock['share_of_excess']:.0%} of what the static map leaves "
-               f"above the noise")
+        why = (f"{reading} explains only {clock['share_of_excess']:.0%} of what the static map "
+               f"leaves above the noise")
     else:
-        why = (f"reading the motion capture so much {'later' if late_s >= 0.0 else 'earlier'} "
-               f"does not clear rules 1 and 2 (removed RMS {clock['removed_rms']:.4g} "
-               f"{units}, {clock['blocks_improved']} blocks improved of "
-               f"{clock['blocks_needed']} needed)")
+        why = (f"{reading} does not clear rules 1 and 2 (removed RMS "
+               f"{clock['removed_rms']:.4g} {units}, {clock['blocks_improved']} blocks "
+               f"improved of {clock['blocks_needed']} needed)")
     return f"{head}{'' if searched else ' to first order'}, but {why}: left to the effects"
 
 
