@@ -55,6 +55,7 @@ from exohil.emulators.discrepancy.folds import (
     Ridge,
     fold_coefs,
     fold_products,
+    fold_system,
     reduce,
     ridge_solve,
 )
@@ -2580,8 +2581,11 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
     """The fold fits' shortcuts (the shared columns' Gram matrices kept per row selection
     and reused by every sensor, each fold's static block factored once and the rest solved by
     block elimination, rows weighted in a stop's knee correcting them, the all-block fit
-    alone) solve the plain ridge system of each fold: Σ w²·x·xᵀ and Σ w·x·t over its rows,
-    formed directly."""
+    alone; the whole design's unweighted Gram matrices kept per row selection and corrected
+    by the rows in a stop's knee, for one set of weights after another; one fold's weighted
+    system formed on its own, as the last Gauss–Newton step through a stop forms it) solve
+    the plain ridge system of each fold: Σ w²·x·xᵀ and Σ w·x·t over its rows, formed
+    directly."""
     trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0)))
     inputs = make_inputs(trial, Spec(degree=2))
     spec = Spec(degree=2, hysteresis=True, drift_degree=2)
@@ -2592,9 +2596,10 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
         assert red.shared_grams is not None and red.shared_grams.ps < red.n_columns
         m = red.yd.size
         usable = red.rows.usable(trial.valid)
-        knees = np.where(rng.random(m) < 0.05, rng.random(m), 1.0)
+        knees = [np.where(rng.random(m) < share, rng.random(m), 1.0) for share in (0.05, 0.3)]
         for ok in (usable, usable & (rng.random(m) > 0.1)):
-            for weights, target in ((None, None), (knees, red.yd + rng.normal(size=m))):
+            for weights, target in ((None, None), (knees[0], red.yd + rng.normal(size=m)),
+                                    (knees[1], None)):
                 got = fold_coefs(red, ok, ridge, weights, target)
                 np.testing.assert_array_equal(
                     fold_coefs(red, ok, ridge, weights, target, folds=False), got[-1:])
@@ -2605,6 +2610,13 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
                 for b in range(N_BLOCKS + 1):  # the last: every block
                     rows = ok & (red.rows.bd != b)
                     gram, rhs = xw[rows].T @ xw[rows], xw[rows].T @ t[rows]
+                    if weights is not None:  # one fold's system on its own
+                        for r in (red, replace(red, shared_grams=None)):
+                            own = fold_system(r, ok, weights, t, without=b)
+                            np.testing.assert_allclose(own[0], gram, rtol=1e-10,
+                                                       atol=1e-10 * np.abs(gram).max())
+                            np.testing.assert_allclose(own[1], rhs, rtol=1e-10,
+                                                       atol=1e-10 * np.abs(rhs).max())
                     want = ridge_solve(gram, rhs, ridge.loading(gram, effect))
                     # the basis is nearly collinear: compared where it matters, as fits
                     np.testing.assert_allclose(xd @ got[b], xd @ want, rtol=0,

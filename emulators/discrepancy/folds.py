@@ -220,6 +220,10 @@ class Reduced:
         rows: how the rows were formed (:class:`Groups`).
         shared_grams: the per-block Gram matrices of ``xs``, by the rows they were formed on
             (:func:`block_grams`); None: every Gram matrix is formed anew.
+        whole_grams: the per-block Gram matrices of the whole design [xs | xe], unweighted,
+            and their sum, by the rows they were formed on (:func:`block_grams`): a fit
+            through a stop weights the rows anew at every Gauss–Newton step, yet only those
+            in its knees.
     """
 
     xs: np.ndarray
@@ -227,6 +231,8 @@ class Reduced:
     yd: np.ndarray
     rows: Groups
     shared_grams: SharedGrams | None = None
+    whole_grams: dict[bytes, tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict, repr=False, compare=False)
 
     @property
     def n_columns(self) -> int:
@@ -372,12 +378,16 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
     rows ``ok`` (M,) of the averaged design, each row times ``weights`` (M,; default 1; at
     most 1: the slopes of a stop), against ``target`` (M,; default the averaged
     measurement). The shared columns' unweighted Gram matrices come formed
-    (``red.shared_grams``, the same for every sensor of a fit); only rows whose weight is
-    not 1 (in a stop's knee) correct them. With ``static`` False (unweighted only), the
-    shared columns' block is left unset, for a caller that has it factored."""
+    (``red.shared_grams``, the same for every sensor of a fit); weighted, the whole
+    design's unweighted ones are formed once per row selection and only the rows whose
+    weight is not 1 (in a stop's knee) correct them (:func:`_knee_corrected`). With
+    ``static`` False (unweighted only), the shared columns' block is left unset, for a
+    caller that has it factored."""
+    y = red.yd if target is None else target
+    if weights is not None and static and red.shared_grams is not None:
+        return _knee_corrected(red, ok, weights, y)
     ps = red.xs.shape[1]
     p = red.n_columns
-    y = red.yd if target is None else target
     grams = np.empty((N_BLOCKS, p, p))
     rhs = np.empty((N_BLOCKS, p))
     bounds = red.rows.bounds
@@ -393,13 +403,6 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
         if static and red.shared_grams is None:
             xw = xs if wb is None else xs * wb[:, None]
             grams[b, :ps, :ps] = xw.T @ xw
-        elif static and wb is not None:
-            bent = wb != 1.0
-            if ps and bent.any():
-                # the rows' share 1 − w² taken out; zᵀz of one array is a symmetric
-                # rank-k update in BLAS, half the work of a general product
-                z = xs[bent] * np.sqrt(1.0 - wb[bent] ** 2)[:, None]
-                grams[b, :ps, :ps] -= z.T @ z
         own = xe if wb is None else xe * (wb**2)[:, None]  # Σ w²·x·xₑᵀ
         yw = yb if wb is None else yb * wb  # Σ w·x·t: the rows times w, not the target
         grams[b, :ps, ps:] = xs.T @ own
@@ -407,6 +410,74 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
         grams[b, ps:, :ps] = grams[b, :ps, ps:].T
         rhs[b, :ps] = xs.T @ yw
         rhs[b, ps:] = xe.T @ yw
+    return grams, rhs
+
+
+def _whole_grams(red: Reduced, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The whole design's unweighted per-block Gram matrices (N_BLOCKS, P, P) over the rows
+    ``ok`` and their sum (P, P), formed once per row selection (:attr:`Reduced.whole_grams`)."""
+    key = ok.tobytes()
+    kept = red.whole_grams.get(key)
+    if kept is None:
+        if len(red.whole_grams) >= KEPT_GRAMS:
+            del red.whole_grams[next(iter(red.whole_grams))]
+        whole = block_grams(red, ok)[0]
+        kept = (whole, whole.sum(axis=0))
+        red.whole_grams[key] = kept
+    return kept
+
+
+def _knee_rows(red: Reduced, knee: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(K, P) the design's rows ``knee`` (K,) times √(1 − w²): zᵀz is their share of the
+    unweighted Gram matrix that their weights take out."""
+    return np.hstack([red.xs[knee], red.xe[knee]]) * np.sqrt(1.0 - weights[knee] ** 2)[:, None]
+
+
+def fold_system(red: Reduced, ok: np.ndarray, weights: np.ndarray, target: np.ndarray,
+                without: int) -> tuple[np.ndarray, np.ndarray]:
+    """The Gram matrix (P, P) and right-hand side (P,) of :func:`block_grams` summed over
+    every block but ``without`` (``N_BLOCKS``: every block), the rows weighted by
+    ``weights`` (at most 1) against ``target``. One fold's own system, as the last
+    Gauss–Newton step through a stop forms it for each fold (:mod:`.stops`): the unweighted
+    total less the left-out block's, less the rows in the knees, at once."""
+    if red.shared_grams is None:
+        grams, rhs = block_grams(red, ok, weights, target)
+        others = np.arange(N_BLOCKS) != without
+        return grams[others].sum(axis=0), rhs[others].sum(axis=0)
+    whole, total = _whole_grams(red, ok)
+    gram = total - whole[without] if without < N_BLOCKS else total.copy()
+    rows = ok & (red.rows.bd >= 0) & (red.rows.bd != without)
+    tw = np.where(rows, target * weights, 0.0)
+    rhs = np.concatenate([red.xs.T @ tw, red.xe.T @ tw])
+    knee = np.flatnonzero(rows & (weights != 1.0))
+    if knee.size:
+        z = _knee_rows(red, knee, weights)
+        gram -= z.T @ z
+    return gram, rhs
+
+
+def _knee_corrected(red: Reduced, ok: np.ndarray, weights: np.ndarray, y: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`block_grams` with ``weights`` (at most 1): Σ w²·x·xᵀ is the unweighted Gram
+    matrix (formed once for the rows ``ok``, :func:`_whole_grams`) less the share 1 − w²
+    of each row whose weight is not 1. A fit through a stop (:mod:`.stops`) forms these at
+    every Gauss–Newton step, for every fold, with a knee holding a few percent to a third
+    of the rows: the other rows are not touched again."""
+    whole = _whole_grams(red, ok)[0]
+    ps = red.xs.shape[1]
+    grams = whole.copy()
+    rhs = np.empty((N_BLOCKS, red.n_columns))
+    yw = np.where(ok, y * weights, 0.0)  # Σ w·x·t over the rows ok
+    bent = ok & (weights != 1.0)
+    bounds = red.rows.bounds
+    for b in range(N_BLOCKS):
+        rows = slice(bounds[b], bounds[b + 1])
+        rhs[b, :ps] = red.xs[rows].T @ yw[rows]
+        rhs[b, ps:] = red.xe[rows].T @ yw[rows]
+        knee = bounds[b] + np.flatnonzero(bent[rows])
+        if knee.size:
+            z = _knee_rows(red, knee, weights)
+            grams[b] -= z.T @ z  # zᵀz of one array: a symmetric rank-k update in BLAS
     return grams, rhs
 
 

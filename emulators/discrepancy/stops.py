@@ -19,8 +19,8 @@ from exohil.emulators.discrepancy.filters import low_pass
 from exohil.emulators.discrepancy.folds import (
     Reduced,
     Ridge,
-    block_grams,
     fold_coefs,
+    fold_system,
     ridge_solve,
 )
 
@@ -172,10 +172,8 @@ def fit_through_stops(red: Reduced, ok: np.ndarray, ridge: Ridge, stops: Stops,
     for _ in range(own):
         grams = np.empty(coefs.shape + coefs.shape[1:])
         rhs = np.empty(coefs.shape)
-        for b in range(N_BLOCKS + 1):
-            block_g, block_r = block_grams(red, ok, *linearised(coefs[b]))
-            others = np.arange(N_BLOCKS) != b  # every block for the last row
-            grams[b], rhs[b] = block_g[others].sum(axis=0), block_r[others].sum(axis=0)
+        for b in range(N_BLOCKS + 1):  # every block for the last row
+            grams[b], rhs[b] = fold_system(red, ok, *linearised(coefs[b]), without=b)
         # the effect columns' ridge from the all-block fit's system (the last row's)
         coefs = ridge_solve(grams, rhs, ridge.loading(grams, ridge.effect_loading(grams[-1])))
     return coefs
