@@ -25,6 +25,10 @@ VOCABULARY = ("hysteresis", "creep", "saturation", "lag", "drift")
 #: on held-out blocks, lags refined on three grids): the order a step hands them to its
 #: processes, so that the longest do not start last.
 COSTLIEST_FIRST = ("saturation", "lag", "creep", "drift", "hysteresis")
+#: The lag's models, each searched on its own (:func:`lag_model`): a step may try them at
+#: once, the longest candidate after a saturation is named (every fit goes through the
+#: stops) and alone as long as the other candidates together.
+LAG_MODELS = ("first_order", "delay", "rate_limit")
 LAG_TAU_S = (0.01, 0.02, 0.04, 0.08, 0.2)
 LAG_DELAY_S = (0.01, 0.025, 0.06, 0.15)
 #: Relative precision of the refined lag (log seconds).
@@ -78,11 +82,8 @@ def _candidates(kind: str, spec: Spec) -> list[Spec]:
 
 def best_candidate(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
     """The candidate configuration of ``kind`` with the lowest held-out error."""
-    if kind == "lag":  # refine each lag model between its grid neighbours, then compare
-        return min([_refine_lag(trial, inputs, spec, "first_order", LAG_TAU_S),
-                    _refine_lag(trial, inputs, spec, "delay", LAG_DELAY_S),
-                    rate_limit_candidate(trial, inputs, spec)],
-                   key=lambda f: f.gap)
+    if kind == "lag":  # each lag model refined between its grid neighbours, then compared
+        return best_lag([lag_model(trial, inputs, spec, m) for m in LAG_MODELS])
     if kind == "creep":
         return min(creep_families(trial, inputs, spec), key=lambda f: f.gap)
     best = min((fit(trial, inputs, s) for s in _candidates(kind, spec)), key=lambda f: f.gap)
@@ -93,6 +94,25 @@ def best_candidate(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
         best = min([best] + [fit(trial, inputs, replace(kept, ridge=r)) for r in STATIC_RIDGES
                              if r != spec.ridge], key=lambda f: f.gap)
     return best
+
+
+def lag_model(trial: Trial, inputs: Inputs, spec: Spec, model: str) -> Fit:
+    """The best lag of one of the ``LAG_MODELS`` added to ``spec``: a low-pass or a delay
+    refined between its grid neighbours (:func:`_refine_lag`), or a rate limit per sensor
+    (:func:`rate_limit_candidate`)."""
+    if model == "first_order":
+        return _refine_lag(trial, inputs, spec, model, LAG_TAU_S)
+    if model == "delay":
+        return _refine_lag(trial, inputs, spec, model, LAG_DELAY_S)
+    if model == "rate_limit":
+        return rate_limit_candidate(trial, inputs, spec)
+    raise ValueError(f"unknown lag model {model!r}; known: {', '.join(LAG_MODELS)}")
+
+
+def best_lag(fits: list[Fit]) -> Fit:
+    """The lag candidate: of the best fit of each of the ``LAG_MODELS``, in that order, the
+    one with the lowest held-out error (the first of equals)."""
+    return min(fits, key=lambda f: f.gap)
 
 
 def creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, ...]:

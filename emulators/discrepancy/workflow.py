@@ -20,8 +20,11 @@ from scipy.ndimage import uniform_filter1d
 from exohil.emulators.discrepancy.candidates import (
     COSTLIEST_FIRST,
     DRIFT_SPAN_S,
+    LAG_MODELS,
     VOCABULARY,
     best_candidate,
+    best_lag,
+    lag_model,
     refine,
     refine_drift,
     refine_lag_delay,
@@ -372,6 +375,37 @@ def _conclusion(steps: list[dict], spec: Spec, left: dict) -> str:
         if left["beyond_noise"] else head
 
 
+def _candidates(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float,
+                missing: list[str], workers: int) -> list[tuple[str, Fit, dict]]:
+    """Each effect in ``missing`` at its best configuration added to ``spec``, with its
+    evidence against ``base`` (:func:`_candidate`), in the order of ``missing``.
+
+    The candidates are independent, and so are the lag's models (``LAG_MODELS``): all are
+    tried at once in ``workers`` processes, the costliest first (``COSTLIEST_FIRST``), and
+    the lag's models compared here (:func:`~.candidates.best_lag`), as
+    :func:`~.candidates.best_candidate` compares them."""
+    jobs = [(kind, model) for kind in sorted(missing, key=COSTLIEST_FIRST.index)
+            for model in (LAG_MODELS if kind == "lag" else (None,))]
+    done = forked_map(functools.partial(_candidate_job, trial, inputs, spec, base, floor),
+                      jobs, workers)
+    tried = [(kind, cand, evidence) for kind, cand, evidence in done if evidence is not None]
+    if "lag" in missing:
+        cand = best_lag([c for kind, c, _ in done if kind == "lag"])
+        tried.append(("lag", cand, candidate_evidence(trial, base, cand, floor)))
+    return sorted(tried, key=lambda item: missing.index(item[0]))
+
+
+def _candidate_job(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float,
+                   job: tuple[str, str | None]) -> tuple[str, Fit, dict | None]:
+    """One job of :func:`_candidates`: ``(kind, None)``, the candidate ``kind``
+    (:func:`_candidate`); ``("lag", model)``, the best lag of that model alone (its
+    evidence None: the lag's models are compared first)."""
+    kind, model = job
+    if model is not None:
+        return kind, lag_model(trial, inputs, spec, model), None
+    return _candidate(trial, inputs, spec, base, floor, kind)
+
+
 def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float, kind: str
                ) -> tuple[str, Fit, dict]:
     """The best configuration of effect ``kind`` added to ``spec`` and its evidence against
@@ -717,11 +751,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
             break
         sig = signatures(trial, base.residual, mot, floor)
         inputs.cache["without_lag"] = base  # the lag candidates' model without the lag
-        # the candidates are independent: tried at once, the costliest first
-        order = sorted(missing, key=COSTLIEST_FIRST.index)
-        tried = forked_map(functools.partial(_candidate, trial, inputs, spec, base, floor),
-                           order, workers)
-        scored = sorted(tried, key=lambda item: missing.index(item[0]))
+        scored = _candidates(trial, inputs, spec, base, floor, missing, workers)
         if not any(e["significant"] for _, _, e in scored):
             scored = [(k, c, _last_count(trial, inputs, base, c, e, floor) if k == "drift"
                        else e) for k, c, e in scored]
