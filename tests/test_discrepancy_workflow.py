@@ -2622,6 +2622,8 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
                     np.testing.assert_allclose(xd @ got[b], xd @ want, rtol=0,
                                                atol=1e-9 * np.abs(red.yd).max())
         assert red.shared_grams.factors  # the unweighted fits took the factored path
+        assert red.whole_grams  # the weighted ones corrected the kept matrices
+        assert not replace(red, xe=red.xe[:, :1]).whole_grams  # another design: none kept
 
 
 def test_designs_and_fold_products_are_their_plain_definitions():

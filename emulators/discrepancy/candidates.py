@@ -9,6 +9,7 @@ constants, a drift's degree. Every comparison is the held-out gap of a full fit.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import replace
 
@@ -19,6 +20,7 @@ from exohil.emulators.discrepancy.data import BLOCK_S, Trial
 from exohil.emulators.discrepancy.folds import block_mse
 from exohil.emulators.discrepancy.model import STATIC_RIDGES, Fit, Inputs, Spec, fit, static_basis
 from exohil.emulators.discrepancy.rules import candidate_evidence, pooled_noise
+from exohil.emulators.discrepancy.workers import forked_map
 
 VOCABULARY = ("hysteresis", "creep", "saturation", "lag", "drift")
 #: The vocabulary by how long a candidate usually takes to fit (stops are chosen per sensor
@@ -307,7 +309,7 @@ def refine_lag_delay(trial: Trial, inputs: Inputs, current: Fit) -> Fit:
     return min(fits.values(), key=lambda f: f.gap)
 
 
-def refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
+def refine(trial: Trial, inputs: Inputs, kind: str, current: Fit, workers: int = 1) -> Fit:
     """Refine the continuous shape parameters of a named effect from its best grid point.
 
     The candidates' grids are coarse (creep: time constants a factor of 3 apart) so that every
@@ -322,7 +324,8 @@ def refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     single model is already refined on its grid (:func:`_refine_lag`), then the low-pass and
     the delay together (:func:`refine_lag_delay`); a rate limit was searched in full by
     :func:`best_candidate` on this very model, so searching it again would return the same fit. The
-    other effects have no shape parameter.
+    other effects have no shape parameter. A creep's families are refined at once in
+    ``workers`` processes (:func:`~.workers.forked_map`; the same fits in any number).
     """
     if kind == "saturation":
         return _keep_stops(current)
@@ -334,8 +337,8 @@ def refine(trial: Trial, inputs: Inputs, kind: str, current: Fit) -> Fit:
     if kind != "creep":
         return current
     bare = replace(current.spec, creep_tau_s=(), creep_asym_s=(), creep_hold_s=())
-    refined = [_refine_creep(trial, inputs, start)
-               for start in creep_families(trial, inputs, bare)]
+    refined = forked_map(functools.partial(_refine_creep, trial, inputs),
+                         creep_families(trial, inputs, bare), workers)
     lows = refined[0]
     refined = [f for f in refined if not f.spec.creep_hold_s
                or flows_within_holds(trial, inputs, f)]

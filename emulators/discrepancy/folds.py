@@ -231,13 +231,20 @@ class Reduced:
     yd: np.ndarray
     rows: Groups
     shared_grams: SharedGrams | None = None
+    # not an argument: a copy with another design (dataclasses.replace) starts empty
     whole_grams: dict[bytes, tuple[np.ndarray, np.ndarray]] = field(
-        default_factory=dict, repr=False, compare=False)
+        default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def n_columns(self) -> int:
         """P = Ps + Pe."""
         return self.xs.shape[1] + self.xe.shape[1]
+
+    @functools.cached_property
+    def joined(self) -> np.ndarray:
+        """(M, P) the design [xs | xe] in one array, for the rows a stop's knee takes out of
+        the Gram matrices (:func:`_knee_rows`): gathered at every Gauss–Newton step."""
+        return np.hstack([self.xs, self.xe])
 
     def times(self, coef: np.ndarray, rows: slice = slice(None)) -> np.ndarray:
         """The design's ``rows`` times ``coef`` (P,)."""
@@ -430,7 +437,7 @@ def _whole_grams(red: Reduced, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _knee_rows(red: Reduced, knee: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """(K, P) the design's rows ``knee`` (K,) times √(1 − w²): zᵀz is their share of the
     unweighted Gram matrix that their weights take out."""
-    return np.hstack([red.xs[knee], red.xe[knee]]) * np.sqrt(1.0 - weights[knee] ** 2)[:, None]
+    return red.joined[knee] * np.sqrt(1.0 - weights[knee] ** 2)[:, None]
 
 
 def fold_system(red: Reduced, ok: np.ndarray, weights: np.ndarray, target: np.ndarray,

@@ -628,21 +628,22 @@ def _fit_in_model(trial: Trial, inputs: Inputs, static_fit: Fit, in_model: tuple
         tried = forked_map(functools.partial(_best_of, trial, inputs, base.spec), missing,
                            workers)
         kind, cand = min(tried, key=lambda item: item[1].gap)
-        base, inputs, _, _ = _add_effect(trial, inputs, kind, cand, previous)
+        base, inputs, _, _ = _add_effect(trial, inputs, kind, cand, previous, workers)
         missing.remove(kind)
         previous = kind
     return base, inputs, previous
 
 
-def _add_effect(trial: Trial, inputs: Inputs, kind: str, cand: Fit, previous: str
-                ) -> tuple[Fit, Inputs, dict | None, tuple[tuple, tuple]]:
+def _add_effect(trial: Trial, inputs: Inputs, kind: str, cand: Fit, previous: str,
+                workers: int) -> tuple[Fit, Inputs, dict | None, tuple[tuple, tuple]]:
     """Effect ``kind``'s candidate ``cand`` made part of the model, as every effect is
     once named (or given by the profile): its shape refined, the map's degree chosen
     again, the lag or drift already in the model refitted where that is due, and the
     terms driven by the model's own static part (:func:`_own_static_part`). ``previous``
-    is the effect added in the step before. Returns the fit, the inputs it was made with,
-    the own-static-part evidence and the lag and drift terms before their refit."""
-    refined = refine(trial, inputs, kind, cand)
+    is the effect added in the step before; ``workers``, the processes a refinement may
+    use. Returns the fit, the inputs it was made with, the own-static-part evidence and the
+    lag and drift terms before their refit."""
+    refined = refine(trial, inputs, kind, cand, workers)
     cand = _best_degree(trial, inputs, refined)
     if kind == "lag" and cand.spec != refined.spec:  # a lag refined on the map chosen
         # without it is biased toward that map: refine it again on the map now chosen
@@ -766,7 +767,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
             break
         kind, cand, _ = winners[0]
         cand, inputs, own_input, (lag_before, drift_before) = _add_effect(
-            trial, inputs, kind, cand, previous)
+            trial, inputs, kind, cand, previous, workers)
         previous = kind
         evidence = candidate_evidence(trial, base, cand, floor)
         if kind == "saturation":  # judged against the smooth curve when it was named
