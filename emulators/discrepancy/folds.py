@@ -28,8 +28,9 @@ RIDGE = 1e-7
 #: Relative ridge of the effect columns: 0.1 % of the energy each adds beyond the static map
 #: (:class:`Ridge`), a negligible bias.
 EFFECT_RIDGE = 1e-3
-#: Row selections whose shared Gram matrices are kept (:class:`SharedGrams`): the valid
-#: rows, and those off a sensor's hard stops while they are chosen.
+#: Row selections whose shared Gram matrices are kept (:class:`SharedGrams`), and whose
+#: whole design's are (:attr:`Reduced.whole_grams`): the valid rows, and those off a
+#: sensor's hard stops while they are chosen.
 KEPT_GRAMS = 4
 
 

@@ -455,10 +455,8 @@ def skew_words(skew: dict, units: str) -> str:
     if skew["applied"]:
         gaps = (f" (the static map's held-out gap {skew['gap_without']:.4g} -> "
                 f"{skew['gap_with']:.4g} {units})" if "gap_without" in skew else "")
-        late_s = skew["mocap_late_s"]
-        return (f"{head}, and is read at that rate from {late_words(abs(late_s))} "
-                f"{'late' if late_s >= 0.0 else 'early'} at the start{gaps}; the recording's "
-                f"timing, not the suit's")
+        return (f"{head}, and is read at that rate from {offset_words(skew['mocap_late_s'])} "
+                f"at the start{gaps}; the recording's timing, not the suit's")
     return (f"{head} to first order, but read so the static map explains "
             f"{skew['share_of_excess']:.0%} of what it left above the noise "
             f"({skew['blocks_improved']} blocks improved of {skew['blocks_needed']} needed): "
@@ -537,7 +535,6 @@ def clock_words(clock: dict, units: str) -> str:
     """The clock offset's evidence (:func:`clock_offset`, :func:`lead_after_effects`) as
     one sentence."""
     late_s = clock["mocap_late_s"]
-    late = late_words(abs(late_s))
     head = f"the readings run {side_words(late_s)} the motion capture"
     searched = clock.get("searched")
     if searched is not None:
@@ -555,9 +552,8 @@ def clock_words(clock: dict, units: str) -> str:
                 f"{clock['gap_with']:.4g} {units})" if "gap_without" in clock else "")
         why = ("which no suit can do" if late_s >= 0.0 else
                "longer than any suit lags its pose")
-        return (f"{head}, {why}: its clock is taken as {late} "
-                f"{'late' if late_s >= 0.0 else 'early'} and read so{gaps}; the recording's "
-                f"timing, not the suit's")
+        return (f"{head}, {why}: its clock is taken as {offset_words(late_s)} and read "
+                f"so{gaps}; the recording's timing, not the suit's")
     reading = f"reading the motion capture so much {'later' if late_s >= 0.0 else 'earlier'}"
     if clock["share_of_excess"] < CLOCK_SHARE:
         why = (f"{reading} explains only {clock['share_of_excess']:.0%} of what the static map "
@@ -574,6 +570,12 @@ def side_words(late_s: float) -> str:
     ``late_s`` s late, e.g. "42 ms ahead of", "3.06 s behind"."""
     return (f"{late_words(late_s)} ahead of" if late_s >= 0.0
             else f"{late_words(-late_s)} behind")
+
+
+def offset_words(late_s: float) -> str:
+    """The motion capture's clock read ``late_s`` s late in words, e.g. "42 ms late",
+    "3.06 s early"."""
+    return f"{late_words(abs(late_s))} {'late' if late_s >= 0.0 else 'early'}"
 
 
 def late_words(seconds: float) -> str:
