@@ -17,7 +17,14 @@ from scipy.ndimage import uniform_filter1d
 from scipy.signal import lfilter, lfilter_zi
 from shared_data import SHARED_DIR
 
-from exohil.emulators.discrepancy import DiscrepancyError, model, noise_floor, prepare_trial, run
+from exohil.emulators.discrepancy import (
+    DiscrepancyError,
+    model,
+    noise_floor,
+    prepare_trial,
+    run,
+    workflow,
+)
 from exohil.emulators.discrepancy.candidates import (
     CREEP_HOLD_S,
     best_candidate,
@@ -1267,6 +1274,44 @@ def test_a_clock_offset_under_a_larger_effect_is_found_once_the_effect_is_added(
     assert outcome.summary["effects"] == ["creep"]
     assert outcome.after.gap < 1.15 * outcome.summary["noise_floor"]
     assert any("again from the start" in line for line in lines)
+    # the first run read the clock as stamped: nothing to say of how it read it
+    assert "read_before" not in clock["after_effects"]
+    assert "the run before" not in markdown(outcome.summary)
+
+
+def test_an_offset_found_again_after_the_effects_says_how_the_run_before_read_it(
+        monkeypatch):
+    """Where the first run's search read the clock and the final model's screen finds it a
+    little further (the fixture's suit stamped 1.5 s early: 1.57 s by the search, 1.55 s
+    once hysteresis and creep are modelled), the run again from the start reads 1.55 s
+    from its first step: its evidence keeps how the run before read it (``read_before``),
+    and the report's sentence says both, not the last step alone. The screen and the
+    second run are stood in for (the real ones take minutes on four minutes of data)."""
+    rec = make_recording(Case("hysteresis", "lib", 2, seed=101, duration_s=30.0))
+    first = workflow._run(_stamped_late(rec, -1.5), "early", (), lambda line: None, 1)
+    read = first.summary["clock_offset"]
+    assert read["applied"] and read["searched"]["lead_s"] == pytest.approx(-1.5, abs=0.02)
+    found = {**{k: v for k, v in read.items() if k != "searched"},
+             "mocap_late_s": read["mocap_late_s"] + 0.01}
+    monkeypatch.setattr(workflow, "lead_after_effects", lambda *args: found)
+    again: list[dict] = []
+
+    def second_run(*args, **kwargs):
+        again.append(args[6])  # after_effects: the screen's evidence, as the run gets it
+        return first
+
+    monkeypatch.setattr(workflow, "_run", second_run)
+    outcome = workflow._offset_again(rec, "early", (), lambda line: None, 1, first)
+    before = {k: read[k] for k in ("mocap_late_s", "gap_without", "gap_with", "searched")}
+    assert again == [{**found, "read_before": before}]
+    assert outcome.summary["timing_after_effects"]["clock_offset"]["read_before"] == before
+    words = clock_words({"mocap_late_s": found["mocap_late_s"], "applied": True,
+                         "after_effects": again[0]}, "mm")
+    assert "found once the effects were modelled" in words
+    assert (f"the run before had read it {late_words(-read['mocap_late_s'])} early: a search "
+            f"over leads found the readings best matched "
+            f"{late_words(-read['searched']['lead_s'])} behind") in words
+    assert f"{read['gap_without']:.4g} -> {read['gap_with']:.4g} mm" in words
 
 
 @pytest.mark.parametrize("case, ppm", [

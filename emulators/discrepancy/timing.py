@@ -538,15 +538,12 @@ def clock_words(clock: dict, units: str) -> str:
     head = f"the readings run {side_words(late_s)} the motion capture"
     searched = clock.get("searched")
     if searched is not None:
-        head += (f" (a search over leads found the readings best matched "
-                 f"{late_words(abs(searched['lead_s']))} "
-                 f"{'ahead' if searched['lead_s'] > 0 else 'behind'}, removing "
-                 f"{searched['share']:.0%} of what a cubic map leaves at the stamped times; "
-                 f"refined to first order)")
+        head += f" ({search_words(searched)}; refined to first order)"
     later = clock.get("after_effects")
     if later is not None:
         head += (f" (found once the effects were modelled: read so late, the model explained "
-                 f"{later['share_of_excess']:.0%} of what it left above the noise)")
+                 f"{later['share_of_excess']:.0%} of what it left above the noise"
+                 f"{read_before_words(later.get('read_before'), units)})")
     if clock["applied"]:
         gaps = (f" (the static map's held-out gap {clock['gap_without']:.4g} -> "
                 f"{clock['gap_with']:.4g} {units})" if "gap_without" in clock else "")
@@ -563,6 +560,27 @@ def clock_words(clock: dict, units: str) -> str:
                f"{clock['removed_rms']:.4g} {units}, {clock['blocks_improved']} blocks "
                f"improved of {clock['blocks_needed']} needed)")
     return f"{head}{'' if searched else ' to first order'}, but {why}: left to the effects"
+
+
+def search_words(searched: dict) -> str:
+    """What the search over leads (:func:`lead_search`) found, in words."""
+    lead = searched["lead_s"]
+    return (f"a search over leads found the readings best matched {late_words(abs(lead))} "
+            f"{'ahead' if lead > 0 else 'behind'}, removing {searched['share']:.0%} of what a "
+            f"cubic map leaves at the stamped times")
+
+
+def read_before_words(read_before: dict | None, units: str) -> str:
+    """How the run before the offset was found again had read the clock
+    (``read_before``, :func:`~.workflow._clock_read`), as a clause after a semicolon; ""
+    where it read it as stamped."""
+    if read_before is None:
+        return ""
+    how = (f": {search_words(read_before['searched'])}, and" if "searched" in read_before
+           else " to first order, and")
+    return (f"; the run before had read it {offset_words(read_before['mocap_late_s'])}{how} "
+            f"its static map's held-out gap went {read_before['gap_without']:.4g} -> "
+            f"{read_before['gap_with']:.4g} {units}")
 
 
 def side_words(late_s: float) -> str:

@@ -494,9 +494,21 @@ def _offset_again(rec: Recording, name: str, in_model: tuple[str, ...],
     found = lead_after_effects(rec, name, first.trial, first.after, pooled_noise(first.trial))
     if found is None:
         return first
+    read_before = first.summary["clock_offset"]
+    if read_before is not None and read_before["applied"]:
+        found = {**found, "read_before": _clock_read(read_before)}
     return _again_if_read_so(first, "clock_offset", found, progress, lambda: _run(
         rec, name, in_model, progress, workers, found["mocap_late_s"], found,
         _filter_after_effects(first)))
+
+
+def _clock_read(clock: dict) -> dict:
+    """How a run's static step read the motion capture's clock (its ``clock_offset``
+    evidence, applied), for the evidence of an offset found again once the effects were
+    modelled (``read_before``): the run again from the start would otherwise show only the
+    last step of the way there."""
+    keys = ("mocap_late_s", "gap_without", "gap_with", "searched")
+    return {k: clock[k] for k in keys if k in clock}
 
 
 def _rate_again(rec: Recording, name: str, in_model: tuple[str, ...],
