@@ -291,6 +291,8 @@ def test_blind_reports_an_unreadable_recording_and_refuses_an_empty_key(tmp_path
 
 @pytest.mark.parametrize("module, words", [
     ("benchmarks.blind4.generate", ["independent test-data generator", "clean twin"]),
+    ("benchmarks.blind5.generate", ["pulley-routed tendons and flex goniometers",
+                                    "never the workflow", "clean twin", "--only"]),
     ("benchmarks.blind3.antipodal", ["anchors pass", "opposite sides of the cap."]),
     ("benchmarks.blind4.verify", ["by the magnitude its truth gives."]),
 ])

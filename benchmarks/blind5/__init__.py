@@ -1,0 +1,1 @@
+"""A fifth generator of recordings with hidden effects, written blind (README.md)."""
