@@ -133,6 +133,11 @@ class Trial:
             (:func:`unusable_sensors`); ``sensor_names`` lists only the analysed ones.
         spikes: (S,) int, frames per sensor holding an isolated spike (:func:`spikes`),
             which are invalid.
+        invalid_by_cause: the invalid frames by their first cause, in this order:
+            ``dropped`` (no sensor frame there), ``outside_motion_capture`` (before or after
+            its span, or in one of its dropouts), ``not_finite`` (a reading NaN or
+            infinite), ``spike`` (an isolated spike on some sensor); the counts add up to
+            the invalid frames.
         resampled: (S,) the widest spread of the readings' second differences over k = 2 …
             ``RESAMPLED_STRIDES`` frames, each over k² noise floors (:func:`resampled_spread`);
             over ``RESAMPLED_SPREAD``, a stream resampled from a slower sensor, whose floor is
@@ -168,6 +173,7 @@ class Trial:
     noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ignored: tuple[tuple[str, str], ...] = ()
     spikes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    invalid_by_cause: dict[str, int] = field(default_factory=dict)
     resampled: np.ndarray = field(default_factory=lambda: np.zeros(0))
     placed_by: str = FRAME_COUNTER
     time_scatter_s: float = 0.0
@@ -269,7 +275,8 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     if not moving:
         raise DiscrepancyError(f"{name}: the mocap joint {joint!r} never moves")
     angles = np.column_stack([np.interp(read, t_mocap, raw[:, k]) for k in moving])
-    valid = present & inside & np.all(np.isfinite(y), axis=1)
+    finite = np.all(np.isfinite(y), axis=1)
+    valid = present & inside & finite
     try:
         floor = sensor_noise(y, valid)
     except DiscrepancyError as err:
@@ -278,6 +285,10 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     # against the frame-to-frame floor of a stream resampled from a slower sensor, far
     # below its noise, most readings would be spikes
     spiked = spikes(y, valid, _widened(y, valid, floor, spread > RESAMPLED_SPREAD))
+    causes = {"dropped": int((~present).sum()),
+              "outside_motion_capture": int((present & ~inside).sum()),
+              "not_finite": int((present & inside & ~finite).sum()),
+              "spike": int((valid & spiked.any(axis=1)).sum())}
     valid &= ~spiked.any(axis=1)
     span = np.diff(t[[0, -1]])[0] if n > 1 else 0.0
     rate = (n - 1) / span if span > 0 else 0.0
@@ -293,11 +304,22 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
                   sensor_names=tuple(rec.sensor_names[j] for j in keep),
                   units=rec.sensor_units, rate_hz=rate, blocks=blocks,
                   scored=valid.copy(), ignored=ignored, spikes=spiked.sum(axis=0),
+                  invalid_by_cause=causes,
                   placed_by=placed_by, time_scatter_s=time_scatter, times_steady=steady,
                   mocap_late_s=mocap_late_s,
                   mocap_low_pass_hz=low_pass_hz, mocap_skew=mocap_skew, resampled=spread)
     trial.noise = noise_floor(trial)
     return trial
+
+
+def invalid_words(by_cause: dict[str, int]) -> str:
+    """The invalid frames by cause (:attr:`Trial.invalid_by_cause`) in words, the causes
+    that hold none left out: "12 dropped, 3600 outside the motion capture or in its
+    dropouts"; "" for none."""
+    words = {"dropped": "dropped",
+             "outside_motion_capture": "outside the motion capture or in its dropouts",
+             "not_finite": "not finite", "spike": "holding an isolated spike"}
+    return ", ".join(f"{by_cause[key]} {words[key]}" for key in words if by_cause.get(key))
 
 
 def held_out_blocks(valid: np.ndarray, rate_hz: float) -> np.ndarray:

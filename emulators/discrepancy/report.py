@@ -14,7 +14,7 @@ from typing import cast
 
 import numpy as np
 
-from exohil.emulators.discrepancy.data import FRAME_COUNTER, spike_counts
+from exohil.emulators.discrepancy.data import FRAME_COUNTER, invalid_words, spike_counts
 from exohil.emulators.discrepancy.localise import (
     SAME_POSE_DEG,
     SIGNATURES,
@@ -507,6 +507,20 @@ def _escaped_names(summary: dict) -> dict:
     return cast(dict, walk(summary))
 
 
+def _invalid_causes(summary: dict) -> str:
+    """The invalid frames by cause, the spikes per sensor (a summary written before the
+    causes were kept: what an invalid frame may be)."""
+    spikes = spike_counts(summary["sensors"], summary["spikes"])
+    by_cause = summary.get("invalid_by_cause")
+    if by_cause is None:
+        return ("dropped, outside motion capture or in its dropouts, or holding an isolated "
+                f"spike: {spikes}")
+    why = invalid_words(by_cause)
+    if by_cause.get("spike"):
+        why += f": {spikes}"
+    return why or "none"
+
+
 def markdown(summary: dict) -> str:
     """The human-readable report."""
     summary = _escaped_names(summary)
@@ -517,9 +531,7 @@ def markdown(summary: dict) -> str:
              f"Sensors: {', '.join(summary['sensors'])} ({u}); driven by "
              f"{', '.join(summary['angles'])} ({summary['joint']}), {summary['frames']} frames "
              f"at {summary['rate_hz']} Hz{_placed_words(summary)}, "
-             f"{summary['invalid_frames']} invalid (dropped, "
-             "outside motion capture or in its dropouts, or holding an isolated spike: "
-             f"{spike_counts(summary['sensors'], summary['spikes'])})." + "".join(
+             f"{summary['invalid_frames']} invalid ({_invalid_causes(summary)})." + "".join(
                  f" Left out: {item['sensor']} {item['reason']}."
                  for item in summary["sensors_ignored"])
              + (f" {_sentence(resampled_words(summary['resampled_sensors']))}."

@@ -37,6 +37,7 @@ from exohil.emulators.discrepancy.data import (
     SPIKE_SIGMAS,
     SPIKE_WINDOW,
     Trial,
+    invalid_words,
     prepare_trial,
     spike_counts,
 )
@@ -502,6 +503,13 @@ def _offset_again(rec: Recording, name: str, in_model: tuple[str, ...],
         _filter_after_effects(first)))
 
 
+def _invalid(trial: Trial) -> str:
+    """How many of the trial's frames are invalid, and why: "135 invalid (100 dropped, 35
+    outside the motion capture)"."""
+    why = invalid_words(trial.invalid_by_cause)
+    return f"{int((~trial.valid).sum())} invalid" + (f" ({why})" if why else "")
+
+
 def _clock_read(clock: dict) -> dict:
     """How a run's static step read the motion capture's clock (its ``clock_offset``
     evidence, applied), for the evidence of an offset found again once the effects were
@@ -692,7 +700,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     sensors = f"{trial.n_sensors} sensor{'' if trial.n_sensors == 1 else 's'}"
     progress(f"[1] calibrating the static map: {sensors} ({trial.units}) from "
              f"{', '.join(trial.angle_names)} ({trial.joint}), {trial.n} frames at "
-             f"{trial.rate_hz:.1f} Hz{placed}, {int((~trial.valid).sum())} invalid; noise floor "
+             f"{trial.rate_hz:.1f} Hz{placed}, {_invalid(trial)}; noise floor "
              f"{floor:.4g} {trial.units}")
     if trial.times_steady:
         progress(f"    the frames were {stamped_words(trial.time_scatter_s)}: the grid takes the "
@@ -838,6 +846,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "frame_time_scatter_s": significant(trial.time_scatter_s),
         "frame_times": "steady rate" if trial.times_steady else "as recorded",
         "invalid_frames": int((~trial.valid).sum()),
+        "invalid_by_cause": trial.invalid_by_cause,
         "spikes": trial.spikes.tolist(),
         "resampled_sensors": resampled,
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
