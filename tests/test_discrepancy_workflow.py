@@ -123,7 +123,7 @@ from exohil.emulators.discrepancy.rules import (
     rules_on_blocks,
     stops_leave_curve_nothing,
 )
-from exohil.emulators.discrepancy.stops import Stops
+from exohil.emulators.discrepancy.stops import RAIL_SHARE, Stops, pinned_at_rail
 from exohil.emulators.discrepancy.timing import (
     SEARCH_BEHIND_S,
     clock_offset,
@@ -919,6 +919,33 @@ def test_invalid_frames_are_counted_by_cause():
             "its dropouts, ")
     assert said in lines[0] and "1 not finite, 1 holding an isolated spike)" in lines[0]
     assert said in markdown(summary) and "holding an isolated spike: T2 1" in markdown(summary)
+
+
+def test_a_reading_pinned_at_a_rail_is_named_saturation():
+    """A clean suit whose sensor T0 is clipped after its noise at its 3rd percentile (an
+    ADC's floor): the clip removes the noise where it holds, so no rule on the gap names
+    it, yet 3 % of the frames read exactly one value, the sensor's lowest, which noise
+    never does. Saturation is named on that, with the rail in its evidence and a progress
+    line; the same suit unclipped is called clean. A reading held at one value only
+    because it is coarser than its noise (quantised in 1 mm steps) is not a rail."""
+    rec = make_recording(Case("clean", "lib", 1, seed=3, duration_s=30.0))
+    assert pinned_at_rail(prepare_trial(rec)) is None
+    values = rec.sensors.values.copy()
+    rail = np.quantile(values[:, 0], 0.03)
+    values[:, 0] = np.maximum(values[:, 0], rail)
+    clipped = _with_values(rec, values)
+    pinned = pinned_at_rail(prepare_trial(clipped))
+    assert pinned is not None and pinned["sensor"] == "T0" and pinned["side"] == "low"
+    assert pinned["level"] == pytest.approx(rail) and pinned["share"] >= RAIL_SHARE
+    lines: list[str] = []
+    summary = run(clipped, "clipped", progress=lines.append).summary
+    assert summary["effects"] == ["saturation"]
+    evidence = summary["steps"][0]["evidence"]
+    assert evidence["pinned_at_rail"] == pinned and not evidence["significant"]
+    assert summary["gap_after"] <= summary["gap_before"]
+    assert any("pinned at a rail" in line for line in lines)
+    coarse = _quantised(clipped, 1.0)
+    assert pinned_at_rail(prepare_trial(coarse)) is None
 
 
 def _quantised(rec: Recording, step: float) -> Recording:

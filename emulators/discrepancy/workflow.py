@@ -67,6 +67,7 @@ from exohil.emulators.discrepancy.rules import (
     rules_on_blocks,
     stops_leave_curve_nothing,
 )
+from exohil.emulators.discrepancy.stops import pinned_at_rail
 from exohil.emulators.discrepancy.timing import (
     after_effects_words,
     clock_offset,
@@ -417,7 +418,23 @@ def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float
         evidence = _counted_refined(trial, inputs, base, cand, evidence, floor)
     if kind == "saturation" and evidence["significant"]:
         evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
+    elif kind == "saturation":
+        evidence = _at_rail(trial, inputs, spec, base, cand, evidence, floor)
     return kind, cand, evidence
+
+
+def _at_rail(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, cand: Fit, evidence: dict,
+             floor: float) -> dict:
+    """``evidence`` of stops that clear no rule on the gap, made significant where a sensor
+    is pinned at a rail (:func:`~.stops.pinned_at_rail`: its reading sits at exactly one
+    value however the pose moves, which no smooth transfer and no noise does) and the stops
+    leave a held-out gap no larger than ``base``'s; with ``pinned_at_rail`` and the smooth
+    curve's comparison (:func:`_against_curve`), for the record."""
+    rail = pinned_at_rail(trial)
+    if rail is None or cand.gap > base.gap:
+        return evidence
+    return {**_against_curve(trial, inputs, spec, cand, evidence, floor), "significant": True,
+            "pinned_at_rail": rail}
 
 
 def _resampled(trial: Trial) -> list[dict]:
@@ -508,6 +525,17 @@ def _invalid(trial: Trial) -> str:
     outside the motion capture)"."""
     why = invalid_words(trial.invalid_by_cause)
     return f"{int((~trial.valid).sum())} invalid" + (f" ({why})" if why else "")
+
+
+def _rail_words(evidence: dict, units: str) -> str:
+    """Where a saturation was named because a reading is pinned at a rail (:func:`_at_rail`),
+    a clause that says so; else ""."""
+    rail = evidence.get("pinned_at_rail")
+    if rail is None:
+        return ""
+    return (f"; {rail['sensor']} reads exactly {rail['level']:.6g} {units}, its "
+            f"{'lowest' if rail['side'] == 'low' else 'highest'} value, on "
+            f"{rail['share']:.1%} of the frames where the joint moves: pinned at a rail")
 
 
 def _clock_read(clock: dict) -> dict:
@@ -792,6 +820,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         evidence = candidate_evidence(trial, base, cand, floor)
         if kind == "saturation":  # judged against the smooth curve when it was named
             evidence["against_smooth_curve"] = winners[0][2]["against_smooth_curve"]
+            if "pinned_at_rail" in winners[0][2]:
+                evidence["pinned_at_rail"] = winners[0][2]["pinned_at_rail"]
         if own_input is not None:
             evidence["own_static_input"] = own_input
         if "refined" in winners[0][2]:  # a drift counted on the drift it would become
@@ -814,9 +844,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                                     if k != kind}}})
         own = (f"; driven by its own static part: {own_input['gap_before']:.4g} before"
                if own_input and own_input["rounds"] else "")
+        refitted = "".join(f"; {k} refitted: {_shape_words(p)}" for k, p in refit.items())
         progress(f"[{step}] added {kind}: held-out gap {cand.gap:.4g} {trial.units} "
-                 f"(tried {table}){own}" + "".join(f"; {k} refitted: {_shape_words(p)}"
-                                                   for k, p in refit.items()))
+                 f"(tried {table}){own}{_rail_words(evidence, trial.units)}{refitted}")
         step += 1
     after = base
     left = remainder(trial, after, floor)
