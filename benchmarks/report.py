@@ -170,6 +170,20 @@ def description(doc: str) -> str:
     return " ".join(doc.strip().split("\n\n")[0].split())
 
 
+def generator_parser(doc: str) -> argparse.ArgumentParser:
+    """The command line of a blind generator that writes its recordings and ``truth.json``
+    to ``--out`` (``--without-effect``: the clean twins; ``--only N ...``: some of them),
+    described by the first paragraph of its module docstring ``doc``."""
+    parser = argparse.ArgumentParser(description=description(doc))
+    parser.add_argument("--out", required=True, help="folder for the recordings and truth.json")
+    parser.add_argument("--without-effect", action="store_true",
+                        help="write each recording's clean twin (the effect computed, not "
+                             "applied)")
+    parser.add_argument("--only", type=int, nargs="*", metavar="N",
+                        help="only these recordings (then no truth.json is written)")
+    return parser
+
+
 def non_negative_float(value: str) -> float:
     """argparse type: a finite number ≥ 0."""
     number = float(value)

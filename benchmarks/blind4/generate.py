@@ -18,7 +18,6 @@ Run from the repository root:
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -1252,15 +1251,9 @@ def apply_effect(cls, fam, target, rng, t, q, eps, tr, y_clean, sd, fs, qgrid):
 
 
 def main():
-    from benchmarks.report import description
+    from benchmarks.report import generator_parser
 
-    ap = argparse.ArgumentParser(description=description(__doc__))
-    ap.add_argument("--out", required=True, help="folder for the recordings and truth.json")
-    ap.add_argument("--without-effect", action="store_true",
-                    help="write each recording's clean twin (the effect computed, not applied)")
-    ap.add_argument("--only", type=int, nargs="*", metavar="N",
-                    help="only these recordings (then no truth.json is written)")
-    args = ap.parse_args()
+    args = generator_parser(__doc__).parse_args()
     os.makedirs(args.out, exist_ok=True)
     plan = make_plan()
     truths = []

@@ -14,7 +14,6 @@ README.md next to this file gives every law and range.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -25,7 +24,7 @@ from mcap.writer import CompressionType, Writer
 from scipy import signal
 from scipy.special import erf
 
-from benchmarks.report import description
+from benchmarks.report import generator_parser
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
 from exohil.formats.recording_messages import sensor_decimals
 from exohil.formats.recording_writer import RecordingWriter, write_recording
@@ -883,13 +882,7 @@ def write(path, rec, w):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=description(__doc__))
-    ap.add_argument("--out", required=True, help="folder for the recordings and truth.json")
-    ap.add_argument("--without-effect", action="store_true",
-                    help="write each recording's clean twin (the effect computed, not applied)")
-    ap.add_argument("--only", type=int, nargs="*", metavar="N",
-                    help="only these recordings (then no truth.json is written)")
-    args = ap.parse_args()
+    args = generator_parser(__doc__).parse_args()
     os.makedirs(args.out, exist_ok=True)
     prng = np.random.default_rng([MASTER, 999])
     plan = list(prng.permutation(PLAN))
