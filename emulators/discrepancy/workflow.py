@@ -535,7 +535,7 @@ def _rail_words(evidence: dict, units: str) -> str:
         return ""
     return (f"; {rail['sensor']} reads exactly {rail['level']:.6g} {units}, its "
             f"{'lowest' if rail['side'] == 'low' else 'highest'} value, on "
-            f"{rail['share']:.1%} of the frames where the joint moves: pinned at a rail")
+            f"{rail['share']:.1%} of its valid frames: pinned at a rail")
 
 
 def _clock_read(clock: dict) -> dict:
