@@ -285,11 +285,12 @@ def prepare_trial(rec: Recording, name: str = "recording", mocap_late_s: float =
     # against the frame-to-frame floor of a stream resampled from a slower sensor, far
     # below its noise, most readings would be spikes
     spiked = spikes(y, valid, _widened(y, valid, floor, spread > RESAMPLED_SPREAD))
+    spike_frames = spiked.any(axis=1)
     causes = {"dropped": int((~present).sum()),
               "outside_motion_capture": int((present & ~inside).sum()),
               "not_finite": int((present & inside & ~finite).sum()),
-              "spike": int((valid & spiked.any(axis=1)).sum())}
-    valid &= ~spiked.any(axis=1)
+              "spike": int((valid & spike_frames).sum())}
+    valid &= ~spike_frames
     span = np.diff(t[[0, -1]])[0] if n > 1 else 0.0
     rate = (n - 1) / span if span > 0 else 0.0
     covered = float(valid.sum()) / rate if rate > 0 else 0.0
