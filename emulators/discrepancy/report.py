@@ -580,6 +580,15 @@ def markdown(summary: dict) -> str:
                       + (f"; beyond its own noise on {', '.join(beyond)} alone, on too few "
                          f"blocks there" if beyond else "") + ". " + _refined_count(
                              step["evidence"]["refined"], u)]
+        jumped = step["evidence"].get("jumped_in_hold")
+        if jumped:
+            lines += ["", f"Step {i} ({step['effect']}) was named because readings jumped "
+                      f"while the joint held still, which no effect of the pose does: "
+                      + "; ".join(f"{j['sensor']} by {j['height']:+.4g} {u} at {j['at_s']:.2f} s "
+                                  f"({j['robust_z']:.3g} robust deviations of its level "
+                                  f"difference in holds)" for j in jumped["jumps"])
+                      + f". The drift it became lowered the held-out error beyond the noise "
+                      f"on {', '.join(jumped['sensors'])}."]
     lines += _remainder_lines(summary)
     lines += _parameter_lines(summary)
     lines += _signature_lines(summary["steps"])

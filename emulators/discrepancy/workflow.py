@@ -42,6 +42,7 @@ from exohil.emulators.discrepancy.data import (
     spike_counts,
 )
 from exohil.emulators.discrepancy.figures import LEVEL_DIGITS, significant, significant_list
+from exohil.emulators.discrepancy.jumps import jumps_in_holds
 from exohil.emulators.discrepancy.localise import localise, motion, signatures, steps_words
 from exohil.emulators.discrepancy.model import (
     LOCAL_DEGREE,
@@ -91,6 +92,8 @@ STATIC_INPUT_ROUNDS = 2
 #: Degrees of a named hysteresis in its plays' level tried beside the plain loop (degree 1,
 #: the candidate; :func:`_own_static_part`).
 HYSTERESIS_DEGREES = (2, 3)
+#: Offset jumps a progress line lists (the JSON has every one).
+JUMPS_LISTED = 3
 
 
 @dataclass
@@ -323,11 +326,41 @@ def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidenc
     still ranked by its low-degree ΔMSE, so a flexible function of time never outranks a
     creep for its flexibility."""
     refined = candidate_evidence(trial, base, refine_drift(trial, inputs, cand), floor)
-    keys = ("heldout_gap", "delta_mse", "blocks_improved", "blocks_needed", "significant")
-    alone = refined.get("on_one_sensor") or {"sensors": {}}
+    keys = ("heldout_gap", "delta_mse", "delta_mse_without_best_block", "blocks_improved",
+            "blocks_needed", "significant")
+    alone = refined.get("on_one_sensor") or {"sensors": {}, "beyond_noise_sensors": []}
     return {**evidence, "significant": refined["significant"],
             "refined": {**{k: refined[k] for k in keys},
-                        "significant_on_sensors": list(alone["sensors"])}}
+                        "significant_on_sensors": list(alone["sensors"]),
+                        "beyond_noise_sensors": list(alone["beyond_noise_sensors"])}}
+
+
+def _jumped_in_hold(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
+                    floor: float) -> dict:
+    """``evidence`` of a drift that clears no rule on the gap, made significant where a
+    sensor's reading jumps while the joint holds still (:func:`~.jumps.jumps_in_holds`: an
+    offset that moved at an instant, which no pose-driven effect does) and the drift it
+    would become (:func:`_counted_refined`) lowers the held-out error of all sensors
+    together, without its best block too, and beyond its noise on a sensor that jumped.
+    Such a drift shifts only the blocks after each jump: it may improve too few folds for
+    rule 2's sign test."""
+    jumps = jumps_in_holds(trial, trial.y - base.prediction, inputs.still)
+    if not jumps:
+        return evidence
+    counted = evidence if "refined" in evidence else _counted_refined(
+        trial, inputs, base, cand, evidence, floor)
+    refined = counted["refined"]
+    jumped = sorted({trial.sensor_names[jump.sensor] for jump in jumps})
+    beyond = [name for name in jumped if name in refined["beyond_noise_sensors"]]
+    if not (refined["delta_mse"] > 0 and refined["delta_mse_without_best_block"] > 0
+            and beyond):
+        return counted
+    t0 = float(trial.t[0])
+    return {**counted, "significant": True, "jumped_in_hold": {
+        "sensors": beyond,
+        "jumps": [{"sensor": trial.sensor_names[jump.sensor],
+                   "at_s": round(jump.at_s - t0, 3), "height": significant(jump.height),
+                   "robust_z": round(jump.z, 1)} for jump in jumps]}}
 
 
 def _last_count(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: dict,
@@ -343,7 +376,9 @@ def _last_count(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: di
     a candidate that passes on its low degrees."""
     if "refined" in evidence or not np.any(_slow_part(trial, base.residual) > trial.noise**2):
         return evidence
-    return _counted_refined(trial, inputs, base, cand, evidence, floor)
+    counted = _counted_refined(trial, inputs, base, cand, evidence, floor)
+    return counted if counted["significant"] else _jumped_in_hold(
+        trial, inputs, base, cand, counted, floor)
 
 
 def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
@@ -416,6 +451,8 @@ def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float
     evidence = candidate_evidence(trial, base, cand, floor)
     if kind == "drift" and beyond_noise_somewhere(evidence) and not evidence["significant"]:
         evidence = _counted_refined(trial, inputs, base, cand, evidence, floor)
+    if kind == "drift" and not evidence["significant"]:
+        evidence = _jumped_in_hold(trial, inputs, base, cand, evidence, floor)
     if kind == "saturation" and evidence["significant"]:
         evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
     elif kind == "saturation":
@@ -536,6 +573,19 @@ def _rail_words(evidence: dict, units: str) -> str:
     return (f"; {rail['sensor']} reads exactly {rail['level']:.6g} {units}, its "
             f"{'lowest' if rail['side'] == 'low' else 'highest'} value, on "
             f"{rail['share']:.1%} of its valid frames: pinned at a rail")
+
+
+def _jump_words(evidence: dict, units: str) -> str:
+    """Where a drift was named because a reading jumped while the joint held still
+    (:func:`_jumped_in_hold`), a clause that says so; else ""."""
+    held = evidence.get("jumped_in_hold")
+    if held is None:
+        return ""
+    jumps = held["jumps"]
+    first = ", ".join(f"{j['sensor']} by {j['height']:+.3g} {units} at {j['at_s']:.1f} s"
+                      for j in jumps[:JUMPS_LISTED])
+    more = f" and {len(jumps) - JUMPS_LISTED} more" if len(jumps) > JUMPS_LISTED else ""
+    return f"; readings jumped while the joint held still: {first}{more}"
 
 
 def _clock_read(clock: dict) -> dict:
@@ -822,6 +872,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
             evidence["against_smooth_curve"] = winners[0][2]["against_smooth_curve"]
             if "pinned_at_rail" in winners[0][2]:
                 evidence["pinned_at_rail"] = winners[0][2]["pinned_at_rail"]
+        if "jumped_in_hold" in winners[0][2]:
+            evidence["jumped_in_hold"] = winners[0][2]["jumped_in_hold"]
         if own_input is not None:
             evidence["own_static_input"] = own_input
         if "refined" in winners[0][2]:  # a drift counted on the drift it would become
@@ -846,7 +898,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                if own_input and own_input["rounds"] else "")
         refitted = "".join(f"; {k} refitted: {_shape_words(p)}" for k, p in refit.items())
         progress(f"[{step}] added {kind}: held-out gap {cand.gap:.4g} {trial.units} "
-                 f"(tried {table}){own}{_rail_words(evidence, trial.units)}{refitted}")
+                 f"(tried {table}){own}{_rail_words(evidence, trial.units)}"
+                 f"{_jump_words(evidence, trial.units)}{refitted}")
         step += 1
     after = base
     left = remainder(trial, after, floor)
