@@ -551,6 +551,11 @@ def test_what_the_model_leaves_beyond_the_noise_is_said_with_what_may_cause_it()
     assert "## What remains" in report and "What remains is noise" not in report
     assert "no moving `elv_angle`" in report and "no moving `shoulder_rot`" in report
     assert "`shoulder_elv`" not in report
+    # the same summary, had the recording's only stream been another joint's
+    elsewhere = markdown({**summary, "joint": "elbow"})
+    assert "(only the elbow's `shoulder_elv` was analysed, the recording holding no " \
+        "shoulder angles: a suit worn on another joint follows that joint's angles)" in elsewhere
+    assert "no moving" not in elsewhere
 
 
 def test_a_floor_of_zero_leaves_no_ratio_and_the_conclusion_still_reads(hysteresis_outcome):

@@ -382,11 +382,18 @@ def _remainder_lines(summary: dict) -> list[str]:
              ""]
     shoulder = [f"`{name}`, {meaning}" for name, meaning in SHOULDER_ANGLES.items()
                 if summary["joint"] == "shoulder" and name not in summary["angles"]]
+    # another joint than the shoulder is analysed only where the recording has no shoulder
+    # stream (the joint with the most samples): the suit may be worn elsewhere
+    joint = ("" if summary["joint"] == "shoulder" else
+             f" (only the {summary['joint']}'s " + ", ".join(f"`{a}`" for a in summary["angles"])
+             + (" was" if len(summary["angles"]) == 1 else " were")
+             + " analysed, the recording holding no shoulder angles: a suit worn on "
+             "another joint follows that joint's angles)")
     return lines + [
         "What it is, the recording alone cannot say. It may be: the calibrated map's form "
         "falling short of this suit's geometry; angles the readings follow that are not "
         "recorded" + (" (the recording has no moving " + "; no moving ".join(shoulder) + ")"
-                      if shoulder else "")
+                      if shoulder else joint)
         + "; the suit shifting on the skin or slipping over a bony prominence; the movement's "
         "history, through an effect outside the five or one of them in a form the candidates "
         "do not follow; noise the floor does not count (the floor is the sensors' "
