@@ -949,6 +949,7 @@ def test_a_reading_pinned_at_a_rail_is_named_saturation():
     assert evidence["pinned_at_rail"] == pinned and not evidence["significant"]
     assert summary["gap_after"] <= summary["gap_before"]
     assert any("pinned at a rail" in line for line in lines)
+    assert "(saturation) was named because T0 reads exactly" in markdown(summary)
     coarse = _quantised(clipped, 1.0)
     assert pinned_at_rail(prepare_trial(coarse)) is None
 

@@ -587,13 +587,22 @@ def markdown(summary: dict) -> str:
                       + (f"; beyond its own noise on {', '.join(beyond)} alone, on too few "
                          f"blocks there" if beyond else "") + ". " + _refined_count(
                              step["evidence"]["refined"], u)]
+        rail = step["evidence"].get("pinned_at_rail")
+        if rail:
+            lines += ["", f"Step {i} ({step['effect']}) was named because {rail['sensor']} "
+                      f"reads exactly {rail['level']:.6g} {u}, its "
+                      f"{'lowest' if rail['side'] == 'low' else 'highest'} value, on "
+                      f"{rail['share']:.1%} of its valid frames, as a converter's floor or a "
+                      f"range's limit holds it and no noise does: pinned at a rail. The stops "
+                      f"left a held-out gap no larger than the model without them."]
         jumped = step["evidence"].get("jumped_in_hold")
         if jumped:
             lines += ["", f"Step {i} ({step['effect']}) was named because readings jumped "
-                      f"while the joint held still, which no effect of the pose does: "
-                      + "; ".join(f"{j['sensor']} by {j['height']:+.4g} {u} at {j['at_s']:.2f} s "
-                                  f"({j['robust_z']:.3g} robust deviations of its level "
-                                  f"difference in holds)" for j in jumped["jumps"])
+                      f"while the joint held still, which no effect of the pose does (each "
+                      f"jump's size in robust deviations of its sensor's level difference in "
+                      f"holds): " + "; ".join(
+                          f"{j['sensor']} by {j['height']:+.4g} {u} at {j['at_s']:.2f} s "
+                          f"({j['robust_z']:.3g})" for j in jumped["jumps"])
                       + f". The drift it became lowered the held-out error beyond the noise "
                       f"on {', '.join(jumped['sensors'])}."]
     lines += _remainder_lines(summary)
