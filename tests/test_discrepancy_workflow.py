@@ -1874,9 +1874,10 @@ def test_an_offset_that_wanders_is_named_drift_and_followed(clean_101, tmp_path)
 def test_an_offset_that_jumps_while_the_arm_holds_still_is_named_drift(clean_101):
     """A contact on one sensor of three opens during a hold and closes during another 25 s
     later (+0.4 mm, 2.7 of its noise, written here apart from the workflow's drift): the
-    drift it would become lowers the held-out error but improves too few blocks for rule 2
-    (the blocks between the jumps and the others are not shifted alike), so its gap alone
-    named nothing (code 9e3f8b8). The reading stepping while the pose holds is the evidence:
+    drift it would become lowers the held-out error by under one noise variance pooled,
+    and on that sensor beyond its noise but on too few of its blocks for rule 2's sign
+    test (the blocks between the jumps and the others are not shifted alike), so its gap
+    alone named nothing (code 9e3f8b8). The reading stepping while the pose holds is the evidence:
     both jumps are found, on that sensor, at their instants, and the drift is named."""
     rec, clean = clean_101
     t = rec.sensors.t - rec.sensors.t[0]
