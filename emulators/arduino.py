@@ -31,7 +31,14 @@ from exohil.emulators.faults import FaultRecord, FrameFaultInjector
 from exohil.emulators.pty_port import VirtualSerialPort
 from exohil.formats.recording import Recording
 from exohil.formats.recording_messages import first_non_finite
-from exohil.formats.wire import MM_PER_LSB, SEQ_MODULUS, TIME_MODULUS_US, WireFrame, encode_frame
+from exohil.formats.wire import (
+    MM_PER_LSB,
+    SEQ_MODULUS,
+    TIME_MODULUS_US,
+    WireFrame,
+    encode_frame,
+    off_the_wire,
+)
 from exohil.realtime import SPIN_S, request_realtime, sleep_until
 
 _IDLE_POLL_S = 0.001
@@ -101,9 +108,9 @@ class ArduinoEmulator:
         present = None
         if isinstance(values_mm, Recording):
             recording = values_mm
-            if recording.sensor_units != "mm":
-                raise ValueError(f"sensor values are in {recording.sensor_units!r}; the wire "
-                                 "protocol carries mm")
+            why = off_the_wire(recording.sensor_units)
+            if why is not None:
+                raise ValueError(why)
             if recording.sensors.values.shape[0] == 0:
                 raise ValueError("the recording has no sensor frames")
             # not looping, with a duration: only the frames streamed, so a recording whose

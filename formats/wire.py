@@ -30,6 +30,8 @@ FRAME_TYPE_SENSORS = 0x1
 TYPE_VERSION_BYTE = (PROTOCOL_VERSION << 4) | FRAME_TYPE_SENSORS  # 0x11
 DELIMITER = 0x00
 MM_PER_LSB = 0.01
+#: The sensor unit the wire carries (``MM_PER_LSB`` per count).
+WIRE_UNITS = "mm"
 #: The largest tendon length the wire carries, mm (a u16 of 0.01 mm).
 MAX_VALUE_MM = 0xFFFF * MM_PER_LSB
 MAX_SENSORS = 16
@@ -78,6 +80,14 @@ class WireFrame:
     def values_mm(self) -> np.ndarray:
         """The (N,) sensor values in mm (float64)."""
         return np.asarray(self.raw, dtype=np.float64) * MM_PER_LSB
+
+
+def off_the_wire(units: str) -> str | None:
+    """Why readings in ``units`` cannot be streamed over wire protocol v1, as one clause
+    ("sensor values are in 'V'; wire protocol v1 carries mm"); None where they can."""
+    if units == WIRE_UNITS:
+        return None
+    return f"sensor values are in {units!r}; wire protocol v1 carries {WIRE_UNITS}"
 
 
 def crc16_ccitt_false(data: bytes | bytearray | memoryview) -> int:

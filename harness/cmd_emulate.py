@@ -27,14 +27,15 @@ from exohil.harness.cli_types import (
 def _load_recording(path: Path):
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
+    from exohil.formats.wire import off_the_wire
 
     try:
         recording = read_recording(path)
     except RecordingError as exc:
         raise click.ClickException(str(exc)) from exc
-    if recording.sensor_units != "mm":
-        raise click.ClickException(f"{path}: sensor values are in {recording.sensor_units!r}; "
-                                   "the wire protocol carries mm")
+    why = off_the_wire(recording.sensor_units)
+    if why is not None:
+        raise click.ClickException(f"{path}: {why}")
     if len(recording.sensors) == 0:
         raise click.ClickException(f"{path}: the recording has no sensor frames")
     return recording

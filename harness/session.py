@@ -49,7 +49,7 @@ from exohil.formats.errors import InputError, RecordingError
 from exohil.formats.measurement import DISTRIBUTION_STATS, Limit, Measurement, distribution
 from exohil.formats.recording import AngleStream, Recording, Segment, SensorStream
 from exohil.formats.recording_metadata import DEFAULT_SENSOR_RATE_HZ
-from exohil.formats.wire import SEQ_MODULUS, TIME_MODULUS_US
+from exohil.formats.wire import SEQ_MODULUS, TIME_MODULUS_US, WIRE_UNITS, off_the_wire
 from exohil.harness.bench import (
     BenchConfig,
     BenchError,
@@ -460,19 +460,18 @@ def run_session(config: BenchConfig, seconds: float | None, *,
         raise SessionError(f"the bench's sensors {list(config.sensor_names)} are not the "
                            f"model's {list(est.sensor_names)}")
     units = est.info.get("sensor_units")
-    if units is not None and units != "mm":  # a device's frames come over the wire in mm
-        raise SessionError(f"{config.model}: the model reads sensors in {units}; a device "
-                           "streams wire protocol v1, which carries mm (train a model on "
-                           "recordings in mm)")
+    why = None if units is None else off_the_wire(units)  # a device's frames come over it
+    if why is not None:
+        raise SessionError(f"{config.model}: the model's {why}, and a device streams over it "
+                           f"(train a model on recordings in {WIRE_UNITS})")
     ref_path = reference_path(config)
     if ref_path is None:
         reference = None
     elif reference is None:
         reference = read_reference(ref_path)
-    if reference is not None and isinstance(config.device, EmulatorDevice) \
-            and reference.sensor_units != "mm":
-        raise SessionError(f"{ref_path}: sensor values are in {reference.sensor_units!r}; the "
-                           "emulator streams them over the wire protocol, which carries mm")
+    why = None if reference is None else off_the_wire(reference.sensor_units)
+    if why is not None and isinstance(config.device, EmulatorDevice):
+        raise SessionError(f"{ref_path}: {why}, and the emulator streams the recording over it")
     if reference is not None:
         try:
             ensure_fits(est, reference, str(ref_path))

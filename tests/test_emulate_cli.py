@@ -19,6 +19,7 @@ from shared_data import SHARED_DIR
 from exohil.formats.recording import Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
+from exohil.formats.wire import off_the_wire
 from exohil.harness.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -216,6 +217,22 @@ def test_emulate_rejects_bad_input_with_one_line(tmp_path: Path) -> None:
         assert result.exception is None or isinstance(result.exception, SystemExit), args
         lines = [line for line in result.output.splitlines() if line.startswith("Error")]
         assert len(lines) == 1, (args, result.output)
+
+
+def test_emulate_refuses_readings_the_wire_cannot_carry_in_the_wording_of_every_refusal(
+        tmp_path: Path) -> None:
+    """A recording in V: the wire carries mm. The emulator, `run` and `demo` refused it in
+    three wordings; all now say it as `off_the_wire` does."""
+    rec = read_recording(_synthetic_recording(tmp_path / "mm.mcap"))
+    rec.sensor_units = "V"
+    volts = tmp_path / "volts.mcap"
+    write_recording(volts, rec)
+    result = CliRunner().invoke(main, ["emulate", str(volts), "--duration", "0.1"])
+    assert result.exit_code == 1, result.output
+    assert result.output.strip().splitlines()[-1] == (
+        f"Error: {volts}: sensor values are in 'V'; wire protocol v1 carries mm")
+    assert off_the_wire("V") == "sensor values are in 'V'; wire protocol v1 carries mm"
+    assert off_the_wire("mm") is None
 
 
 def test_emulate_refuses_a_fault_log_that_is_its_fault_file(tmp_path: Path) -> None:

@@ -445,8 +445,8 @@ def test_a_model_refuses_readings_in_another_unit_than_it_was_trained_on(files):
                                        "--duration", "1", "--sink", "none"])
     assert result.exit_code == 1, result.output
     assert result.output.strip().splitlines()[-1] == (
-        f"Error: {v_model}: the model reads sensors in V; a device streams wire protocol v1, "
-        "which carries mm (train a model on recordings in mm)")
+        f"Error: {v_model}: the model's sensor values are in 'V'; wire protocol v1 carries mm, "
+        "and a device streams over it (train a model on recordings in mm)")
 
 
 def test_train_warns_when_the_timestamps_disagree_with_the_nominal_rate(files):

@@ -587,5 +587,5 @@ def test_a_demo_of_a_recording_in_volts_names_the_file(tmp_path):
                                        "--out", str(tmp_path / "out")])
     assert result.exit_code == 1
     errors = [line for line in result.output.splitlines() if line.startswith("Error")]
-    assert errors == [f"Error: {volts}: sensor values are in 'V'; the emulator streams them "
-                      "over the wire protocol, which carries mm"], result.output
+    assert errors == [f"Error: {volts}: sensor values are in 'V'; wire protocol v1 carries "
+                      "mm, and the emulator streams the recording over it"], result.output
