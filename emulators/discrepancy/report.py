@@ -35,6 +35,7 @@ from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import (
     Outcome,
     map_words,
+    rail_words,
     resampled_words,
     stamped_words,
 )
@@ -589,12 +590,10 @@ def markdown(summary: dict) -> str:
                              step["evidence"]["refined"], u)]
         rail = step["evidence"].get("pinned_at_rail")
         if rail:
-            lines += ["", f"Step {i} ({step['effect']}) was named because {rail['sensor']} "
-                      f"reads exactly {rail['level']:.6g} {u}, its "
-                      f"{'lowest' if rail['side'] == 'low' else 'highest'} value, on "
-                      f"{rail['share']:.1%} of its valid frames, as a converter's floor or a "
-                      f"range's limit holds it and no noise does: pinned at a rail. The stops "
-                      f"left a held-out gap no larger than the model without them."]
+            lines += ["", f"Step {i} ({step['effect']}) was named because "
+                      f"{rail_words(rail, u)}, as a converter's floor or a range's limit holds "
+                      f"it and no noise does: pinned at a rail. The stops left a held-out gap "
+                      f"no larger than the model without them."]
         jumped = step["evidence"].get("jumped_in_hold")
         if jumped:
             lines += ["", f"Step {i} ({step['effect']}) was named because readings jumped "

@@ -373,12 +373,12 @@ def _last_count(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidence: di
     residual's slow part holds more than the noise on some sensor, against that sensor's
     own noise (:func:`_slow_part`; a refined drift costs a dozen fits, and one sensor's
     sawtooth among twelve is under the pooled noise), so the drift is still never named over
-    a candidate that passes on its low degrees."""
+    a candidate that passes on its low degrees. Jumps in holds were looked for on the same
+    model when the candidate was scored (:func:`_candidate`): where there were any the drift
+    was counted then."""
     if "refined" in evidence or not np.any(_slow_part(trial, base.residual) > trial.noise**2):
         return evidence
-    counted = _counted_refined(trial, inputs, base, cand, evidence, floor)
-    return counted if counted["significant"] else _jumped_in_hold(
-        trial, inputs, base, cand, counted, floor)
+    return _counted_refined(trial, inputs, base, cand, evidence, floor)
 
 
 def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
@@ -564,15 +564,20 @@ def _invalid(trial: Trial) -> str:
     return f"{int((~trial.valid).sum())} invalid" + (f" ({why})" if why else "")
 
 
+def rail_words(rail: dict, units: str) -> str:
+    """A reading pinned at a rail (``pinned_at_rail`` evidence) in words, for the progress
+    line and the report: "T0 reads exactly 0 counts, its lowest value, on 10.1% of its
+    valid frames"."""
+    return (f"{rail['sensor']} reads exactly {rail['level']:.6g} {units}, its "
+            f"{'lowest' if rail['side'] == 'low' else 'highest'} value, on "
+            f"{rail['share']:.1%} of its valid frames")
+
+
 def _rail_words(evidence: dict, units: str) -> str:
     """Where a saturation was named because a reading is pinned at a rail (:func:`_at_rail`),
     a clause that says so; else ""."""
     rail = evidence.get("pinned_at_rail")
-    if rail is None:
-        return ""
-    return (f"; {rail['sensor']} reads exactly {rail['level']:.6g} {units}, its "
-            f"{'lowest' if rail['side'] == 'low' else 'highest'} value, on "
-            f"{rail['share']:.1%} of its valid frames: pinned at a rail")
+    return "" if rail is None else f"; {rail_words(rail, units)}: pinned at a rail"
 
 
 def _jump_words(evidence: dict, units: str) -> str:
