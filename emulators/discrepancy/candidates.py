@@ -18,7 +18,14 @@ from scipy.optimize import minimize, minimize_scalar
 
 from exohil.emulators.discrepancy.data import BLOCK_S, Trial
 from exohil.emulators.discrepancy.folds import block_mse
-from exohil.emulators.discrepancy.model import STATIC_RIDGES, Fit, Inputs, Spec, fit, static_basis
+from exohil.emulators.discrepancy.model import (
+    STATIC_RIDGES,
+    Fit,
+    Inputs,
+    Spec,
+    coefficient_slices,
+    fit,
+)
 from exohil.emulators.discrepancy.rules import candidate_evidence, pooled_noise
 from exohil.emulators.discrepancy.workers import forked_map
 
@@ -73,8 +80,9 @@ DRIFT_SPAN_S = 2 * BLOCK_S
 def _candidates(kind: str, spec: Spec) -> list[Spec]:
     """The configurations of ``kind`` to try on top of ``spec`` (lag: see _refine_lag;
     creep: see creep_families)."""
-    if kind == "hysteresis":
-        return [replace(spec, hysteresis=True)]
+    if kind == "hysteresis":  # a loop in the reading, or in the pose
+        return [replace(spec, hysteresis=True), replace(spec, hysteresis=True,
+                                                        hysteresis_angles=True)]
     if kind == "drift":
         return [replace(spec, drift_degree=d) for d in DRIFT_DEGREES]
     if kind == "saturation":  # see best_candidate
@@ -235,14 +243,13 @@ def rate_limit_candidate(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
     grid = np.log(np.column_stack([np.quantile(v[v > 0] if (v > 0).any() else np.ones(1),
                                                RATE_LIMIT_QUANTILES) for v in speed.T]))
     sensors = np.arange(grid.shape[1])
-    n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
 
     def at(log_rates: np.ndarray) -> tuple[Fit, np.ndarray]:
         """The fit with these limits and its held-out mean squared error per sensor (+inf
         where the limit's gain is not positive)."""
         rates = tuple(float(f"{r:.5g}") for r in np.exp(log_rates))
         f = fit(trial, inputs, replace(spec, lag_kind="rate_limit", lag_rates=rates))
-        col = f.spec.columns(n_static, inputs.thresholds.shape[1])["lag"].start
+        col = coefficient_slices(inputs, f.spec)["lag"].start
         gain = np.array([c[col] for c in f.coef])
         return f, np.where(gain > 0, np.nanmean(f.residual[trial.scored] ** 2, axis=0), np.inf)
 

@@ -17,7 +17,9 @@ held fixed as the *input* of the history-dependent terms) the model is
 * H (``hysteresis``): Prandtl–Ishlinskii basis, ŝ − play_r(ŝ) for play operators of thresholds
   r spread over the sensor's range; any weighted sum is a rate-independent loop. A named loop
   may also take powers of each play's output (:func:`hysteresis_columns`): a loop whose
-  width changes with the level, as a Preisach operator's does.
+  width changes with the level, as a Preisach operator's does. Or the plays act on each
+  joint angle instead, weighted by ŝ's slope in it (:func:`angle_play_columns`): a loop in
+  the pose, as a sleeve that slips on the limb makes, which ŝ need not show.
 * C (``creep``): ŝ low-passed with time constants of seconds to tens of seconds (slow
   relaxation toward the current stretch), an asymmetric build/recover state, or states
   that flow toward the stretch only while the joint holds still and recover while it
@@ -83,6 +85,10 @@ MOVING_DEG_S = 2.0 * STILL_DEG_S
 SPEED_WINDOW_S = 0.5
 #: Play-operator thresholds as fractions of the sensor's range (p1–p99).
 PLAY_FRACTIONS = (0.005, 0.015, 0.04, 0.1, 0.25)
+#: The step of the central differences that give ŝ's slope in each angle, degrees
+#: (:func:`angle_play_columns`): small against the bends of a map over tens of degrees,
+#: far above rounding.
+STATIC_SLOPE_STEP_DEG = 0.5
 #: The static map's local basis (offered beside the polynomials for an arm direction): a
 #: Fibonacci lattice of this many centres on the unit sphere, of which those within
 #: ``LOCAL_KEEP`` spacings of some recorded direction are kept, each the centre of a compact
@@ -123,6 +129,8 @@ class Spec:
         hysteresis_degree: the degree of the hysteresis term in each play operator's output
             (:func:`hysteresis_columns`): 1, a Prandtl–Ishlinskii loop of the same width at
             every level; higher, a loop whose width changes with the level.
+        hysteresis_angles: the play operators act on the joint's angles, not on ŝ
+            (:func:`angle_play_columns`; degree 1 only).
         creep_tau_s: time constants of the creep low-passes, s (empty = none).
         creep_quadratic: each low-pass also of (ŝ − centre)², a driver that is not
             proportional to the stretch (a fabric whose load stiffens, or eases, with it).
@@ -158,6 +166,7 @@ class Spec:
     local_ridge: float = LOCAL_RIDGES[0]
     hysteresis: bool = False
     hysteresis_degree: int = 1
+    hysteresis_angles: bool = False
     creep_tau_s: tuple[float, ...] = ()
     creep_quadratic: bool = False
     creep_asym_s: tuple[float, ...] = ()
@@ -198,12 +207,13 @@ class Spec:
             return self
         return self.without_lag()
 
-    def columns(self, n_static: int, n_play: int) -> dict[str, slice]:
+    def columns(self, n_static: int, n_play: int, n_angles: int) -> dict[str, slice]:
         """Where each effect term's coefficients sit in a sensor's coefficient vector, after
-        ``n_static`` static columns (``n_play``: the hysteresis term's play operators)."""
+        ``n_static`` static columns (``n_play``: the hysteresis term's play operators on each
+        of its inputs; ``n_angles``: the joint's angles)."""
+        loop = n_play * (n_angles if self.hysteresis_angles else self.hysteresis_degree)
         out, at = {}, n_static
-        for kind, width in (("hysteresis",
-                             n_play * self.hysteresis_degree if self.hysteresis else 0),
+        for kind, width in (("hysteresis", loop if self.hysteresis else 0),
                             ("creep", len(self.creep_tau_s) * (2 if self.creep_quadratic else 1)
                              + (1 if self.creep_asym_s else 0)
                              + (2 if self.creep_hold_s else 0)),
@@ -231,6 +241,7 @@ class Spec:
         return {"degree": self.degree, "local": self.local,
                 **({"local_ridge": self.local_ridge} if self.local else {}),
                 "hysteresis": self.hysteresis, "hysteresis_degree": self.hysteresis_degree,
+                "hysteresis_angles": self.hysteresis_angles,
                 "creep_tau_s": list(self.creep_tau_s), "creep_quadratic": self.creep_quadratic,
                 "creep_asym_s": list(self.creep_asym_s),
                 "creep_hold_s": list(self.creep_hold_s),
@@ -277,6 +288,8 @@ class Inputs:
     Attributes:
         u: (N, U) inputs of the static map (see :func:`map_inputs`).
         input_kind: "arm_direction", "arm_axes" or "angles".
+        angles: (N, A) the joint's angles, degrees (input of the plays on the angles).
+        angle_names: their names (:func:`map_inputs`).
         angle_lo / angle_hi: (A,) degrees, the scaling range.
         static: (N, S) static prediction ŝ (input of the hysteresis and creep terms).
         static_coef: (P, S) its coefficients on the degree-``static_degree`` basis.
@@ -308,6 +321,8 @@ class Inputs:
     t_norm: np.ndarray
     t_span: tuple[float, float]
     centre: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    angles: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    angle_names: tuple[str, ...] = ()
     segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     segment_sensors: tuple[int, ...] = ()
     static_local: bool = False
@@ -464,6 +479,13 @@ def static_basis(inputs: Inputs, degree: int, local: bool = False) -> np.ndarray
     return inputs.cache[key]
 
 
+def coefficient_slices(inputs: Inputs, spec: Spec) -> dict[str, slice]:
+    """Where each effect term of ``spec`` sits in a sensor's coefficient vector
+    (:meth:`Spec.columns`) with these inputs' static basis, plays and angles."""
+    n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
+    return spec.columns(n_static, inputs.thresholds.shape[1], inputs.angles.shape[1])
+
+
 def fit_segments(trial: Trial, u: np.ndarray, input_kind: str,
                  ) -> tuple[np.ndarray, tuple[int, ...]]:
     """The straight tendon runs across the shoulder that the readings show, as (P₂, K)
@@ -590,6 +612,56 @@ def loop_width_terms(thresholds: np.ndarray, degree: int) -> np.ndarray:
     return np.vstack(rows)
 
 
+def angle_thresholds(inputs: Inputs) -> np.ndarray:
+    """(A, K) the half-widths of the plays on the angles, degrees: :data:`PLAY_FRACTIONS` of
+    each angle's scaling range (its recorded range)."""
+    span = np.maximum(inputs.angle_hi - inputs.angle_lo, 0.0)
+    return span[:, None] * np.asarray(PLAY_FRACTIONS)[None, :]
+
+
+def static_at(inputs: Inputs, angles: np.ndarray) -> np.ndarray:
+    """(N, S) the static input ŝ's map (its basis and coefficients) at ``angles`` (N, A),
+    degrees."""
+    u, _ = map_inputs(angles, inputs.angle_names, inputs.angle_lo, inputs.angle_hi)
+    basis = static_terms(u, inputs.static_degree, inputs.segments,
+                         inputs.centres if inputs.static_local else None)
+    return basis @ inputs.static_coef
+
+
+def angle_play_columns(inputs: Inputs) -> np.ndarray:
+    """(N, S, A·K) the hysteresis basis of a loop in the pose: for each angle αₐ and each
+    play half-width r (:func:`angle_thresholds`), ∂ŝ/∂αₐ · (αₐ − p_r(αₐ)), grouped by angle.
+
+    A sleeve that slips on the limb, or a tendon that sticks in its guide, follows each
+    angle with a backlash: the sensor reads the pose the fabric holds, ŝ(p(α)) ≈ ŝ(α) −
+    ∂ŝ/∂α · (α − p(α)). Any weighted sum over r is a Prandtl–Ishlinskii loop in each angle,
+    read through the map's slope (:func:`static_slopes`). Unlike
+    the plays on ŝ (:func:`hysteresis_columns`) it loops where one angle reverses while ŝ
+    goes on one way (an axial rotation with the arm raised), and it is as wide in the
+    angle at every pose. Each column is zero wherever the play has caught up with its
+    angle, so none is a static function of the pose."""
+    if "HA" not in inputs.cache:
+        lost = inputs.angles[:, :, None] - play(inputs.angles, angle_thresholds(inputs))
+        cols = static_slopes(inputs)[:, :, :, None] * lost[:, None, :, :]  # (N, S, A, K)
+        inputs.cache["HA"] = cols.reshape(cols.shape[0], cols.shape[1], -1)
+    return inputs.cache["HA"]
+
+
+def static_slopes(inputs: Inputs) -> np.ndarray:
+    """(N, S, A) ∂ŝ/∂αₐ, sensor units per degree: central differences of ŝ's map
+    (:func:`static_at`) of ``STATIC_SLOPE_STEP_DEG`` in each angle (cached)."""
+    if "dS" not in inputs.cache:
+        angles = inputs.angles
+        slopes = np.empty((angles.shape[0], inputs.static_coef.shape[1], angles.shape[1]))
+        for a in range(angles.shape[1]):
+            step = np.zeros(angles.shape[1])
+            step[a] = STATIC_SLOPE_STEP_DEG
+            slopes[:, :, a] = (static_at(inputs, angles + step)
+                               - static_at(inputs, angles - step)) / (2.0 * step[a])
+        inputs.cache["dS"] = slopes
+    return inputs.cache["dS"]
+
+
 def creep_columns(inputs: Inputs, tau_s: float, rate_hz: float) -> np.ndarray:
     """(N, S) ŝ low-passed with ``tau_s`` (the relaxing creep state)."""
     key = ("C", tau_s)
@@ -705,7 +777,9 @@ def design(rate_hz: float, inputs: Inputs, spec: Spec, j: int) -> Design:
         return lagged_term(inputs, spec, rate_hz, columns, *args)
 
     own = []
-    if spec.hysteresis:
+    if spec.hysteresis and spec.hysteresis_angles:
+        own.append(lagged(angle_play_columns)[:, j, :])
+    elif spec.hysteresis:
         own.append(lagged(hysteresis_columns, spec.hysteresis_degree)[:, j, :])
     for tau in spec.creep_tau_s:
         own.append(lagged(creep_columns, tau, rate_hz)[:, j:j + 1])
@@ -885,7 +959,8 @@ def make_inputs(trial: Trial, static_map: Spec | None = None) -> Inputs:
     t0, t1 = float(trial.t[0]), float(trial.t[-1])
     u, kind = map_inputs(trial.angles, trial.angle_names, lo, hi)
     inputs = Inputs(u=u, input_kind=kind, angle_lo=lo, angle_hi=hi,
-                    static=np.empty(0), static_coef=np.empty(0), static_degree=1,
+                    angles=trial.angles, angle_names=trial.angle_names, static=np.empty(0),
+                    static_coef=np.empty(0), static_degree=1,
                     thresholds=np.empty(0), t_norm=2.0 * (trial.t - t0) / (t1 - t0) - 1.0,
                     t_span=(t0, t1))
     inputs.still = trial_motion(trial)[1]

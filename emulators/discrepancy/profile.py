@@ -155,6 +155,7 @@ def profile_dict(suit: CalibratedSuit, description: str = "") -> dict:
         "terms": {
             "hysteresis": spec.hysteresis,
             "hysteresis_degree": spec.hysteresis_degree,
+            "hysteresis_on_angles": spec.hysteresis_angles,
             "creep_tau_s": list(spec.creep_tau_s),
             "creep_quadratic": spec.creep_quadratic,
             "creep_build_recover_s": list(spec.creep_asym_s),
@@ -260,6 +261,7 @@ def load_calibrated_profile(path: str | Path) -> CalibratedSuit:
         spec = Spec(degree=int(sm["degree"]), local=bool(sm.get("local", False)),
                     hysteresis=bool(terms["hysteresis"]),
                     hysteresis_degree=int(terms.get("hysteresis_degree", 1)),
+                    hysteresis_angles=bool(terms.get("hysteresis_on_angles", False)),
                     creep_tau_s=tuple(float(v) for v in terms["creep_tau_s"]),
                     creep_quadratic=bool(terms.get("creep_quadratic", False)),
                     creep_asym_s=tuple(float(v) for v in terms["creep_build_recover_s"]),
@@ -341,7 +343,8 @@ def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inpu
     u, _ = map_inputs(angles_deg, suit.angles, suit.inputs.angle_lo, suit.inputs.angle_hi)
     t0, t1 = suit.inputs.t_span
     inputs = Inputs(u=u, input_kind=suit.inputs.input_kind, angle_lo=suit.inputs.angle_lo,
-                    angle_hi=suit.inputs.angle_hi, static=np.empty(0),
+                    angle_hi=suit.inputs.angle_hi, angles=angles_deg, angle_names=suit.angles,
+                    static=np.empty(0),
                     static_coef=suit.inputs.static_coef,
                     static_degree=suit.inputs.static_degree,
                     static_local=suit.inputs.static_local, centres=suit.inputs.centres,

@@ -236,16 +236,21 @@ PER_SENSOR_PARAMS = frozenset({
 #: Parameters left to the JSON: the hysteresis term's play operators (a row per sensor of
 #: as many thresholds and weights as the model has plays, and of the weights of each power
 #: of the plays' level).
-JSON_ONLY_PARAMS = frozenset({"play_thresholds", "weights", "level_weights"})
+JSON_ONLY_PARAMS = frozenset({"play_thresholds", "play_thresholds_deg", "weights",
+                              "level_weights"})
 
 
 #: What each parameter of ``steps[].params`` means, in the order the report explains them
 #: (a per-sensor one is a column of its step's table, the others follow the step's title).
 PARAMETERS = {
+    "on": "what the loop's plays act on: the reading (a loop in the static prediction) or "
+          "the angles (a loop in the pose, read through the map's slope in each angle)",
+    "angles": "the angles whose plays make a loop in the pose",
     "loop_width": "the falling branch minus the rising branch after an excursion wider than "
-                  "the widest play, sensor units, at the middle of the sensor's range: "
-                  "positive where the reading is higher on the way down than on the way up "
-                  "(it trails its input), negative where lower",
+                  "the widest play, sensor units, at the middle of the sensor's range (plays "
+                  "on the reading) or at the map's median slope in each angle (plays on the "
+                  "angles): positive where the reading is higher on the way down than on the "
+                  "way up (it trails its input), negative where lower",
     "level_degree": "the loop's degree in the level: 1, as wide at every level "
                     "(Prandtl–Ishlinskii); 2 or 3, a width that changes along the range",
     "tau_s": "time constant(s), s: of each low-pass of the stretch (creep), or of the "

@@ -52,12 +52,14 @@ from exohil.emulators.discrepancy.model import (
     Fit,
     Inputs,
     Spec,
+    angle_thresholds,
+    coefficient_slices,
     drift_columns,
     fit,
     loop_width_terms,
     make_inputs,
     restrict_to_coverage,
-    static_basis,
+    static_slopes,
     with_static_of,
 )
 from exohil.emulators.discrepancy.rules import (
@@ -189,14 +191,15 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     """The fitted parameters of one effect term, per sensor where they differ (sensor units
     unless the name says otherwise)."""
     spec = result.spec
-    n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
-    cols = spec.columns(n_static, inputs.thresholds.shape[1]).get(kind, slice(0, 0))
+    cols = coefficient_slices(inputs, spec).get(kind, slice(0, 0))
+    if kind == "hysteresis" and spec.hysteresis_angles:
+        return _angle_loop_params(result, inputs, trial, cols)
     if kind == "hysteresis":
         n_play = inputs.thresholds.shape[1]
         weights = [c[cols] for c in result.coef]
         width = [float(np.sum(w.reshape(-1, n_play) * loop_width_terms(r, spec.hysteresis_degree)))
                  for w, r in zip(weights, inputs.thresholds, strict=True)]
-        return {"loop_width": [significant(w) for w in width],
+        return {"on": "reading", "loop_width": [significant(w) for w in width],
                 "play_thresholds": significant_list(inputs.thresholds),
                 "level_degree": spec.hysteresis_degree,
                 "weights": [np.round(w[:n_play], 5).tolist() for w in weights],
@@ -252,6 +255,23 @@ def effect_params(kind: str, result: Fit, inputs: Inputs, trial: Trial) -> dict:
     raise ValueError(kind)
 
 
+def _angle_loop_params(result: Fit, inputs: Inputs, trial: Trial, cols: slice) -> dict:
+    """The parameters of a loop in the pose (plays on the angles,
+    :func:`~.model.angle_play_columns`): per sensor, the weights of each angle's plays
+    (a row per angle), their half-widths in degrees, and the loop's width in sensor units
+    at the median slope of ŝ in each angle over the valid frames: the falling branch less
+    the rising one after an excursion wider than the widest play, Σ −2·r·w·∂ŝ/∂α."""
+    thresholds = angle_thresholds(inputs)  # (A, K)
+    weights = [c[cols].reshape(thresholds.shape) for c in result.coef]
+    slope = np.median(static_slopes(inputs)[trial.valid], axis=0)  # (S, A)
+    width = [float(np.sum(-2.0 * thresholds * w * slope[j][:, None]))
+             for j, w in enumerate(weights)]
+    return {"on": "angles", "angles": list(trial.angle_names),
+            "loop_width": [significant(v) for v in width],
+            "play_thresholds_deg": significant_list(thresholds),
+            "weights": [np.round(w, 5).tolist() for w in weights]}
+
+
 def _static_input_again(trial: Trial, inputs: Inputs, cand: Fit
                         ) -> tuple[Fit, Inputs, dict | None]:
     """``cand`` refitted, up to ``STATIC_INPUT_ROUNDS`` times, with its history terms driven
@@ -279,8 +299,9 @@ def _own_static_part(trial: Trial, inputs: Inputs, cand: Fit, loop_named: bool
     :func:`~.model.hysteresis_columns`) as well: the one with the lowest held-out gap on its
     own static part is kept. Chosen on the first ŝ instead, powers that follow what that ŝ
     got wrong can win and then leave more once ŝ is the model's own
-    (hysteresis/alt/m2/s1001: 0.2468 mm against the plain loop's 0.2168)."""
-    if not loop_named:
+    (hysteresis/alt/m2/s1001: 0.2468 mm against the plain loop's 0.2168). A loop in the
+    pose (plays on the angles) has no level powers."""
+    if not loop_named or cand.spec.hysteresis_angles:
         return _static_input_again(trial, inputs, cand)
     tried = [_static_input_again(trial, inputs, cand)]
     for degree in HYSTERESIS_DEGREES:

@@ -1,0 +1,127 @@
+"""A loop in the pose: the hysteresis term's plays on the joint's angles (a sleeve that slips).
+
+The suit below is the suite's geometry read at a pose the fabric holds back: its axial
+rotation follows the arm's only once the arm has turned a backlash beyond it. That is
+written here as a loop over the frames, apart from the workflow's play operators.
+"""
+
+import numpy as np
+import pytest
+
+from exohil.emulators.discrepancy import run
+from exohil.emulators.discrepancy.hidden import (
+    random_geometry,
+    random_trajectory,
+    suit_recording,
+)
+from exohil.emulators.discrepancy.model import (
+    PLAY_FRACTIONS,
+    Inputs,
+    angle_play_columns,
+    angle_thresholds,
+    legendre_products,
+    scale_angles,
+    static_slopes,
+)
+from exohil.emulators.discrepancy.profile import (
+    calibrated_suit,
+    load_calibrated_profile,
+    simulate_calibrated,
+    write_calibrated_profile,
+)
+from exohil.emulators.effects import Signal
+
+#: The sleeve's backlash in axial rotation, degrees.
+SLIP_DEG = 6.0
+NOISE_MM = 0.15
+
+
+def _held_back(angle: np.ndarray, backlash: float) -> np.ndarray:
+    """Where a sleeve that slips sits: it stays put until the limb has turned ``backlash``
+    beyond it, then is dragged along at that distance."""
+    out = np.empty_like(angle)
+    sleeve = angle[0]
+    for i, a in enumerate(angle):
+        if a > sleeve + backlash:
+            sleeve = a - backlash
+        elif a < sleeve - backlash:
+            sleeve = a + backlash
+        out[i] = sleeve
+    return out
+
+
+def _knee_inputs(angle: np.ndarray, gain: float) -> Inputs:
+    """Inputs of a one-angle joint whose static map is ``gain`` sensor units per degree."""
+    lo, hi = np.array([angle.min()]), np.array([angle.max()])
+    u = scale_angles(angle[:, None], lo, hi)
+    # ŝ = c₀ + c₁·P₁(u), u = (α − mid) / half range: slope c₁ / half range per degree
+    coef = np.array([[3.0], [gain * (hi[0] - lo[0]) / 2.0]])
+    assert legendre_products(u, 1)[0].shape[1] == 2
+    return Inputs(u=u, input_kind="angles", angle_lo=lo, angle_hi=hi, angles=angle[:, None],
+                  angle_names=("knee",), static=np.empty(0), static_coef=coef,
+                  static_degree=1, thresholds=np.empty(0), t_norm=np.zeros(angle.size),
+                  t_span=(0.0, 1.0))
+
+
+def test_each_play_on_an_angle_is_the_backlash_it_holds_through_the_maps_slope():
+    """Up to 90°, back to 40°, up again: each column is the map's slope times how far the
+    angle has run ahead of a play of that half-width (0 wherever the play has caught up
+    after a reversal, ±r once it has), as the sleeve loop above computes it."""
+    angle = np.concatenate([np.linspace(0.0, 90.0, 400), np.linspace(90.0, 40.0, 300),
+                            np.linspace(40.0, 90.0, 300)])
+    inputs = _knee_inputs(angle, gain=0.2)
+    np.testing.assert_allclose(static_slopes(inputs)[:, 0, 0], 0.2, rtol=1e-9)
+    widths = angle_thresholds(inputs)[0]
+    np.testing.assert_allclose(widths, 90.0 * np.asarray(PLAY_FRACTIONS))
+    columns = angle_play_columns(inputs)[:, 0, :]
+    assert columns.shape == (angle.size, len(PLAY_FRACTIONS))
+    for k, r in enumerate(widths):
+        np.testing.assert_allclose(columns[:, k], 0.2 * (angle - _held_back(angle, r)),
+                                   atol=1e-9)
+    # the widest play's column after the first rise and after the fall
+    assert columns[399, -1] == pytest.approx(0.2 * widths[-1])
+    assert columns[699, -1] == pytest.approx(-0.2 * widths[-1])
+
+
+@pytest.fixture(scope="module")
+def sleeve_slip():
+    """A suit of the suite (seed 4) turned within ±35° about the humerus, whose tendons read
+    the axial rotation through a sleeve with a 6° backlash; and the same suit read at the
+    arm's own pose (its clean twin), each with 0.15 mm of noise."""
+    trajectory = random_trajectory(4, 60.0, axial_deg=35.0)
+    geometry, gains, offsets = random_geometry(4)
+    t = trajectory.frame_times(250.0)
+    ang = trajectory.sample(t)
+    noise = np.random.default_rng(4).normal(0.0, NOISE_MM, (t.size, len(geometry.tendons)))
+    runs = {}
+    for name, psi in (("slip", _held_back(ang[:, 2], SLIP_DEG)), ("twin", ang[:, 2])):
+        lengths = geometry.path_lengths(*np.deg2rad([ang[:, 0], ang[:, 1], psi]))
+        y = lengths * gains + offsets + noise
+        rec = suit_recording(trajectory, geometry, Signal.from_values(t, y), {"case": name})
+        runs[name] = run(rec, name)
+    return runs
+
+
+def test_a_sleeve_that_slips_in_axial_rotation_is_named_a_loop_in_the_pose(sleeve_slip,
+                                                                              tmp_path):
+    """The slip loops only where ψ reverses, and with the arm raised ŝ need not reverse
+    with it: the plays on ŝ follow it less well than plays on the angles do. Hysteresis is
+    named first, as a loop in the pose, and takes most of what the slip adds to the clean
+    twin's gap; the profile written simulates what the model fitted."""
+    slip, twin = sleeve_slip["slip"], sleeve_slip["twin"]
+    s = slip.summary
+    assert twin.summary["effects"] == [], twin.summary["effects"]
+    assert s["effects"][:1] == ["hysteresis"], s["effects"]
+    params = s["steps"][0]["params"]
+    assert params["on"] == "angles", params
+    assert params["angles"] == ["elv_angle", "shoulder_elv", "shoulder_rot"]
+    assert np.shape(params["weights"]) == (len(s["sensors"]), 3, len(PLAY_FRACTIONS))
+    added = s["gap_before"] ** 2 - twin.summary["gap_before"] ** 2  # what the slip adds
+    assert added > 2.0 * NOISE_MM**2, (s, twin.summary)
+    # the loop in the pose takes at least three quarters of it
+    assert s["gap_after"] ** 2 - twin.summary["gap_after"] ** 2 < 0.25 * added, (s, twin.summary)
+    write_calibrated_profile(tmp_path / "p.toml", calibrated_suit(slip, "sleeve"))
+    loaded = load_calibrated_profile(tmp_path / "p.toml")
+    assert loaded.spec.hysteresis_angles
+    np.testing.assert_allclose(simulate_calibrated(loaded, slip.trial.t, slip.trial.angles),
+                               slip.after.prediction, atol=1e-6)
