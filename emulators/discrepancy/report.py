@@ -248,9 +248,10 @@ PARAMETERS = {
     "angles": "the angles whose plays make a loop in the pose",
     "loop_width": "the falling branch minus the rising branch after an excursion wider than "
                   "the widest play, sensor units, at the middle of the sensor's range (plays "
-                  "on the reading) or at the map's median slope in each angle (plays on the "
-                  "angles): positive where the reading is higher on the way down than on the "
-                  "way up (it trails its input), negative where lower",
+                  "on the reading) or at the map's median slope in each angle, every angle "
+                  "reversing at once (plays on the angles): positive where the reading is "
+                  "higher on the way down than on the way up (it trails its input), negative "
+                  "where lower",
     "level_degree": "the loop's degree in the level: 1, as wide at every level "
                     "(Prandtl–Ishlinskii); 2 or 3, a width that changes along the range",
     "tau_s": "time constant(s), s: of each low-pass of the stretch (creep), or of the "

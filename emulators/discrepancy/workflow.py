@@ -260,7 +260,8 @@ def _angle_loop_params(result: Fit, inputs: Inputs, trial: Trial, cols: slice) -
     :func:`~.model.angle_play_columns`): per sensor, the weights of each angle's plays
     (a row per angle), their half-widths in degrees, and the loop's width in sensor units
     at the median slope of ŝ in each angle over the valid frames: the falling branch less
-    the rising one after an excursion wider than the widest play, Σ −2·r·w·∂ŝ/∂α."""
+    the rising one after an excursion wider than the widest play in every angle at once,
+    Σ −2·r·w·∂ŝ/∂α over the angles and plays."""
     thresholds = angle_thresholds(inputs)  # (A, K)
     weights = [c[cols].reshape(thresholds.shape) for c in result.coef]
     slope = np.median(static_slopes(inputs)[trial.valid], axis=0)  # (S, A)
