@@ -5,6 +5,8 @@ rotation follows the arm's only once the arm has turned a backlash beyond it. Th
 written here as a loop over the frames, apart from the workflow's play operators.
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -19,6 +21,7 @@ from exohil.emulators.discrepancy.model import (
     Inputs,
     angle_play_columns,
     angle_thresholds,
+    fit,
     legendre_products,
     scale_angles,
     static_slopes,
@@ -29,6 +32,7 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated,
     write_calibrated_profile,
 )
+from exohil.emulators.discrepancy.workflow import _own_static_part
 from exohil.emulators.effects import Signal
 
 #: The sleeve's backlash in axial rotation, degrees.
@@ -125,3 +129,19 @@ def test_a_sleeve_that_slips_in_axial_rotation_is_named_a_loop_in_the_pose(sleev
     assert loaded.spec.hysteresis_angles
     np.testing.assert_allclose(simulate_calibrated(loaded, slip.trial.t, slip.trial.angles),
                                slip.after.prediction, atol=1e-6)
+
+
+def test_a_named_loop_is_refitted_in_its_other_configuration_and_the_lower_kept(sleeve_slip):
+    """Where the step's comparison had kept the plays on ŝ, naming the loop refits the plays
+    on the angles too (each on its own static part, beside the level powers) and keeps the
+    lower: on the sleeve slip, the loop in the pose."""
+    slip = sleeve_slip["slip"]
+    trial, inputs = slip.trial, slip.inputs
+    on_reading = fit(trial, inputs, replace(slip.after.spec, hysteresis_angles=False))
+    assert on_reading.gap > slip.after.gap
+    kept, _, _ = _own_static_part(trial, inputs, on_reading, loop_named=True)
+    assert kept.spec.hysteresis_angles
+    assert kept.gap < on_reading.gap
+    # not named just now: refitted on its own static part only, as it stands
+    alone, _, _ = _own_static_part(trial, inputs, on_reading, loop_named=False)
+    assert not alone.spec.hysteresis_angles
