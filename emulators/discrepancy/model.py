@@ -635,11 +635,11 @@ def angle_play_columns(inputs: Inputs) -> np.ndarray:
     A sleeve that slips on the limb, or a tendon that sticks in its guide, follows each
     angle with a backlash: the sensor reads the pose the fabric holds, ŝ(p(α)) ≈ ŝ(α) −
     ∂ŝ/∂α · (α − p(α)). Any weighted sum over r is a Prandtl–Ishlinskii loop in each angle,
-    read through the map's slope (:func:`static_slopes`). Unlike
-    the plays on ŝ (:func:`hysteresis_columns`) it loops where one angle reverses while ŝ
-    goes on one way (an axial rotation with the arm raised), and it is as wide in the
-    angle at every pose. Each column is zero wherever the play has caught up with its
-    angle, so none is a static function of the pose."""
+    read through the map's slope (:func:`static_slopes`). Unlike the plays on ŝ
+    (:func:`hysteresis_columns`) it loops where one angle reverses while ŝ goes on one way
+    (an axial rotation with the arm raised), and it is as wide in the angle at every pose.
+    Each column is zero wherever the play has caught up with its angle, so none is a
+    static function of the pose."""
     if "HA" not in inputs.cache:
         lost = inputs.angles[:, :, None] - play(inputs.angles, angle_thresholds(inputs))
         cols = static_slopes(inputs)[:, :, :, None] * lost[:, None, :, :]  # (N, S, A, K)
