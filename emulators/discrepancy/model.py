@@ -620,9 +620,15 @@ def angle_thresholds(inputs: Inputs) -> np.ndarray:
 
 
 def static_at(inputs: Inputs, angles: np.ndarray) -> np.ndarray:
-    """(N, S) the static input ŝ's map (its basis and coefficients) at ``angles`` (N, A),
-    degrees."""
+    """(N, S) the static input ŝ's map at ``angles`` (N, A), degrees
+    (:func:`static_of_map_inputs`)."""
     u, _ = map_inputs(angles, inputs.angle_names, inputs.angle_lo, inputs.angle_hi)
+    return static_of_map_inputs(inputs, u)
+
+
+def static_of_map_inputs(inputs: Inputs, u: np.ndarray) -> np.ndarray:
+    """(N, S) the static input ŝ's map (its basis and coefficients) at the map inputs ``u``
+    (N, U; :func:`map_inputs`)."""
     basis = static_terms(u, inputs.static_degree, inputs.segments,
                          inputs.centres if inputs.static_local else None)
     return basis @ inputs.static_coef

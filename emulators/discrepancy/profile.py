@@ -25,6 +25,7 @@ from exohil.emulators.discrepancy.model import (
     holding_still,
     joint_speed,
     map_inputs,
+    static_of_map_inputs,
     static_terms,
 )
 from exohil.emulators.discrepancy.stops import Stops
@@ -352,9 +353,7 @@ def _inputs(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray) -> Inpu
                     t_norm=np.clip(2.0 * (t - t0) / (t1 - t0) - 1.0, -1.0, 1.0), t_span=(t0, t1),
                     centre=suit.inputs.centre, segments=suit.inputs.segments,
                     still=holding_still(joint_speed(angles_deg, suit.angles, suit.rate_hz)))
-    inputs.static = static_terms(u, inputs.static_degree, inputs.segments,
-                                 inputs.centres if inputs.static_local else None
-                                 ) @ inputs.static_coef
+    inputs.static = static_of_map_inputs(inputs, u)
     return inputs
 
 
