@@ -142,6 +142,14 @@ def test_a_named_loop_is_refitted_in_its_other_configuration_and_the_lower_kept(
     kept, _, _ = _own_static_part(trial, inputs, on_reading, loop_named=True)
     assert kept.spec.hysteresis_angles
     assert kept.gap < on_reading.gap
+    # the refits are jobs that two processes share, from either configuration (from the
+    # loop in the pose, the plays' powers wait for their own map): the same fits
+    for start in (on_reading, slip.after):
+        here = _own_static_part(trial, inputs, start, loop_named=True)
+        apart = _own_static_part(trial, inputs, start, loop_named=True, workers=2)
+        assert apart[0].spec == here[0].spec and apart[2] == here[2]
+        np.testing.assert_array_equal(apart[0].residual, here[0].residual)
+        np.testing.assert_array_equal(apart[1].static, here[1].static)
     # not named just now: refitted on its own static part only, as it stands
     alone, _, _ = _own_static_part(trial, inputs, on_reading, loop_named=False)
     assert not alone.spec.hysteresis_angles

@@ -33,6 +33,8 @@ from exohil.emulators.discrepancy.candidates import (
     flows_within_holds,
     rate_limit_candidate,
     recording_length,
+    saturation_candidate,
+    saturation_parts,
 )
 from exohil.emulators.discrepancy.data import (
     BLOCK_S,
@@ -1770,6 +1772,27 @@ def test_a_stop_must_bend_more_than_a_smooth_transfer_curve(bend, stop):
     soft knee (7.5) still clear the bar."""
     _, judged, _ = _stops_against_curve(bend)
     assert judged["significant"] is stop, judged
+
+
+def test_a_saturation_put_together_from_each_sensors_share_is_the_fit_of_all_sensors():
+    """A step computes each sensor's share of the saturation candidate in a job of its own
+    (its stops chosen, then its fit through them at each ridge; one sensor after another,
+    the stops were the step's longest job) and puts the candidate together from them: the
+    stops and the fits are those of a fit that chooses them for every sensor at once."""
+    trial = prepare_trial(_bent_recording(lambda z: np.minimum(z, 0.7)))
+    quadratic = Spec(degree=2)
+    inputs = make_inputs(trial, quadratic)
+    bent = replace(quadratic, saturation=True)
+    whole = fit(trial, inputs, bent)
+    assert sum(stop.hard for stop in whole.stops) >= 2, whole.stops  # worth choosing
+    parts = [saturation_parts(trial, inputs, quadratic, j) for j in range(trial.n_sensors)]
+    assert [share[0][1] for share in parts] == whole.stops
+    np.testing.assert_array_equal(fit(trial, inputs, bent, [p[0] for p in parts]).residual,
+                                  whole.residual)
+    cand = saturation_candidate(trial, inputs, quadratic, parts)
+    through = fit(trial, inputs, replace(bent, stops=tuple(whole.stops), ridge=cand.spec.ridge))
+    np.testing.assert_array_equal(cand.residual, through.residual)
+    assert cand.gap == best_candidate(trial, inputs, "saturation", quadratic).gap
 
 
 def test_a_stop_approached_gently_is_named_when_the_curve_adds_nothing_to_it():

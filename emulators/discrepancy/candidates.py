@@ -22,18 +22,21 @@ from exohil.emulators.discrepancy.model import (
     STATIC_RIDGES,
     Fit,
     Inputs,
+    SensorPart,
     Spec,
     coefficient_slices,
     fit,
+    sensor_part,
 )
 from exohil.emulators.discrepancy.rules import candidate_evidence, pooled_noise
 from exohil.emulators.discrepancy.workers import forked_map
 
 VOCABULARY = ("hysteresis", "creep", "saturation", "lag", "drift")
-#: The vocabulary by how long a candidate usually takes to fit (stops are chosen per sensor
-#: on held-out blocks, lags refined on three grids): the order a step hands them to its
-#: processes, so that the longest do not start last.
-COSTLIEST_FIRST = ("saturation", "lag", "creep", "drift", "hysteresis")
+#: The vocabulary by how long a candidate's jobs usually take (each lag model refined on its
+#: grid, the loop fitted on the reading and on the pose, each sensor's stops chosen on
+#: held-out blocks): the order a step hands them to its processes, so that the longest do
+#: not start last.
+COSTLIEST_FIRST = ("lag", "hysteresis", "saturation", "creep", "drift")
 #: The lag's models, each searched on its own (:func:`lag_model`): a step may try them at
 #: once, the longest candidate after a saturation is named (every fit goes through the
 #: stops) and alone as long as the other candidates together.
@@ -79,14 +82,12 @@ DRIFT_SPAN_S = 2 * BLOCK_S
 
 def _candidates(kind: str, spec: Spec) -> list[Spec]:
     """The configurations of ``kind`` to try on top of ``spec`` (lag: see _refine_lag;
-    creep: see creep_families)."""
+    creep: see creep_families; saturation: see saturation_candidate)."""
     if kind == "hysteresis":  # a loop in the reading, or in the pose
         return [replace(spec, hysteresis=True), replace(spec, hysteresis=True,
                                                         hysteresis_angles=True)]
     if kind == "drift":
         return [replace(spec, drift_degree=d) for d in DRIFT_DEGREES]
-    if kind == "saturation":  # see best_candidate
-        return [replace(spec, saturation=True)]
     raise ValueError(f"unknown effect {kind!r}; known: {', '.join(VOCABULARY)}")
 
 
@@ -96,14 +97,40 @@ def best_candidate(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
         return best_lag([lag_model(trial, inputs, spec, m) for m in LAG_MODELS])
     if kind == "creep":
         return min(creep_families(trial, inputs, spec), key=lambda f: f.gap)
-    best = min((fit(trial, inputs, s) for s in _candidates(kind, spec)), key=lambda f: f.gap)
-    if kind == "saturation":  # fitted between the stops, the map extrapolates into them: its
-        # ridge is chosen again (a small one that interpolates well can extrapolate wildly),
-        # through the stops chosen with the current one
-        kept = _keep_stops(best).spec
-        best = min([best] + [fit(trial, inputs, replace(kept, ridge=r)) for r in STATIC_RIDGES
-                             if r != spec.ridge], key=lambda f: f.gap)
-    return best
+    if kind == "saturation":
+        return saturation_candidate(trial, inputs, spec)
+    return min((fit(trial, inputs, s) for s in _candidates(kind, spec)), key=lambda f: f.gap)
+
+
+def saturation_candidate(trial: Trial, inputs: Inputs, spec: Spec,
+                         parts: list[list[SensorPart]] | None = None) -> Fit:
+    """Stops added to ``spec`` (:func:`saturation_parts` of each sensor: ``parts`` where
+    computed apart), at the ridge of the map that predicts the held-out blocks best. Fitted
+    between the stops, the map extrapolates into them: its ridge is chosen again (a small
+    one that interpolates well can extrapolate wildly), through the stops chosen with the
+    current one."""
+    if parts is None:
+        parts = [saturation_parts(trial, inputs, spec, j) for j in range(trial.n_sensors)]
+    first = fit(trial, inputs, replace(spec, saturation=True), [p[0] for p in parts])
+    kept = _keep_stops(first).spec
+    return min([first] + [fit(trial, inputs, replace(kept, ridge=r), [p[k] for p in parts])
+                          for k, r in enumerate(_other_ridges(spec), start=1)],
+               key=lambda f: f.gap)
+
+
+def saturation_parts(trial: Trial, inputs: Inputs, spec: Spec, j: int) -> list[SensorPart]:
+    """Sensor j's share of :func:`saturation_candidate`: its stops chosen with ``spec``'s
+    ridge (the candidate's costliest part), then its fit through them at that ridge and at
+    each of the others (:func:`~.model.sensor_part`). No other sensor's enters it, so a
+    step computes each sensor's apart (:func:`~.workflow._candidates`)."""
+    first = sensor_part(trial, inputs, replace(spec, saturation=True), j)
+    return [first] + [sensor_part(trial, inputs, replace(spec, saturation=True, ridge=r), j,
+                                  first[1]) for r in _other_ridges(spec)]
+
+
+def _other_ridges(spec: Spec) -> list[float]:
+    """The static ridges a saturation tries beside ``spec``'s, in order."""
+    return [r for r in STATIC_RIDGES if r != spec.ridge]
 
 
 def lag_model(trial: Trial, inputs: Inputs, spec: Spec, model: str) -> Fit:

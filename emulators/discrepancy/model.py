@@ -869,30 +869,53 @@ def map_ridge(inputs: Inputs, spec: Spec) -> Ridge:
                  local_ridge=spec.local_ridge)
 
 
-def fit(trial: Trial, inputs: Inputs, spec: Spec) -> Fit:
-    """Held-out residuals and full-data coefficients of ``spec`` for every sensor.
+#: One sensor's share of a fit: its fold coefficients ((N_BLOCKS + 1, P): each held-out
+#: fold's, then the full-data fit's) and its stops.
+SensorPart = tuple[np.ndarray, Stops]
+
+
+def sensor_part(trial: Trial, inputs: Inputs, spec: Spec, j: int, stop: Stops | None = None
+                ) -> SensorPart:
+    """Sensor j's share of :func:`fit` of ``spec`` (its stops ``stop`` where
+    ``spec.stops`` gives none; see :func:`_sensor_part`). A sensor's share depends on no
+    other sensor, so the costly ones (stops chosen on the held-out blocks) may be computed
+    apart and handed to :func:`fit`."""
+    return _sensor_part(trial, inputs, spec, j, design(trial.rate_hz, inputs, spec, j), stop)
+
+
+def _sensor_part(trial: Trial, inputs: Inputs, spec: Spec, j: int, x: Design,
+                 stop: Stops | None) -> SensorPart:
+    """Sensor j's fold coefficients on its design ``x`` and its stops: with the saturation
+    term its map bends at ``spec.stops[j]`` when given, else at ``stop``, else at stops
+    chosen here (:func:`~.stops.choose_stops`), fitted through them
+    (:func:`~.stops.fit_with_stops`); without it, none."""
+    y = trial.y[:, j]
+    ridge = map_ridge(inputs, spec)  # the static map is the same for every sensor
+    if not spec.saturation:
+        return fit_coefs(trial, x, y, ridge), NO_STOPS
+    red = reduce(trial, x, y)
+    plain = fold_coefs(red, red.rows.usable(trial.valid), ridge)
+    if spec.stops:
+        stop = spec.stops[j]
+    elif stop is None:
+        stop = choose_stops(trial, y, ridge, j, red, plain)
+    return fit_with_stops(trial, y, ridge, stop, float(trial.noise[j]), red, plain), stop
+
+
+def fit(trial: Trial, inputs: Inputs, spec: Spec, parts: list[SensorPart] | None = None
+        ) -> Fit:
+    """Held-out residuals and full-data coefficients of ``spec`` for every sensor, from
+    each sensor's share (:func:`sensor_part`): ``parts`` where given (computed apart),
+    else computed here.
 
     With the saturation term each sensor's map bends at its stops: ``spec.stops`` when
     given, else chosen (:func:`~.stops.choose_stops`), then fitted (:func:`~.stops.fit_with_stops`).
     """
-    designs: list[Design] = []
-    fold: list[np.ndarray] = []  # per sensor, (N_BLOCKS + 1, P) fold coefficients
-    stops: list[Stops] = []
-    ridge = map_ridge(inputs, spec)  # the static map is the same for every sensor
-    for j in range(trial.n_sensors):
-        y = trial.y[:, j]
-        x = design(trial.rate_hz, inputs, spec, j)
-        if spec.saturation:
-            red = reduce(trial, x, y)
-            plain = fold_coefs(red, red.rows.usable(trial.valid), ridge)
-            stop = (spec.stops[j] if spec.stops
-                    else choose_stops(trial, y, ridge, j, red, plain))
-            c = fit_with_stops(trial, y, ridge, stop, float(trial.noise[j]), red, plain)
-        else:
-            c, stop = fit_coefs(trial, x, y, ridge), NO_STOPS
-        designs.append(x)
-        fold.append(c)
-        stops.append(stop)
+    designs = [design(trial.rate_hz, inputs, spec, j) for j in range(trial.n_sensors)]
+    if parts is None:
+        parts = [_sensor_part(trial, inputs, spec, j, x, None) for j, x in enumerate(designs)]
+    fold = [c for c, _ in parts]  # per sensor, (N_BLOCKS + 1, P) fold coefficients
+    stops = [stop for _, stop in parts]
     held, full = fold_products(trial, designs, fold)
     residual = np.empty_like(trial.y)
     prediction = np.empty_like(trial.y)

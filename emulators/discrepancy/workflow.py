@@ -28,6 +28,8 @@ from exohil.emulators.discrepancy.candidates import (
     refine,
     refine_drift,
     refine_lag_delay,
+    saturation_candidate,
+    saturation_parts,
 )
 from exohil.emulators.discrepancy.data import (
     FRAME_COUNTER,
@@ -51,6 +53,7 @@ from exohil.emulators.discrepancy.model import (
     STATIC_RIDGES,
     Fit,
     Inputs,
+    SensorPart,
     Spec,
     angle_thresholds,
     coefficient_slices,
@@ -59,6 +62,7 @@ from exohil.emulators.discrepancy.model import (
     loop_width_terms,
     make_inputs,
     restrict_to_coverage,
+    sensor_part,
     static_slopes,
     with_static_of,
 )
@@ -280,21 +284,35 @@ def _static_input_again(trial: Trial, inputs: Inputs, cand: Fit
     held-out gap, the inputs it was fitted with, and what that did (JSON
     ``evidence.own_static_input``: the rounds kept and the gap before them; None where no
     term of ``cand`` reads ŝ)."""
+    rounds = _static_input_rounds(trial, inputs, cand)
+    return rounds[-1][0], rounds[-1][1], _rounds_done([f for f, _ in rounds])
+
+
+def _static_input_rounds(trial: Trial, inputs: Inputs, cand: Fit) -> list[tuple[Fit, Inputs]]:
+    """The rounds of :func:`_static_input_again`: ``cand`` and each refit kept, each with
+    the inputs it was fitted with."""
+    rounds = [(cand, inputs)]
     if not cand.spec.reads_static():
-        return cand, inputs, None
-    done = {"rounds": 0, "gap_before": significant(cand.gap)}
+        return rounds
     for _ in range(STATIC_INPUT_ROUNDS):
         other = with_static_of(inputs, cand)
         refit = fit(trial, other, cand.spec)
         if refit.gap >= cand.gap:
             break
         cand, inputs = refit, other
-        done["rounds"] += 1
-    return cand, inputs, done
+        rounds.append((cand, inputs))
+    return rounds
 
 
-def _own_static_part(trial: Trial, inputs: Inputs, cand: Fit, loop_named: bool
-                     ) -> tuple[Fit, Inputs, dict | None]:
+def _rounds_done(fits: list[Fit]) -> dict | None:
+    """JSON ``evidence.own_static_input`` of the rounds ``fits`` (:func:`_static_input_rounds`)."""
+    if not fits[0].spec.reads_static():
+        return None
+    return {"rounds": len(fits) - 1, "gap_before": significant(fits[0].gap)}
+
+
+def _own_static_part(trial: Trial, inputs: Inputs, cand: Fit, loop_named: bool,
+                     workers: int = 1) -> tuple[Fit, Inputs, dict | None]:
     """:func:`_static_input_again`, and where a hysteresis was just named (``loop_named``)
     with each degree of the plays' level on ŝ (``HYSTERESIS_DEGREES``,
     :func:`~.model.hysteresis_columns`) as well: the one with the lowest held-out gap on its
@@ -308,22 +326,45 @@ def _own_static_part(trial: Trial, inputs: Inputs, cand: Fit, loop_named: bool
     it may win the step's comparison and then leave more than the plays on ŝ with their
     powers (graphene S3_4_HC45: 0.0949 against 0.0919 dR/R0), and on the map chosen with
     the loop in the pose the plays on ŝ left more than on their own (fourth blind
-    generator's rec 17: 1.2465 against 1.2154 pF)."""
+    generator's rec 17: 1.2465 against 1.2154 pF).
+
+    The loop's refits are independent: they run as jobs in ``workers`` processes
+    (:func:`_loop_rounds`), each sending back its fits, and the inputs of the one kept are
+    formed again here from them (the inputs hold the designs' caches: too large to send).
+    A loop in the pose waits for its other configuration's map before the plays' powers
+    are fitted on it."""
     if not loop_named:
         return _static_input_again(trial, inputs, cand)
     on_reading = replace(cand.spec, hysteresis_angles=False, hysteresis_degree=1)
-    other = _best_degree(trial, inputs, fit(trial, inputs, replace(
-        on_reading, hysteresis_angles=not cand.spec.hysteresis_angles)))
-    reading = other if cand.spec.hysteresis_angles else cand
-    tried = [_static_input_again(trial, inputs, cand), _static_input_again(trial, inputs, other)]
-    for degree in HYSTERESIS_DEGREES:
-        tried.append(_static_input_again(
-            trial, inputs, fit(trial, inputs, replace(reading.spec, hysteresis_degree=degree))))
-    return min(tried, key=lambda kept: kept[0].gap)
+    other = replace(on_reading, hysteresis_angles=not cand.spec.hysteresis_angles)
+    job = functools.partial(_loop_rounds, trial, inputs)
+    jobs: list[tuple[str, Fit | Spec]] = [("kept", cand), ("map again", other)]
+    if not cand.spec.hysteresis_angles:  # the powers on the plays' map, ``cand``'s
+        jobs += [("fit", replace(on_reading, hysteresis_degree=d)) for d in HYSTERESIS_DEGREES]
+    tried = forked_map(job, jobs, workers)
+    if cand.spec.hysteresis_angles:  # the powers on the plays' own map, chosen in job 2
+        reading = tried[1][0].spec
+        tried += forked_map(job, [("fit", replace(reading, hysteresis_degree=d))
+                                  for d in HYSTERESIS_DEGREES], workers)
+    fits = min(tried, key=lambda rounds: rounds[-1].gap)
+    for kept in fits[:-1]:  # the inputs of the last round, formed again
+        inputs = with_static_of(inputs, kept)
+    return fits[-1], inputs, _rounds_done(fits)
+
+
+def _loop_rounds(trial: Trial, inputs: Inputs, job: tuple[str, Fit | Spec]) -> list[Fit]:
+    """One job of :func:`_own_static_part`: the fits of :func:`_static_input_rounds` from
+    ``("kept", fit)``, from ``("fit", spec)`` fitted, or from ``("map again", spec)``
+    fitted with its map's degree chosen again (:func:`_best_degree`)."""
+    how, start = job
+    first = start if isinstance(start, Fit) else fit(trial, inputs, start)
+    if how == "map again":
+        first = _best_degree(trial, inputs, first)
+    return [f for f, _ in _static_input_rounds(trial, inputs, first)]
 
 
 def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence: dict,
-                   floor: float) -> dict:
+                   floor: float, workers: int = 1) -> dict:
     """``evidence`` of the stops ``cand`` over ``spec`` with rule 3: added to a smooth
     transfer curve of each sensor (``Spec.output_curve``), they must still clear rules 1
     and 2 over it, pooled or on the sensors held at hard stops, or else explain everything
@@ -333,9 +374,14 @@ def _against_curve(trial: Trial, inputs: Inputs, spec: Spec, cand: Fit, evidence
     transfer, a misfit spread over the poses) is calibration that soft knees at both ends
     can imitate, and the curve follows it better; a stop is a bend at an end that no smooth
     curve follows, or one approached so gently that a curve follows part of it and adds
-    nothing to the stops."""
+    nothing to the stops. The stops with the curve are fitted one sensor a job in
+    ``workers`` processes: where the candidate did not keep its stops they are chosen again
+    beside the curve, the costliest part of a named saturation's step."""
     curve = fit(trial, inputs, replace(spec, output_curve=True))
-    both = fit(trial, inputs, replace(cand.spec, output_curve=True))
+    both_spec = replace(cand.spec, output_curve=True)  # stops chosen again where not kept
+    both = fit(trial, inputs, both_spec, forked_map(
+        functools.partial(sensor_part, trial, inputs, both_spec), range(trial.n_sensors),
+        workers))
     over = candidate_evidence(trial, curve, both, floor)
     curve_adds = rules_on_blocks(cand.block_mse, both.block_mse, floor)
     encompassed, stops_vs_curve = stops_leave_curve_nothing(cand, curve, curve_adds, floor)
@@ -450,51 +496,68 @@ def _candidates(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: floa
     """Each effect in ``missing`` at its best configuration added to ``spec``, with its
     evidence against ``base`` (:func:`_candidate`), in the order of ``missing``.
 
-    The candidates are independent, and so are the lag's models (``LAG_MODELS``): all are
-    tried at once in ``workers`` processes, the costliest first (``COSTLIEST_FIRST``), and
-    the lag's models compared here (:func:`~.candidates.best_lag`), as
-    :func:`~.candidates.best_candidate` compares them."""
-    jobs = [(kind, model) for kind in sorted(missing, key=COSTLIEST_FIRST.index)
-            for model in (LAG_MODELS if kind == "lag" else (None,))]
+    The candidates are independent, and so are the lag's models (``LAG_MODELS``) and each
+    sensor's share of the saturation (:func:`~.candidates.saturation_parts`): all are
+    computed at once in ``workers`` processes, the costliest first (``COSTLIEST_FIRST``);
+    then the lag's models are compared here (:func:`~.candidates.best_lag`), as
+    :func:`~.candidates.best_candidate` compares them, and the saturation is put together
+    from its sensors' shares. Choosing one sensor's stops after another in one process
+    was the step's longest job (12 of a 14 s step on a four-minute recording whose map
+    has local functions) while the other process had finished the other candidates."""
+    shares: dict[str, tuple] = {"lag": LAG_MODELS, "saturation": tuple(range(trial.n_sensors))}
+    jobs = [(kind, share) for kind in sorted(missing, key=COSTLIEST_FIRST.index)
+            for share in shares.get(kind, (None,))]
     done = forked_map(functools.partial(_candidate_job, trial, inputs, spec, base, floor),
                       jobs, workers)
-    tried = [(kind, cand, evidence) for kind, cand, evidence in done if evidence is not None]
+    tried = [(kind, cand, evidence) for kind, cand, evidence in done
+             if isinstance(cand, Fit) and evidence is not None]
     if "lag" in missing:
-        cand = best_lag([c for kind, c, _ in done if kind == "lag"])
+        cand = best_lag([c for kind, c, _ in done if kind == "lag" and isinstance(c, Fit)])
         tried.append(("lag", cand, candidate_evidence(trial, base, cand, floor)))
+    if "saturation" in missing:
+        parts = [part for kind, part, _ in done if kind == "saturation" and isinstance(part, list)]
+        tried.append(_candidate(trial, inputs, spec, base, floor, "saturation", workers,
+                                saturation_candidate(trial, inputs, spec, parts)))
     return sorted(tried, key=lambda item: missing.index(item[0]))
 
 
 def _candidate_job(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float,
-                   job: tuple[str, str | None]) -> tuple[str, Fit, dict | None]:
+                   job: tuple[str, str | int | None]
+                   ) -> tuple[str, Fit | list[SensorPart], dict | None]:
     """One job of :func:`_candidates`: ``(kind, None)``, the candidate ``kind``
-    (:func:`_candidate`); ``("lag", model)``, the best lag of that model alone (its
-    evidence None: the lag's models are compared first)."""
-    kind, model = job
-    if model is not None:
-        return kind, lag_model(trial, inputs, spec, model), None
+    (:func:`_candidate`); ``("lag", model)``, the best lag of that model alone;
+    ``("saturation", j)``, sensor j's share of the saturation (evidence None for both: the
+    lag's models are compared, and the saturation's shares put together, first)."""
+    kind, share = job
+    if kind == "lag" and isinstance(share, str):
+        return kind, lag_model(trial, inputs, spec, share), None
+    if kind == "saturation" and isinstance(share, int):
+        return kind, saturation_parts(trial, inputs, spec, share), None
     return _candidate(trial, inputs, spec, base, floor, kind)
 
 
-def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float, kind: str
-               ) -> tuple[str, Fit, dict]:
-    """The best configuration of effect ``kind`` added to ``spec`` and its evidence against
-    ``base`` (the model without it): one candidate of a step, on its own."""
-    cand = best_candidate(trial, inputs, kind, spec)
+def _candidate(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float, kind: str,
+               workers: int = 1, cand: Fit | None = None) -> tuple[str, Fit, dict]:
+    """The best configuration of effect ``kind`` added to ``spec`` (``cand`` where found
+    already) and its evidence against ``base`` (the model without it): one candidate of a
+    step, on its own (``workers``: the processes the stops' comparison with a smooth curve
+    may use, :func:`_against_curve`)."""
+    if cand is None:
+        cand = best_candidate(trial, inputs, kind, spec)
     evidence = candidate_evidence(trial, base, cand, floor)
     if kind == "drift" and beyond_noise_somewhere(evidence) and not evidence["significant"]:
         evidence = _counted_refined(trial, inputs, base, cand, evidence, floor)
     if kind == "drift" and not evidence["significant"]:
         evidence = _jumped_in_hold(trial, inputs, base, cand, evidence, floor)
     if kind == "saturation" and evidence["significant"]:
-        evidence = _against_curve(trial, inputs, spec, cand, evidence, floor)
+        evidence = _against_curve(trial, inputs, spec, cand, evidence, floor, workers)
     elif kind == "saturation":
-        evidence = _at_rail(trial, inputs, spec, base, cand, evidence, floor)
+        evidence = _at_rail(trial, inputs, spec, base, cand, evidence, floor, workers)
     return kind, cand, evidence
 
 
 def _at_rail(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, cand: Fit, evidence: dict,
-             floor: float) -> dict:
+             floor: float, workers: int) -> dict:
     """``evidence`` of stops that clear no rule on the gap, made significant where a sensor
     is pinned at a rail (:func:`~.stops.pinned_at_rail`: its reading sits at exactly one
     value however the pose moves, which no smooth transfer and no noise does) and the stops
@@ -503,8 +566,8 @@ def _at_rail(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, cand: Fit, evi
     rail = pinned_at_rail(trial)
     if rail is None or cand.gap > base.gap:
         return evidence
-    return {**_against_curve(trial, inputs, spec, cand, evidence, floor), "significant": True,
-            "pinned_at_rail": rail}
+    return {**_against_curve(trial, inputs, spec, cand, evidence, floor, workers),
+            "significant": True, "pinned_at_rail": rail}
 
 
 def _resampled(trial: Trial) -> list[dict]:
@@ -793,7 +856,8 @@ def _add_effect(trial: Trial, inputs: Inputs, kind: str, cand: Fit, previous: st
     if previous == "lag":  # a lag named while a larger effect was
         # still missing was fitted against it: refit it once, with the next effect added
         cand = refine_lag_delay(trial, inputs, cand)
-    cand, inputs, own_input = _own_static_part(trial, inputs, cand, kind == "hysteresis")
+    cand, inputs, own_input = _own_static_part(trial, inputs, cand, kind == "hysteresis",
+                                               workers)
     return cand, inputs, own_input, (lag_before, drift_before)
 
 
