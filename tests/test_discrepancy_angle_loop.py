@@ -23,6 +23,7 @@ from exohil.emulators.discrepancy.model import (
     angle_thresholds,
     fit,
     legendre_products,
+    make_inputs,
     scale_angles,
     static_slopes,
 )
@@ -32,7 +33,8 @@ from exohil.emulators.discrepancy.profile import (
     simulate_calibrated,
     write_calibrated_profile,
 )
-from exohil.emulators.discrepancy.workflow import _own_static_part
+from exohil.emulators.discrepancy.rules import candidate_evidence, pooled_noise
+from exohil.emulators.discrepancy.workflow import _own_static_part, _pose_loop_over_richer_map
 from exohil.emulators.effects import Signal
 
 #: The sleeve's backlash in axial rotation, degrees.
@@ -129,6 +131,30 @@ def test_a_sleeve_that_slips_in_axial_rotation_is_named_a_loop_in_the_pose(sleev
     assert loaded.spec.hysteresis_angles
     np.testing.assert_allclose(simulate_calibrated(loaded, slip.trial.t, slip.trial.angles),
                                slip.after.prediction, atol=1e-6)
+
+
+def test_a_loop_in_the_pose_must_also_beat_a_map_one_degree_richer(sleeve_slip):
+    """Plays on the angles follow the direction of motion in each, so they can take up what
+    a map too stiff for the suit misses while the arm moves; a loop in the pose is kept
+    only where it also clears rules 1 and 2 over a map one degree richer, else the plays
+    on ŝ stand in for it. The slip's loop does (and says so in its evidence); on the clean
+    twin, over its own calibrated map, the plays on ŝ stand in."""
+    slip, twin = sleeve_slip["slip"], sleeve_slip["twin"]
+    richer = slip.summary["steps"][0]["evidence"]["over_richer_map"]
+    assert richer["significant"] and richer["degree"] == slip.before.spec.degree + 1, richer
+    for outcome, kept in ((slip, True), (twin, False)):
+        trial, spec, floor = outcome.trial, outcome.before.spec, pooled_noise(outcome.trial)
+        inputs = make_inputs(trial, spec)
+        base = fit(trial, inputs, spec)
+        loop = fit(trial, inputs, replace(spec, hysteresis=True, hysteresis_angles=True))
+        cand, evidence = _pose_loop_over_richer_map(trial, inputs, spec, base, loop,
+                                                    candidate_evidence(trial, base, loop, floor),
+                                                    floor)
+        assert cand.spec.hysteresis_angles is kept
+        assert ("over_richer_map" in evidence) is kept
+        if not kept:
+            assert not evidence["loop_in_pose_over_richer_map"]["significant"], evidence
+            assert evidence["config"] == cand.spec.config()  # the plays on ŝ's own evidence
 
 
 def test_a_named_loop_is_refitted_in_its_other_configuration_and_the_lower_kept(sleeve_slip):
