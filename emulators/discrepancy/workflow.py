@@ -1010,16 +1010,15 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         previous = kind
         evidence = candidate_evidence(trial, base, cand, floor)
         if kind == "saturation":  # judged against the smooth curve when it was named
-            evidence["against_smooth_curve"] = winners[0][2]["against_smooth_curve"]
-            if "pinned_at_rail" in winners[0][2]:
-                evidence["pinned_at_rail"] = winners[0][2]["pinned_at_rail"]
-        for key in ("jumped_in_hold", "over_richer_map", "loop_in_pose_over_richer_map"):
+            evidence["against_smooth_curve"] = named["against_smooth_curve"]
+        for key in ("pinned_at_rail", "jumped_in_hold", "over_richer_map",
+                    "loop_in_pose_over_richer_map"):
             if key in named:
                 evidence[key] = named[key]
         if own_input is not None:
             evidence["own_static_input"] = own_input
-        if "refined" in winners[0][2]:  # a drift counted on the drift it would become
-            low = winners[0][2]
+        if "refined" in named:  # a drift counted on the drift it would become
+            low = named
             evidence["low_degrees"] = {
                 **{k: low[k] for k in ("heldout_gap", "delta_mse", "removed_rms",
                                        "blocks_improved", "blocks_needed", "beyond_noise")},
