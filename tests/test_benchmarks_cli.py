@@ -293,6 +293,8 @@ def test_blind_reports_an_unreadable_recording_and_refuses_an_empty_key(tmp_path
     ("benchmarks.blind4.generate", ["independent test-data generator", "clean twin"]),
     ("benchmarks.blind5.generate", ["pulley-routed tendons and flex goniometers",
                                     "never the workflow", "clean twin", "--only"]),
+    ("benchmarks.blind6.generate", ["blind6 recordings and their answer key", "clean twins",
+                                    "--only"]),
     ("benchmarks.blind3.antipodal", ["anchors pass", "opposite sides of the cap."]),
     ("benchmarks.blind4.verify", ["by the magnitude its truth gives."]),
 ])

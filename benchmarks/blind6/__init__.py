@@ -1,0 +1,1 @@
+"""blind6: an independent generator of textile-garment recordings with hidden effects."""
