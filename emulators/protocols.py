@@ -27,7 +27,7 @@ from scipy.interpolate import PchipInterpolator
 
 from exohil.emulators.seeding import keyed_rng
 from exohil.formats.opensim_mot import read_mot
-from exohil.formats.recording import Segment
+from exohil.formats.recording import Recording, Segment
 from exohil.kinematics import isb_to_ms
 
 ANGLE_NAMES = ("elv_angle", "shoulder_elv", "shoulder_rot")
@@ -390,3 +390,44 @@ def mot_trajectory(paths: Sequence[str | Path], bridge_s: float = 1.0) -> Trajec
     knot_t = np.concatenate(times)
     return Trajectory(knot_t, np.concatenate(angles), "pchip", float(knot_t[-1]), segments,
                       source="mot:" + ",".join(Path(p).name for p in paths))
+
+
+def replayed_motion(rec: Recording, joint: str, angles: Sequence[str], name: str
+                    ) -> tuple[np.ndarray, np.ndarray, list[Segment]]:
+    """The motion capture of ``rec``'s ``joint`` to replay, on ``rec``'s clock: the times
+    (M,) of its samples where every one of ``angles`` is finite (s), those angles (M, A) in
+    degrees in the order given, and ``rec``'s segments cut to their span (empty ones
+    dropped). ValueError (naming ``name``) without such a stream, or with fewer than two
+    samples."""
+    stream = rec.mocap.get(joint)
+    if stream is None:
+        held = ", ".join(f"/mocap/{j}" for j in rec.mocap) or "no motion capture"
+        raise ValueError(f"{name}: no /mocap/{joint} stream to replay (it holds {held})")
+    missing = [a for a in angles if a not in stream.names]
+    if missing:
+        raise ValueError(f"{name}: /mocap/{joint} has no {', '.join(missing)} (it has "
+                         f"{', '.join(stream.names)})")
+    values = stream.angles[:, [stream.names.index(a) for a in angles]]
+    kept = np.all(np.isfinite(values), axis=1) & np.isfinite(stream.t)
+    t = stream.t[kept]
+    if t.shape[0] < 2 or not t[-1] > t[0]:
+        raise ValueError(f"{name}: /mocap/{joint} holds {t.shape[0]} sample(s) with every "
+                         f"one of {', '.join(angles)} finite; a replay needs two or more "
+                         "spanning some time")
+    first, last = float(t[0]), float(t[-1])
+    segments = [Segment(s.name, max(s.t0, first), min(s.t1, last))
+                for s in rec.segments if s.t1 > first and s.t0 < last]
+    return t, values[kept], segments
+
+
+def replay_trajectory(rec: Recording, name: str) -> Trajectory:
+    """The shoulder motion captured in ``rec`` (``/mocap/shoulder``: θ, φ, ψ, degrees) as a
+    trajectory from 0 s at its first sample, through every sample (shape-preserving, so
+    across a dropout too), with ``rec``'s segments on that clock; ``source`` names ``name``
+    and where on its clock the replay starts. ValueError where ``rec`` holds no such
+    motion."""
+    t, angles, segments = replayed_motion(rec, "shoulder", ANGLE_NAMES, name)
+    t0 = float(t[0])
+    return Trajectory(t - t0, angles, "pchip", float(t[-1] - t0),
+                      [Segment(s.name, s.t0 - t0, s.t1 - t0) for s in segments],
+                      source=f"replay:{name} from {t0:.6g} s")

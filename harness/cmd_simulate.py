@@ -19,21 +19,40 @@ def _mot_files(protocol: str) -> list[Path]:
     return [Path(p) for p in protocol[4:].split(",")] if protocol.startswith("mot:") else []
 
 
-def _trajectory(protocol: str, seed: int):
-    from exohil.emulators.protocols import calibration_protocol, mot_trajectory, paper_protocol
+def _replayed_file(protocol: str) -> Path | None:
+    return Path(protocol[len("replay:"):]) if protocol.startswith("replay:") else None
+
+
+def _input_files(protocol: str) -> list[Path]:
+    """The files the movement is read from."""
+    replayed = _replayed_file(protocol)
+    return _mot_files(protocol) + ([replayed] if replayed else [])
+
+
+def _trajectory(protocol: str, seed: int, replayed: Recording | None):
+    """The shoulder movement ``protocol`` names (``replayed``: the recording it replays)."""
+    from exohil.emulators.protocols import (
+        calibration_protocol,
+        mot_trajectory,
+        paper_protocol,
+        replay_trajectory,
+    )
 
     if protocol == "paper":
         return paper_protocol(seed)
     if protocol == "calibration":
         return calibration_protocol(seed)
     try:
+        if replayed is not None:
+            return replay_trajectory(replayed, Path(protocol[len("replay:"):]).name)
         return mot_trajectory([Path(p) for p in protocol[4:].split(",")])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
 
 
 class Protocol(click.ParamType):
-    """``paper``, ``calibration`` or ``mot:FILE[,FILE...]`` with every .mot file present."""
+    """``paper``, ``calibration``, ``mot:FILE[,FILE...]`` with every .mot file present, or
+    ``replay:FILE`` with the recording present."""
 
     name = "protocol"
 
@@ -41,8 +60,14 @@ class Protocol(click.ParamType):
         text = str(value)
         if text in ("paper", "calibration"):
             return text
+        if text.startswith("replay:"):
+            name = text[len("replay:"):]
+            if not name.strip() or "\x00" in name or not Path(name).is_file():
+                self.fail(f"no such recording: {name!r}", param, ctx)
+            return text
         if not text.startswith("mot:") or not text[4:]:
-            self.fail(f"{text!r}: use 'paper', 'calibration' or 'mot:FILE[,FILE...]'", param, ctx)
+            self.fail(f"{text!r}: use 'paper', 'calibration', 'mot:FILE[,FILE...]' or "
+                      "'replay:FILE'", param, ctx)
         for name in text[4:].split(","):
             if not name.strip() or "\x00" in name or not Path(name).is_file():
                 self.fail(f"no such .mot file: {name!r}", param, ctx)
@@ -61,12 +86,15 @@ class EffectKind(click.Choice):
 
 @click.command("simulate")
 @click.option("--protocol", type=Protocol(), default="paper", show_default=True,
-              metavar="paper|calibration|mot:FILE[,FILE]",
+              metavar="paper|calibration|mot:FILE[,FILE]|replay:FILE",
               help="Movement: the paper's Table III protocol (246 s, seeded); 'calibration', "
                    "the 60 s calibration recording a new wearer makes (stand, flexion-"
                    "extension, abduction, plane sweeps, slow and fast reaching, stand; "
-                   "seeded; docs/suit-model.md); or real motion from OpenSim .mot files "
-                   "(comma-separated, concatenated in order).")
+                   "seeded; docs/suit-model.md); real motion from OpenSim .mot files "
+                   "(comma-separated, concatenated in order); or 'replay:FILE', the motion "
+                   "capture of a recording: the shoulder's, from 0 s at its first sample; "
+                   "with a calibrated profile, the joint it was calibrated on (a knee, an "
+                   "elbow, ...), on the recording's own clock.")
 @click.option("--profile", "profile_path", type=InputFile(), default=None,
               help="Suit profile TOML (default: the packaged default profile), or a "
                    "calibrated suit profile written by `exohil discrepancy` "
@@ -90,6 +118,8 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
     With a calibrated profile (from `exohil discrepancy`) the sensors are those it was
     calibrated on, in its units and at its rate, with its white noise; a movement that
     leaves the angles it was calibrated on gets a warning line (the map extrapolates there).
+    A replay writes the angles it replays as recorded, on their joint's stream, and the
+    replayed recording's license and source notes.
 
     \b
     Examples:
@@ -98,26 +128,31 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
           --profile emulators/profiles/donning-b.toml --out calibration.mcap
       exohil simulate --protocol mot:ABD01.mot,FLX01.mot --without noise --out real.mcap
       exohil simulate --profile disc/suit_profile.toml --out calibrated.mcap
+      exohil simulate --profile disc/suit_profile.toml --protocol replay:knee.mcap \\
+          --out knee-sim.mcap
     """
     from exohil.emulators.discrepancy.profile import CalibratedSuit, load_any_profile
     from exohil.emulators.suit_profile import ProfileError, load_default_profile
 
-    refuse_overwriting_inputs([("--out", out_path)], [profile_path, *_mot_files(protocol)])
+    refuse_overwriting_inputs([("--out", out_path)], [profile_path, *_input_files(protocol)])
     try:
         profile = load_default_profile() if profile_path is None else load_any_profile(
             profile_path)
     except ProfileError as exc:
         raise click.ClickException(str(exc)) from exc
+    replayed = _read_replayed(protocol)
     if isinstance(profile, CalibratedSuit):
-        recording = _calibrated(profile, protocol, seed, without)
+        recording = _calibrated(profile, protocol, seed, without, replayed)
     else:
         from exohil.emulators.simulate import simulate
 
-        trajectory = _trajectory(protocol, seed)
+        trajectory = _trajectory(protocol, seed, replayed)
         click.echo(f"simulating {trajectory.duration_s:.1f} s of {trajectory.source} on suit "
                    f"profile '{profile.name}'", err=True)
         recording = simulate(trajectory, profile, seed, effects=profile.effects.without(*without))
     _carry_notices(recording, _mot_files(protocol))
+    if replayed is not None:
+        _carry_terms(recording, replayed)
     if recording.sensor_units == "mm":
         _warn_beyond_the_wire(recording)
     _write(out_path, recording)
@@ -137,6 +172,36 @@ def _carry_notices(recording: Recording, mot_files: list[Path]) -> None:
         for key, text in notices.items():
             if recording.metadata.setdefault(key, text) != text:  # same name, other folder
                 recording.metadata[f"{key}@{mot.parent.name}"] = text
+
+
+def _read_replayed(protocol: str) -> Recording | None:
+    """The recording ``replay:FILE`` names (None for another protocol); one error line where
+    it cannot be read."""
+    path = _replayed_file(protocol)
+    if path is None:
+        return None
+    from exohil.formats.errors import RecordingError
+    from exohil.formats.recording_reader import read_recording
+
+    try:
+        return read_recording(path)
+    except (OSError, RecordingError) as exc:
+        raise click.ClickException(f"cannot read {path}: {exc}") from exc
+
+
+#: Metadata keys of a replayed recording that go with what is simulated from its motion: its
+#: license and where it came from (``notice.<file>``: the text of each note beside the data it
+#: was imported from).
+CARRIED_KEYS = ("license", "source", "source_sha256")
+
+
+def _carry_terms(recording: Recording, replayed: Recording) -> None:
+    """Store the license and source notes of the recording whose motion was replayed in
+    ``recording``'s metadata, under ``replayed.<key>`` (the terms of real motion go with
+    what derives from it)."""
+    for key, text in replayed.metadata.items():
+        if key in CARRIED_KEYS or key.startswith("notice."):
+            recording.metadata[f"replayed.{key}"] = text
 
 
 def _warn_beyond_the_wire(recording: Recording) -> None:
@@ -162,13 +227,16 @@ def _warn_beyond_the_wire(recording: Recording) -> None:
                    "train and calibrate read them unclipped", err=True)
 
 
-def _calibrated(suit: CalibratedSuit, protocol: str, seed: int,
-                without: tuple[str, ...]) -> Recording:
-    """The recording of the calibrated ``suit`` following ``protocol`` (noise-free with
+def _calibrated(suit: CalibratedSuit, protocol: str, seed: int, without: tuple[str, ...],
+                replayed: Recording | None) -> Recording:
+    """The recording of the calibrated ``suit`` following ``protocol`` (``replayed``: the
+    recording it replays, of the joint ``suit`` was calibrated on; noise-free with
     ``--without noise``; any other ``--without`` is refused), with a warning line where the
     movement leaves the angles the suit was calibrated on."""
     from exohil.emulators.discrepancy.profile import (
         outside_calibration,
+        outside_range,
+        replay_calibrated_recording,
         simulate_calibrated_recording,
     )
     from exohil.emulators.suit_profile import ProfileError
@@ -179,21 +247,43 @@ def _calibrated(suit: CalibratedSuit, protocol: str, seed: int,
             f"--without {', '.join(others)}: a calibrated profile's effects "
             f"({', '.join(suit.effects) or 'none'}) were fitted together with its static map, "
             "so they cannot be dropped one by one; only --without noise applies")
-    trajectory = _trajectory(protocol, seed)
+    described = (f"on calibrated suit profile '{suit.name}' ({len(suit.sensors)} sensors, "
+                 f"{suit.units}, {suit.rate_hz:.4g} Hz; effects: "
+                 f"{', '.join(suit.effects) or 'none'})")
+    if replayed is not None:
+        name = Path(protocol[len("replay:"):]).name
+        try:
+            recording = replay_calibrated_recording(replayed, suit, seed, name,
+                                                    noise="noise" not in without)
+        except ValueError as exc:
+            raise click.ClickException(str(exc)) from exc
+        t = recording.sensors.t
+        click.echo(f"simulating {t[-1] - t[0]:.1f} s of {recording.metadata['trajectory']} "
+                   f"(its clock, from {t[0]:.6g} s) {described}", err=True)
+        _warn_outside(suit, outside_range(suit, recording.mocap[suit.joint].angles),
+                      "motion-capture samples")
+        return recording
+    trajectory = _trajectory(protocol, seed, None)
     try:
         outside = outside_calibration(suit, trajectory)
     except ProfileError as exc:
         raise click.ClickException(str(exc)) from exc
-    click.echo(f"simulating {trajectory.duration_s:.1f} s of {trajectory.source} on calibrated "
-               f"suit profile '{suit.name}' ({len(suit.sensors)} sensors, {suit.units}, "
-               f"{suit.rate_hz:.4g} Hz; effects: {', '.join(suit.effects) or 'none'})", err=True)
-    if outside:
-        lo, hi = suit.inputs.angle_lo, suit.inputs.angle_hi
-        click.echo("warning: the movement leaves the angles the profile was calibrated on ("
-                   + "; ".join(f"{a} {lo[k]:.0f}…{hi[k]:.0f}° on {100 * outside[a]:.1f} % of "
-                               f"the frames" for k, a in enumerate(suit.angles) if a in outside)
-                   + "): the calibrated map extrapolates there", err=True)
+    click.echo(f"simulating {trajectory.duration_s:.1f} s of {trajectory.source} {described}",
+               err=True)
+    _warn_outside(suit, outside, "frames")
     return simulate_calibrated_recording(trajectory, suit, seed, noise="noise" not in without)
+
+
+def _warn_outside(suit: CalibratedSuit, outside: dict[str, float], counted: str) -> None:
+    """A warning line where the movement leaves the angles ``suit`` was calibrated on
+    (``outside``: the share of its ``counted`` beyond each angle's range)."""
+    if not outside:
+        return
+    lo, hi = suit.inputs.angle_lo, suit.inputs.angle_hi
+    click.echo("warning: the movement leaves the angles the profile was calibrated on ("
+               + "; ".join(f"{a} {lo[k]:.0f}…{hi[k]:.0f}° on {100 * outside[a]:.1f} % of "
+                           f"the {counted}" for k, a in enumerate(suit.angles) if a in outside)
+               + "): the calibrated map extrapolates there", err=True)
 
 
 def _write(out_path: Path, recording: Recording) -> None:

@@ -96,6 +96,7 @@ _COMMANDS = {
     "table --out": ["table", "--train", "{rec}", "--out", "{rec}"],
     "plot": ["plot", "{rec}", "--kind", "timeseries", "--out", "{rec}"],
     "simulate": ["simulate", "--protocol", "mot:{rec}", "--out", "{rec}"],
+    "simulate --protocol replay:": ["simulate", "--protocol", "replay:{link}", "--out", "{rec}"],
     "emulate": ["emulate", "{rec}", "--fault-log", "{rec}", "--duration", "1"],
     "discrepancy": ["discrepancy", "{dir}/report.md", "--out", "{dir}"],
     "record recover": ["record", "recover", "{rec}", "--out", "{link}"],

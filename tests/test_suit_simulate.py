@@ -329,9 +329,11 @@ def test_simulate_command_writes_a_calibration_recording(tmp_path, profile_args)
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["--protocol", "walk"], "use 'paper', 'calibration' or 'mot:FILE"),
-    (["--protocol", "calibration:45"], "use 'paper', 'calibration' or 'mot:FILE"),
+    (["--protocol", "walk"], "use 'paper', 'calibration', 'mot:FILE[,FILE...]' or 'replay:FILE'"),
+    (["--protocol", "calibration:45"], "use 'paper', 'calibration', 'mot:FILE"),
     (["--protocol", "mot:/nonexistent.mot"], "no such .mot file"),
+    (["--protocol", "replay:"], "no such recording: ''"),
+    (["--protocol", "replay:/nonexistent.mcap"], "no such recording: '/nonexistent.mcap'"),
     (["--without", "glue"], "unknown effect kind"),
     (["--profile", "/nonexistent.toml"], "does not exist"),
 ])

@@ -31,7 +31,7 @@ from exohil.emulators.discrepancy.model import (
 from exohil.emulators.discrepancy.stops import Stops
 from exohil.emulators.discrepancy.workflow import Outcome
 from exohil.emulators.effects import Noise, Signal
-from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory
+from exohil.emulators.protocols import ANGLE_NAMES, MOCAP_RATE_HZ, Trajectory, replayed_motion
 from exohil.emulators.suit_profile import (
     PROFILE_SCHEMA,
     ProfileError,
@@ -452,15 +452,47 @@ def simulate_calibrated_recording(trajectory: Trajectory, suit: CalibratedSuit,
                   "trajectory": trajectory.source, "suit_profile": suit.name})
 
 
+def replay_calibrated_recording(measured: Recording, suit: CalibratedSuit, seed: int,
+                                name: str, noise: bool = True) -> Recording:
+    """A recording of the calibrated suit following the motion capture of ``measured``, a
+    recording of any joint (``name`` names it in messages), on ``measured``'s clock (the
+    clock the suit's drift was fitted on, where it has one): ``suit``'s angles on
+    ``/mocap/<suit.joint>`` at the samples where all are finite, linearly interpolated
+    (across a dropout too) to sensor frames at the profile's rate from the first of them,
+    with its white noise (none with ``noise`` False); the angles replayed as recorded, and
+    ``measured``'s segments within their span. ValueError where ``measured`` holds no such
+    motion."""
+    t_mocap, angles_mocap, segments = replayed_motion(measured, suit.joint, suit.angles, name)
+    t0 = float(t_mocap[0])
+    span = float(t_mocap[-1]) - t0
+    t = t0 + np.arange(int(math.floor(span * suit.rate_hz)) + 1) / suit.rate_hz
+    angles = np.column_stack([np.interp(t, t_mocap, a) for a in angles_mocap.T])
+    clean = Signal.from_values(t, simulate_calibrated(suit, t, angles))
+    sigma = suit.noise if noise else np.zeros_like(suit.noise)
+    noisy = Noise(sigma_mm=sigma.tolist()).apply(clean, np.random.default_rng(seed))
+    return Recording(
+        sensor_names=suit.sensors,
+        sensors=SensorStream(seq=np.arange(t.shape[0]), t=t, values=noisy.values),
+        mocap={suit.joint: AngleStream(t=t_mocap, names=suit.angles, angles=angles_mocap)},
+        sensor_units=suit.units, sensor_rate_hz=suit.rate_hz,
+        mocap_rate_hz=measured.mocap_rate_hz, segments=segments,
+        metadata={"generator": "exohil.emulators.discrepancy.profile", "seed": str(int(seed)),
+                  "trajectory": f"replay:{name}", "suit_profile": suit.name})
+
+
 def outside_calibration(suit: CalibratedSuit, trajectory: Trajectory) -> dict[str, float]:
-    """Per angle the suit is driven by, the share of a shoulder ``trajectory``'s frames (at
-    the suit's rate) outside the range of that angle the suit was calibrated on, where the
-    calibrated map extrapolates, beyond ``RANGE_TOLERANCE_DEG``; only angles with such
-    frames. The plane of elevation counts only where the elevation is at least
+    """:func:`outside_range` of a shoulder ``trajectory`` sampled at the suit's rate."""
+    t = trajectory.frame_times(suit.rate_hz)
+    return outside_range(suit, _shoulder_angles(suit, trajectory, t))
+
+
+def outside_range(suit: CalibratedSuit, angles: np.ndarray) -> dict[str, float]:
+    """Per angle the suit is driven by, the share of the frames ``angles`` (N, A; degrees,
+    in ``suit.angles`` order) outside the range of that angle the suit was calibrated on,
+    where the calibrated map extrapolates, beyond ``RANGE_TOLERANCE_DEG``; only angles with
+    such frames. The plane of elevation counts only where the elevation is at least
     :data:`~exohil.kinematics.OBSERVABLE_ELEVATION_DEG` (with the arm hanging it is
     undefined, and any value names the same pose)."""
-    t = trajectory.frame_times(suit.rate_hz)
-    angles = _shoulder_angles(suit, trajectory, t)
     lo, hi = suit.inputs.angle_lo, suit.inputs.angle_hi
     outside = (angles < lo - RANGE_TOLERANCE_DEG) | (angles > hi + RANGE_TOLERANCE_DEG)
     if "elv_angle" in suit.angles and "shoulder_elv" in suit.angles:
