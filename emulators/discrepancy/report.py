@@ -33,7 +33,9 @@ from exohil.emulators.discrepancy.timing import (
 )
 from exohil.emulators.discrepancy.workers import forked_map, workers_for
 from exohil.emulators.discrepancy.workflow import (
+    DRIFT_KEPT_NOTED,
     Outcome,
+    drift_kept_words,
     map_words,
     rail_words,
     resampled_words,
@@ -567,6 +569,9 @@ def markdown(summary: dict) -> str:
     if map_words(final) != map_words(calibrated):
         lines += ["", f"With the effects in place the static map was chosen again: the final "
                       f"model's is {map_words(final)}."]
+    kept = summary.get("drift_kept_heldout")
+    if kept is not None and kept < DRIFT_KEPT_NOTED:
+        lines += ["", f"{_sentence(drift_kept_words(kept))}."]
     for i, step in enumerate(summary["steps"], start=1):
         held = step["evidence"].get("held_at_stops")
         if held and held["significant"]:

@@ -58,6 +58,7 @@ from exohil.emulators.discrepancy.model import (
     angle_thresholds,
     coefficient_slices,
     drift_columns,
+    drift_kept_heldout,
     fit,
     loop_width_terms,
     make_inputs,
@@ -98,6 +99,10 @@ STATIC_INPUT_ROUNDS = 2
 #: Degrees of a named hysteresis in its plays' level tried beside the plain loop (degree 1,
 #: the candidate; :func:`_own_static_part`).
 HYSTERESIS_DEGREES = (2, 3)
+#: Below this share of a linear drift kept in the held-out gap
+#: (:func:`~.model.drift_kept_heldout`), progress line [2] says that the poses follow time:
+#: the static map then takes in more than half of a slow drift.
+DRIFT_KEPT_NOTED = 0.5
 #: Offset jumps a progress line lists (the JSON has every one).
 JUMPS_LISTED = 3
 
@@ -606,6 +611,13 @@ def _at_rail(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, cand: Fit, evi
             "significant": True, "pinned_at_rail": rail}
 
 
+def drift_kept_words(kept: float) -> str:
+    """The static map's hold on time (:func:`~.model.drift_kept_heldout`) in words."""
+    return (f"the poses follow time: held out, the static map keeps {kept:.1%} of a linear "
+            "drift and takes the rest in as the pose's doing (poses revisited through the "
+            "recording tell the two apart)")
+
+
 def _resampled(trial: Trial) -> list[dict]:
     """The sensors whose readings change less from one frame to the next than noise or a
     smooth movement can (``trial.resampled`` over ``RESAMPLED_SPREAD``), each with that
@@ -975,6 +987,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     progress(f"[2] simulated with the calibrated model ({map_words(calibrated)}"
              f"{', with ' + ', '.join(in_model) if in_model else ''}): held-out gap "
              f"{base.gap:.4g} {trial.units}")
+    drift_kept = drift_kept_heldout(trial, inputs, static_fit.spec)
+    if drift_kept < DRIFT_KEPT_NOTED:
+        progress(f"    {drift_kept_words(drift_kept)}")
     mot = motion(trial, inputs.static)
     local_before = localise(trial, base.residual, mot)
     progress(f"[3] localised ({trial.units} RMS): by direction " + ", ".join(
@@ -1074,6 +1089,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         "spikes": trial.spikes.tolist(),
         "resampled_sensors": resampled,
         "unscored_frames": int((trial.valid & ~trial.scored).sum()),
+        "drift_kept_heldout": significant(drift_kept),
         "already_in_model": list(in_model),
         "clock_offset": clock,
         "clock_skew": skew,
