@@ -118,8 +118,8 @@ def simulate_command(protocol: str, profile_path: Path | None, seed: int,
     With a calibrated profile (from `exohil discrepancy`) the sensors are those it was
     calibrated on, in its units and at its rate, with its white noise; a movement that
     leaves the angles it was calibrated on gets a warning line (the map extrapolates there).
-    A replay writes the angles it replays as recorded, on their joint's stream, and the
-    replayed recording's license and source notes.
+    A calibrated profile's replay writes the angles as recorded, on their joint's stream;
+    every replay carries the replayed recording's license and source notes.
 
     \b
     Examples:
