@@ -23,6 +23,14 @@ def _replayed_file(protocol: str) -> Path | None:
     return Path(protocol[len("replay:"):]) if protocol.startswith("replay:") else None
 
 
+def _replayed_name(protocol: str) -> str:
+    """The file name of the recording ``replay:FILE`` replays, as messages and metadata give
+    it."""
+    replayed = _replayed_file(protocol)
+    assert replayed is not None, "called for a replay only"
+    return replayed.name
+
+
 def _input_files(protocol: str) -> list[Path]:
     """The files the movement is read from."""
     replayed = _replayed_file(protocol)
@@ -44,10 +52,15 @@ def _trajectory(protocol: str, seed: int, replayed: Recording | None):
         return calibration_protocol(seed)
     try:
         if replayed is not None:
-            return replay_trajectory(replayed, Path(protocol[len("replay:"):]).name)
+            return replay_trajectory(replayed, _replayed_name(protocol))
         return mot_trajectory([Path(p) for p in protocol[4:].split(",")])
     except ValueError as exc:
         raise click.ClickException(str(exc)) from exc
+
+
+def _names_a_file(name: str) -> bool:
+    """``name`` is the path of a file that exists (not blank, no NUL byte)."""
+    return bool(name.strip()) and "\x00" not in name and Path(name).is_file()
 
 
 class Protocol(click.ParamType):
@@ -62,14 +75,14 @@ class Protocol(click.ParamType):
             return text
         if text.startswith("replay:"):
             name = text[len("replay:"):]
-            if not name.strip() or "\x00" in name or not Path(name).is_file():
+            if not _names_a_file(name):
                 self.fail(f"no such recording: {name!r}", param, ctx)
             return text
         if not text.startswith("mot:") or not text[4:]:
             self.fail(f"{text!r}: use 'paper', 'calibration', 'mot:FILE[,FILE...]' or "
                       "'replay:FILE'", param, ctx)
         for name in text[4:].split(","):
-            if not name.strip() or "\x00" in name or not Path(name).is_file():
+            if not _names_a_file(name):
                 self.fail(f"no such .mot file: {name!r}", param, ctx)
         return text
 
@@ -251,7 +264,7 @@ def _calibrated(suit: CalibratedSuit, protocol: str, seed: int, without: tuple[s
                  f"{suit.units}, {suit.rate_hz:.4g} Hz; effects: "
                  f"{', '.join(suit.effects) or 'none'})")
     if replayed is not None:
-        name = Path(protocol[len("replay:"):]).name
+        name = _replayed_name(protocol)
         try:
             recording = replay_calibrated_recording(replayed, suit, seed, name,
                                                     noise="noise" not in without)

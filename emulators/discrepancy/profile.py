@@ -430,20 +430,27 @@ def _shoulder_angles(suit: CalibratedSuit, trajectory: Trajectory, t: np.ndarray
     return trajectory.sample(t)[:, [ANGLE_NAMES.index(a) for a in suit.angles]]
 
 
+def _sensor_stream(suit: CalibratedSuit, t: np.ndarray, angles_deg: np.ndarray, seed: int,
+                   noise: bool) -> SensorStream:
+    """The calibrated suit's sensor frames at times ``t`` (uniform at its rate) for
+    ``angles_deg`` (:func:`simulate_calibrated`), with its white noise drawn from ``seed``
+    (none with ``noise`` False), numbered from 0."""
+    clean = Signal.from_values(t, simulate_calibrated(suit, t, angles_deg))
+    sigma = suit.noise if noise else np.zeros_like(suit.noise)
+    noisy = Noise(sigma_mm=sigma.tolist()).apply(clean, np.random.default_rng(seed))
+    return SensorStream(seq=np.arange(t.shape[0]), t=t, values=noisy.values)
+
+
 def simulate_calibrated_recording(trajectory: Trajectory, suit: CalibratedSuit,
                                   seed: int, noise: bool = True) -> Recording:
     """A recording of the calibrated suit following a shoulder ``trajectory``: sensors at the
     profile's rate with its white noise (none with ``noise`` False), exact angles on
     ``/mocap/shoulder`` at 120 Hz."""
     t = trajectory.frame_times(suit.rate_hz)
-    angles = _shoulder_angles(suit, trajectory, t)
-    clean = Signal.from_values(t, simulate_calibrated(suit, t, angles))
-    sigma = suit.noise if noise else np.zeros_like(suit.noise)
-    noisy = Noise(sigma_mm=sigma.tolist()).apply(clean, np.random.default_rng(seed))
     t_mocap = trajectory.frame_times(MOCAP_RATE_HZ)
     return Recording(
         sensor_names=suit.sensors,
-        sensors=SensorStream(seq=np.arange(t.shape[0]), t=t, values=noisy.values),
+        sensors=_sensor_stream(suit, t, _shoulder_angles(suit, trajectory, t), seed, noise),
         mocap={"shoulder": AngleStream(t=t_mocap, names=ANGLE_NAMES,
                                        angles=trajectory.sample(t_mocap))},
         sensor_units=suit.units, sensor_rate_hz=suit.rate_hz, mocap_rate_hz=MOCAP_RATE_HZ,
@@ -467,12 +474,9 @@ def replay_calibrated_recording(measured: Recording, suit: CalibratedSuit, seed:
     span = float(t_mocap[-1]) - t0
     t = t0 + np.arange(int(math.floor(span * suit.rate_hz)) + 1) / suit.rate_hz
     angles = np.column_stack([np.interp(t, t_mocap, a) for a in angles_mocap.T])
-    clean = Signal.from_values(t, simulate_calibrated(suit, t, angles))
-    sigma = suit.noise if noise else np.zeros_like(suit.noise)
-    noisy = Noise(sigma_mm=sigma.tolist()).apply(clean, np.random.default_rng(seed))
     return Recording(
         sensor_names=suit.sensors,
-        sensors=SensorStream(seq=np.arange(t.shape[0]), t=t, values=noisy.values),
+        sensors=_sensor_stream(suit, t, angles, seed, noise),
         mocap={suit.joint: AngleStream(t=t_mocap, names=suit.angles, angles=angles_mocap)},
         sensor_units=suit.units, sensor_rate_hz=suit.rate_hz,
         mocap_rate_hz=measured.mocap_rate_hz, segments=segments,
