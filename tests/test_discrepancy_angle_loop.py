@@ -89,6 +89,27 @@ def test_each_play_on_an_angle_is_the_backlash_it_holds_through_the_maps_slope()
     assert columns[699, -1] == pytest.approx(-0.2 * widths[-1])
 
 
+def test_the_slopes_formed_in_processes_are_those_formed_in_turn():
+    """ŝ's slopes of a two-angle map (a product term, so each slope depends on both angles)
+    are the same values whether the shifted maps are formed in one process or in two."""
+    rng = np.random.default_rng(5)
+    angles = np.column_stack([rng.uniform(0.0, 120.0, 2000), rng.uniform(-40.0, 80.0, 2000)])
+    lo, hi = angles.min(axis=0), angles.max(axis=0)
+    u = scale_angles(angles, lo, hi)
+    basis, _ = legendre_products(u, 2)
+    coef = rng.normal(size=(basis.shape[1], 3))
+
+    def inputs() -> Inputs:
+        return Inputs(u=u, input_kind="angles", angle_lo=lo, angle_hi=hi, angles=angles,
+                      angle_names=("a", "b"), static=basis @ coef, static_coef=coef,
+                      static_degree=2, thresholds=np.empty(0), t_norm=np.zeros(len(u)),
+                      t_span=(0.0, 1.0))
+
+    in_turn = static_slopes(inputs(), workers=1)
+    assert in_turn.shape == (2000, 3, 2) and np.ptp(in_turn[:, :, 0], axis=0).min() > 0
+    assert np.array_equal(static_slopes(inputs(), workers=2), in_turn)
+
+
 @pytest.fixture(scope="module")
 def sleeve_slip():
     """A suit of the suite (seed 4) turned within ±35° about the humerus, whose tendons read

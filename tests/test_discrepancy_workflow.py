@@ -2285,6 +2285,20 @@ def test_a_straight_run_under_the_arm_is_followed_by_the_static_map(tmp_path, mo
                                    "segments need 28 coefficients")
 
 
+def test_the_local_basis_is_the_wendland_function_of_every_pair_written_out():
+    """Evaluated only where a centre reaches, the local basis is, value for value, the
+    Wendland function of the clipped distance over every direction and centre pair."""
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(3000, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    centres = model.local_centres(u[:1500])
+    reach = model.LOCAL_REACH * math.sqrt(4 * math.pi / model.LOCAL_CENTRES)
+    r = np.minimum(np.sqrt(np.maximum(2.0 - 2.0 * (u @ centres.T), 0.0)) / reach, 1.0)
+    values = model.local_terms(u, centres)
+    assert 0 < np.count_nonzero(values) < values.size
+    assert np.array_equal(values, (1.0 - r) ** 4 * (4.0 * r + 1.0))
+
+
 def test_local_functions_are_compact_and_kept_only_near_the_poses():
     """A Wendland function is 1 at its centre, falls smoothly and is 0 beyond its reach;
     centres are kept only near the arm directions recorded (a cap here)."""

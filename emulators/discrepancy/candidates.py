@@ -152,14 +152,19 @@ def best_lag(fits: list[Fit]) -> Fit:
     return min(fits, key=lambda f: f.gap)
 
 
-def creep_families(trial: Trial, inputs: Inputs, spec: Spec) -> tuple[Fit, ...]:
+def creep_families(trial: Trial, inputs: Inputs, spec: Spec,
+                   computed: tuple[Fit, ...] | None = None) -> tuple[Fit, ...]:
     """The best creep of each family on its grid added to ``spec``: low-passes of the stretch
     (one time constant, then a second if it helps), the asymmetric build/recover state and
-    the state that flows only during holds.
+    the state that flows only during holds (``computed``, where computed apart: a step's
+    job, :func:`~.workflow._candidates`).
     Kept for the last ``spec`` asked: a named creep is refined from the grid it was
     compared on (:func:`best_candidate`, then :func:`refine`)."""
     kept = inputs.cache.get("creep_families")
-    if kept is None or kept[0] != spec:
+    if computed is not None:
+        kept = (spec, computed)
+        inputs.cache["creep_families"] = kept
+    elif kept is None or kept[0] != spec:
         kept = (spec, _creep_grids(trial, inputs, spec))
         inputs.cache["creep_families"] = kept
     return kept[1]

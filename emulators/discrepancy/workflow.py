@@ -24,6 +24,7 @@ from exohil.emulators.discrepancy.candidates import (
     VOCABULARY,
     best_candidate,
     best_lag,
+    creep_families,
     lag_model,
     refine,
     refine_drift,
@@ -64,6 +65,7 @@ from exohil.emulators.discrepancy.model import (
     make_inputs,
     restrict_to_coverage,
     sensor_part,
+    static_basis,
     static_slopes,
     with_static_of,
 )
@@ -139,7 +141,7 @@ def _static_maps(inputs: Inputs) -> list[Spec]:
     return maps
 
 
-def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
+def _static_map(trial: Trial, inputs: Inputs, floor: float, workers: int = 1) -> Fit:
     """The static map with the lowest held-out gap, except that a map with the local basis
     must also beat the best polynomial bent at stops (saturation) by more than the noise,
     by rules 1 and 2 (the bar an effect must clear to be named). A stop is a static bend
@@ -148,13 +150,21 @@ def _static_map(trial: Trial, inputs: Inputs, floor: float) -> Fit:
     a physical explanation, the workflow keeps the second unless the local functions predict
     the held-out blocks better by more than it would take to name an effect (``floor``:
     the recording's pooled noise RMS, the bar's σ). Without rule 2's sign test: local
-    functions help where the poses they cover are, so on some blocks more than others."""
-    fits = [fit(trial, inputs, static_map) for static_map in _static_maps(inputs)]
+    functions help where the poses they cover are, so on some blocks more than others.
+
+    The maps, and the stops' sensors, are fitted in ``workers`` processes
+    (:func:`~.workers.forked_map`; the same fits in any number), the local basis formed here
+    first for all of them."""
+    if inputs.centres.shape[0]:
+        static_basis(inputs, LOCAL_DEGREE, local=True)
+    fits = forked_map(functools.partial(fit, trial, inputs), _static_maps(inputs), workers)
     best = min(fits, key=lambda f: f.gap)
     if not best.spec.local:
         return best
     polynomial = min((f for f in fits if not f.spec.local), key=lambda f: f.gap)
-    bent = best_candidate(trial, inputs, "saturation", polynomial.spec)
+    bent = saturation_candidate(trial, inputs, polynomial.spec, forked_map(
+        functools.partial(saturation_parts, trial, inputs, polynomial.spec),
+        range(trial.n_sensors), workers))
     bends = rules_on_blocks(bent.block_mse, best.block_mse, floor)["beyond_noise"]
     return best if bends else polynomial
 
@@ -541,8 +551,16 @@ def _candidates(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: floa
     :func:`~.candidates.best_candidate` compares them, and the saturation is put together
     from its sensors' shares. Choosing one sensor's stops after another in one process
     was the step's longest job (12 of a 14 s step on a four-minute recording whose map
-    has local functions) while the other process had finished the other candidates."""
-    shares: dict[str, tuple] = {"lag": LAG_MODELS, "saturation": tuple(range(trial.n_sensors))}
+    has local functions) while the other process had finished the other candidates.
+    What a named effect is refined from comes back to this process and is kept: the
+    creep's families (:func:`~.candidates.creep_families`); ŝ's slopes, which the loop in
+    the pose reads, are formed here first for every process (:func:`~.model.static_slopes`).
+    Each had been formed again, one after the other: 1.2 and 2.6 s of a four-minute
+    recording whose map has local functions."""
+    shares: dict[str, tuple] = {"lag": LAG_MODELS, "saturation": tuple(range(trial.n_sensors)),
+                                "creep": ("families",)}
+    if "hysteresis" in missing:  # the loop in the pose reads ŝ's slopes: formed once here,
+        static_slopes(inputs, workers)  # for every process, and for the loop's refits after
     jobs = [(kind, share) for kind in sorted(missing, key=COSTLIEST_FIRST.index)
             for share in shares.get(kind, (None,))]
     done = forked_map(functools.partial(_candidate_job, trial, inputs, spec, base, floor),
@@ -552,6 +570,11 @@ def _candidates(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: floa
     if "lag" in missing:
         cand = best_lag([c for kind, c, _ in done if kind == "lag" and isinstance(c, Fit)])
         tried.append(("lag", cand, candidate_evidence(trial, base, cand, floor)))
+    if "creep" in missing:  # kept here: a named creep is refined from them
+        families = creep_families(trial, inputs, spec, next(
+            c for kind, c, _ in done if kind == "creep" and isinstance(c, tuple)))
+        tried.append(_candidate(trial, inputs, spec, base, floor, "creep",
+                                cand=min(families, key=lambda f: f.gap)))
     if "saturation" in missing:
         parts = [part for kind, part, _ in done if kind == "saturation" and isinstance(part, list)]
         tried.append(_candidate(trial, inputs, spec, base, floor, "saturation", workers,
@@ -561,14 +584,18 @@ def _candidates(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: floa
 
 def _candidate_job(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: float,
                    job: tuple[str, str | int | None]
-                   ) -> tuple[str, Fit | list[SensorPart], dict | None]:
+                   ) -> tuple[str, Fit | tuple[Fit, ...] | list[SensorPart], dict | None]:
     """One job of :func:`_candidates`: ``(kind, None)``, the candidate ``kind``
     (:func:`_candidate`); ``("lag", model)``, the best lag of that model alone;
-    ``("saturation", j)``, sensor j's share of the saturation (evidence None for both: the
-    lag's models are compared, and the saturation's shares put together, first)."""
+    ``("creep", "families")``, the creep's families (:func:`~.candidates.creep_families`);
+    ``("saturation", j)``, sensor j's share of the saturation (evidence None for the last
+    three: the lag's models are compared, the creep's families and the saturation's shares
+    put together, first)."""
     kind, share = job
     if kind == "lag" and isinstance(share, str):
         return kind, lag_model(trial, inputs, spec, share), None
+    if kind == "creep" and share == "families":
+        return kind, creep_families(trial, inputs, spec), None
     if kind == "saturation" and isinstance(share, int):
         return kind, saturation_parts(trial, inputs, spec, share), None
     return _candidate(trial, inputs, spec, base, floor, kind)
@@ -951,11 +978,11 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     uncovered = restrict_to_coverage(trial, scaled.u)
     if uncovered > 0:
         progress(f"    {uncovered:.1%} of frames are poses no other fold covers: not scored")
-    static_fit = _static_map(trial, scaled, floor)
+    static_fit = _static_map(trial, scaled, floor, workers)
 
     def static_map(other: Trial, inputs: Inputs) -> Fit:
         """The static map chosen for ``other``, the trial read another way."""
-        return _static_map(other, inputs, floor)
+        return _static_map(other, inputs, floor, workers)
 
     if filter_found is None:
         trial, scaled, static_fit, filtered = mocap_filter(rec, name, trial, scaled,
