@@ -73,23 +73,21 @@ def delay(x: np.ndarray, delay_s: float, rate_hz: float) -> np.ndarray:
     k = int(math.floor(samples))
     frac = samples - k
 
-    def shifted(by: int) -> np.ndarray:
+    def shifted(by: int, weight: float) -> np.ndarray:
+        """x shifted ``by`` frames (its ends held) times ``weight``, in one pass."""
         out = np.empty_like(x)
         if by >= 0:
-            out[by:] = x[:x.shape[0] - by]
-            out[:by] = x[0]
+            np.multiply(x[:x.shape[0] - by], weight, out=out[by:])
+            out[:by] = x[0] * weight
         else:
-            out[:by] = x[-by:]
-            out[by:] = x[-1]
+            np.multiply(x[-by:], weight, out=out[:by])
+            out[by:] = x[-1] * weight
         return out
 
     if frac == 0:
-        return shifted(k)
-    out = shifted(k)  # (1 − frac)·x[i − k] + frac·x[i − k − 1], in place: no temporaries
-    out *= 1.0 - frac
-    later = shifted(k + 1)
-    later *= frac
-    out += later
+        return shifted(k, 1.0)
+    out = shifted(k, 1.0 - frac)  # (1 − frac)·x[i − k] + frac·x[i − k − 1]
+    out += shifted(k + 1, frac)
     return out
 
 
