@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
-from scipy.signal import lfilter, lfilter_zi
 
 from exohil.emulators.seeding import keyed_rng
 
@@ -264,6 +263,10 @@ class Lag:
         _check(isinstance(self.clock_offset_s, int | float), "lag: clock_offset_s is one number")
 
     def apply(self, signal: Signal, rng: np.random.Generator) -> Signal:
+        # here, not at the top: scipy.signal takes half a second to import, and every
+        # command line reads this module for the effect kinds (``exohil --help`` included)
+        from scipy.signal import lfilter, lfilter_zi
+
         x = signal.values
         n, s = x.shape
         if n == 0:

@@ -1,5 +1,7 @@
 """Bad paths give one error line and a non-zero exit, never a traceback."""
 
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -123,3 +125,22 @@ def test_a_command_started_with_stdout_closed_says_so():
                           timeout=120, preexec_fn=lambda: os.close(1))
     assert done.returncode == 1
     assert done.stderr.startswith("Error: standard output is closed")
+
+
+def test_the_help_loads_no_heavy_library():
+    """``exohil --help`` and every command's help read the command modules only: torch,
+    matplotlib and scipy.signal (each half a second or more to import) wait for a command
+    to run."""
+    script = (
+        "import sys\n"
+        "from click.testing import CliRunner\n"
+        "from exohil.harness.cli import main\n"
+        "runner = CliRunner()\n"
+        "assert runner.invoke(main, ['--help']).exit_code == 0\n"
+        "for name in main.list_commands(None):\n"
+        "    assert runner.invoke(main, [name, '--help']).exit_code == 0, name\n"
+        "heavy = ('torch', 'matplotlib', 'scipy.signal')\n"
+        "print(sorted(m for m in sys.modules if m in heavy))\n")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]", out.stdout
