@@ -110,7 +110,7 @@ def conform(target: str | None, model: Path | None, bench_file: Path | None, pro
     args = ["--pyargs", "exohil.conformance", "-p", "no:cacheprovider", "-q",
             "-o", "junit_family=xunit1", "-W", "ignore::pytest.PytestAssertRewriteWarning",
             f"--junitxml={out_dir / JUNIT_FILE}", "--exohil-profile", profile,
-            "--exohil-out", str(out_dir)]
+            "--exohil-out", str(out_dir), "--exohil-verdict-after"]
     for option, value in (("--exohil-target", target), ("--exohil-model", model),
                           ("--exohil-bench", bench_file), ("--exohil-backend", backend),
                           ("--exohil-baseline", baseline), ("--exohil-reference", reference)):

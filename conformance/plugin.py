@@ -65,6 +65,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--exohil-out", default=None,
                     help="Folder for conformance.json, summary.md and run.mcap (an earlier "
                          "run's are removed first; one that is an input is refused).")
+    group.addoption("--exohil-verdict-after", action="store_true",
+                    help="The caller prints the verdict line after pytest's own lines "
+                         "(exohil conform): the summary table leaves it out.")
 
 
 def _is_check(item: pytest.Item) -> bool:
@@ -307,5 +310,6 @@ def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Co
     from exohil.conformance.report import summary_lines
 
     terminalreporter.section("exohil conformance")
-    for line in summary_lines(config.stash[_RUN], config.stash[_RESULTS]):
+    for line in summary_lines(config.stash[_RUN], config.stash[_RESULTS],
+                              verdict=not config.getoption("exohil_verdict_after")):
         terminalreporter.write_line(line)

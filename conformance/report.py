@@ -119,14 +119,15 @@ def summary_markdown(run: Any, results: list[Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def summary_lines(run: Any, results: list[Any]) -> list[str]:
+def summary_lines(run: Any, results: list[Any], verdict: bool = True) -> list[str]:
     """The terminal summary; its last line names the verdict and, on failure, the first
-    failing check and its figure."""
+    failing check and its figure (without ``verdict``, left to the caller to print last)."""
     lines = [f"{'check':14s} {'verdict':8s} message"]
     for r in results:
         req = "" if r.required else " (optional)"
         lines.append(f"{r.name:14s} {r.verdict.value.upper():8s} {r.message}{req}")
-    lines.append(final_line(report_dict(run, results)))
+    if verdict:
+        lines.append(final_line(report_dict(run, results)))
     return lines
 
 

@@ -195,6 +195,9 @@ def test_the_reference_ennet_passes_and_writes_every_report(tmp_path, fast_profi
     code, output, report = conform(tmp_path, fast_profile)
     assert code == 0, output
     assert last_line(output).startswith("PASS")
+    # the verdict is said once, last (the summary table used to end with it too)
+    assert [line for line in output.splitlines() if line.startswith(("PASS", "FAIL"))] == [
+        last_line(output)]
     # the profile states no latency limit (timing is never asserted in unit tests): the
     # verdict line says the check judged nothing
     assert "latency" in last_line(output).partition(";")[2]
