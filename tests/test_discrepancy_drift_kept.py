@@ -3,6 +3,8 @@ time, the map takes a drift in as the pose's doing, and the workflow says so."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from exohil.emulators.discrepancy import run
@@ -19,7 +21,8 @@ from exohil.formats.recording import AngleStream, Recording, SensorStream
 RATE_HZ = 100.0
 
 
-def _knee(flexion_of: callable, seconds: float = 80.0, drift: float = 0.0) -> Recording:
+def _knee(flexion_of: Callable[[np.ndarray], np.ndarray], seconds: float = 80.0,
+          drift: float = 0.0) -> Recording:
     """Two bands over a knee whose flexion is ``flexion_of(t)``, noise 0.01, plus a linear
     drift of ``drift`` from start to end on the first."""
     t = np.arange(int(seconds * RATE_HZ)) / RATE_HZ

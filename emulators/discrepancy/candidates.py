@@ -103,14 +103,15 @@ def best_candidate(trial: Trial, inputs: Inputs, kind: str, spec: Spec) -> Fit:
 
 
 def saturation_candidate(trial: Trial, inputs: Inputs, spec: Spec,
-                         parts: list[list[SensorPart]] | None = None) -> Fit:
+                         parts: list[list[SensorPart]] | None = None, workers: int = 1) -> Fit:
     """Stops added to ``spec`` (:func:`saturation_parts` of each sensor: ``parts`` where
-    computed apart), at the ridge of the map that predicts the held-out blocks best. Fitted
-    between the stops, the map extrapolates into them: its ridge is chosen again (a small
-    one that interpolates well can extrapolate wildly), through the stops chosen with the
-    current one."""
+    computed apart, else here, one sensor a job in ``workers`` processes), at the ridge of
+    the map that predicts the held-out blocks best. Fitted between the stops, the map
+    extrapolates into them: its ridge is chosen again (a small one that interpolates well
+    can extrapolate wildly), through the stops chosen with the current one."""
     if parts is None:
-        parts = [saturation_parts(trial, inputs, spec, j) for j in range(trial.n_sensors)]
+        parts = forked_map(functools.partial(saturation_parts, trial, inputs, spec),
+                           range(trial.n_sensors), workers)
     first = fit(trial, inputs, replace(spec, saturation=True), [p[0] for p in parts])
     kept = _keep_stops(first).spec
     return min([first] + [fit(trial, inputs, replace(kept, ridge=r), [p[k] for p in parts])

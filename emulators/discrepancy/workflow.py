@@ -162,9 +162,7 @@ def _static_map(trial: Trial, inputs: Inputs, floor: float, workers: int = 1) ->
     if not best.spec.local:
         return best
     polynomial = min((f for f in fits if not f.spec.local), key=lambda f: f.gap)
-    bent = saturation_candidate(trial, inputs, polynomial.spec, forked_map(
-        functools.partial(saturation_parts, trial, inputs, polynomial.spec),
-        range(trial.n_sensors), workers))
+    bent = saturation_candidate(trial, inputs, polynomial.spec, workers=workers)
     bends = rules_on_blocks(bent.block_mse, best.block_mse, floor)["beyond_noise"]
     return best if bends else polynomial
 
@@ -570,11 +568,11 @@ def _candidates(trial: Trial, inputs: Inputs, spec: Spec, base: Fit, floor: floa
     if "lag" in missing:
         cand = best_lag([c for kind, c, _ in done if kind == "lag" and isinstance(c, Fit)])
         tried.append(("lag", cand, candidate_evidence(trial, base, cand, floor)))
-    if "creep" in missing:  # kept here: a named creep is refined from them
-        families = creep_families(trial, inputs, spec, next(
+    if "creep" in missing:  # kept here, where the candidate is chosen from them and a
+        # named creep is refined from them
+        creep_families(trial, inputs, spec, next(
             c for kind, c, _ in done if kind == "creep" and isinstance(c, tuple)))
-        tried.append(_candidate(trial, inputs, spec, base, floor, "creep",
-                                cand=min(families, key=lambda f: f.gap)))
+        tried.append(_candidate(trial, inputs, spec, base, floor, "creep"))
     if "saturation" in missing:
         parts = [part for kind, part, _ in done if kind == "saturation" and isinstance(part, list)]
         tried.append(_candidate(trial, inputs, spec, base, floor, "saturation", workers,
