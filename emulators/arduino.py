@@ -73,8 +73,9 @@ class ArduinoEmulator:
             before that flush is discarded by the host), or for clients that never flush, until
             this many seconds have passed. Such frames are logged ``not_read``.
         drain_timeout_s: at a disconnect, how long to wait for the host to read what was
-            already written before the port vanishes (bytes still unread then are logged
-            lost); also how long the end of the stream waits for the host to catch up.
+            already written before the port vanishes (frames still unread then are logged
+            lost); also how long the end of the stream waits for the host to catch up (what
+            it has not read when :meth:`stop` closes the port is logged lost there).
         record_send_times: keep (seq, perf_counter_ns) of every write (benchmarks).
         spin_s: pacing spins on the clock for the last ``spin_s`` seconds before each deadline.
         realtime: run the emulator thread under SCHED_FIFO (needs CAP_SYS_NICE; when refused,
@@ -197,11 +198,15 @@ class ArduinoEmulator:
         self._go.set()
 
     def stop(self, timeout_s: float = 5.0) -> None:
-        """Stop streaming, remove the port and join the thread (bounded by ``timeout_s``)."""
+        """Stop streaming, join the thread (bounded by ``timeout_s``) and remove the port;
+        frames an attached host has not read by then are logged ``not_read`` (reason
+        ``port closed``), so :attr:`fault_log` is complete once this returns."""
         self._stop.set()
         self._go.set()
         if self._thread.is_alive():
             self._thread.join(timeout_s)
+        if not self._thread.is_alive() and self._port.host_attached():
+            self._log_unread("not_read", reason="port closed")
         self._port.close()
 
     def wait_finished(self, timeout_s: float | None = None) -> bool:
@@ -219,7 +224,8 @@ class ArduinoEmulator:
 
     @property
     def fault_log(self) -> list[FaultRecord]:
-        """A copy of the fault log so far (complete once finished)."""
+        """A copy of the fault log so far: complete once :meth:`stop` has returned (once
+        finished, only frames a host has still not read when the port closes are added)."""
         return list(self._log)
 
     def write_time_ns(self, seq: int) -> int | None:
@@ -372,17 +378,25 @@ class ArduinoEmulator:
     def _go_offline(self) -> None:
         """Disconnect: let the host read what it already has, then make the port vanish."""
         if self._port.host_attached() and not self._port.drain(self.drain_timeout_s):
-            self._log_in_flight(self._port.unread_bytes())
+            self._log_unread("disconnect", in_flight=True)
         lost = self._port.disconnect()
         if lost is not None:
             self._log_fault(lost, "disconnect", in_flight=True)
 
-    def _log_in_flight(self, unread: int) -> None:
-        """Log the most recent frames covering ``unread`` bytes as lost in flight."""
+    def _log_unread(self, kind: str, **details: Any) -> None:
+        """Take the bytes the host has not read out of the port, pending tail included, and
+        log the most recent frames they cover as ``kind``: the port is about to vanish and
+        the host loses them. A frame the host read in part is logged too (it cannot decode
+        it). Without a second open of the slave only the pending tail is counted."""
+        unread = (self._port.take_unread() or 0) + self._port.pending_bytes
+        self._port.discard_pending()
+        lost: list[int] = []
         while unread > 0 and self._recent:
             seq, size = self._recent.pop()
-            self._log_fault(seq, "disconnect", in_flight=True)
+            lost.append(seq)
             unread -= size
+        for seq in reversed(lost):
+            self._log_fault(seq, kind, **details)
 
     def _deliver(self, seq: int, data: bytes) -> None:
         if not self._port.host_attached():

@@ -3,6 +3,7 @@ docs/wire-protocol.md (its own COBS and CRC; nothing from exohil.formats.wire)."
 
 from __future__ import annotations
 
+import json
 import os
 import select
 import struct
@@ -136,11 +137,17 @@ def _emulate(*args: str) -> list[tuple[int, int, list[int]]]:
     return frames
 
 
-def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Path) -> None:
+#: the fault kinds of frames a host never receives intact, as docs/emulator.md lists them
+LOSING = {"drop", "corrupt", "truncate", "disconnect", "not_read"}
+
+
+def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Path,
+                                                              tmp_path: Path) -> None:
     rate, duration = 2000, 2.0
     generated = int(rate * duration)
+    fault_log = tmp_path / "faults.jsonl"
     frames = _emulate(str(recording_path), "--rate", str(rate), "--duration", str(duration),
-                      "--loop")
+                      "--loop", "--fault-log", str(fault_log))
     seqs = [seq for seq, _, _ in frames]
     # the emulator replays the recording's own numbering: sequence numbers the recording lacks
     # (the foreign sample has gaps) are never sent, looped over its seq span
@@ -148,10 +155,15 @@ def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Pa
     offsets = recorded - recorded[0]
     present = np.zeros(int(offsets[-1]) + 1, dtype=bool)
     present[offsets] = True
-    sent = [k for k in range(generated) if present[k % present.size]]
-    assert seqs == sorted(seqs) and seqs[-1] == int(recorded[0]) + sent[-1]
-    span = sum(1 for k in sent if int(recorded[0]) + k >= seqs[0])  # sent once the reader was ready
-    assert len(frames) >= 0.999 * span, f"decoded {len(frames)} of {span}"
+    assert seqs == sorted(seqs)
+    # every frame generated is decoded or in the fault log, never both; how many the reader
+    # decodes depends on it being scheduled at 2 kHz (benchmarks/bench_emulator.py measures it)
+    log = [json.loads(line) for line in fault_log.read_text().splitlines()]
+    lost = [r["seq"] for r in log if r["kind"] in LOSING]
+    assert sorted(seqs + lost) == [int(recorded[0]) + k for k in range(generated)]
+    absent = {int(recorded[0]) + k for k in range(generated) if not present[k % present.size]}
+    assert absent == {r["seq"] for r in log
+                      if r["details"].get("reason") == "absent from the recording"}
     rec = read_recording(recording_path)
     row_of = {int(offset): row for row, offset in enumerate(offsets)}
     expected = np.rint(rec.sensors.values / 0.01).astype(int)

@@ -313,6 +313,62 @@ def test_a_host_that_does_not_read_fills_the_buffer_and_frames_are_logged_not_re
     assert stats.crc_errors == 0 and stats.decode_errors == 0
 
 
+def test_frames_a_host_has_not_read_when_the_port_closes_are_logged() -> None:
+    """The port stays up after the stream until stop(); what the host has not read then is
+    lost as the port closes, and logged ``not_read`` (reason ``port closed``): every frame
+    generated is decoded by the host or in the log, never both, with far more unread than
+    the 4 KiB the line discipline's FIONREAD counts (the old count, which logged nothing
+    here)."""
+    n = 3000
+    emulator = ArduinoEmulator(_values(n), rate_hz=20000.0, autostart=False, drain_timeout_s=0.05)
+    stream = bytearray()
+    with emulator:
+        fd = os.open(emulator.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            termios.tcflush(fd, termios.TCIFLUSH)
+            emulator.begin()
+            assert emulator.wait_finished(WAIT_S)
+            stream += os.read(fd, 3001)  # a little, ending inside a frame
+            emulator.stop()
+            try:
+                stream += os.read(fd, 65536)
+            except OSError:  # EIO: the port is gone
+                pass
+        finally:
+            os.close(fd)
+    log = emulator.fault_log
+    stats = LinkStats()
+    decoded = [f.seq for f in StreamDecoder(stats).feed(bytes(stream), host_ns=0)]
+    lost = [r.seq for r in log if r.kind in LOSING_KINDS]
+    assert sorted(decoded + lost) == list(range(n))
+    closed = [r for r in log if r.details.get("reason") == "port closed"]
+    written = emulator.bytes_written // emulator.frames_written  # bytes a frame
+    assert len(closed) * written > 4096
+    assert [r.seq for r in closed] == list(range(closed[0].seq, closed[0].seq + len(closed)))
+    assert closed[0].seq == decoded[-1] + 1 and stats.crc_errors == 0
+
+
+def test_a_disconnect_logs_every_frame_a_host_far_behind_had_not_read() -> None:
+    """The port vanishing mid-stream under a host that reads nothing: the frames in the pty
+    (about 18 KiB, far more than FIONREAD's 4 KiB) are logged ``disconnect`` in flight, so
+    the log names every frame generated, the host having decoded none."""
+    n = 2000
+    emulator = ArduinoEmulator(_values(n), rate_hz=20000.0, autostart=False,
+                               drain_timeout_s=0.02, faults="disconnect:at_s=0.05,for_s=0.01")
+    with emulator:
+        fd = os.open(emulator.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            termios.tcflush(fd, termios.TCIFLUSH)
+            emulator.begin()
+            assert emulator.wait_finished(WAIT_S)
+        finally:
+            os.close(fd)
+    log = emulator.fault_log
+    assert sorted(r.seq for r in log if r.kind in LOSING_KINDS) == list(range(n))
+    in_flight = [r.seq for r in log if r.details.get("in_flight")]
+    assert len(in_flight) * (emulator.bytes_written // emulator.frames_written) > 4096
+
+
 def test_a_stream_begun_when_attached_waits_for_a_host():
     """``begin(when_attached=True)`` starts the device clock once a host has the port open:
     a session that took longer to open it than a fault's ``at_s`` never met the fault."""
