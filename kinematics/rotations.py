@@ -3,7 +3,8 @@
 Conventions used throughout exohil:
 
 * Angles in radians.
-* Quaternions are scalar-last ``(x, y, z, w)`` and canonicalised to ``w >= 0`` on output.
+* Quaternions are scalar-last ``(x, y, z, w)`` and canonicalised to ``w >= 0`` on output
+  (a half-turn, ``w == 0``: first non-zero of x, y, z positive).
 * Rotation matrices are ``(..., 3, 3)`` and map child-frame coordinates to parent-frame
   coordinates (``v_parent = R @ v_child``).
 * "Intrinsic A-B'-C''" means ``R = R_A(a) @ R_B(b) @ R_C(c)``: rotate about A, then about the
@@ -99,8 +100,11 @@ def quat_multiply(p, q) -> np.ndarray:
 
 
 def normalize_quat(q) -> np.ndarray:
-    """Unit quaternion with ``w >= 0``. Raises ValueError for a non-finite quaternion or one
-    shorter than 1e-12 (zero, or too near it to have a direction)."""
+    """Unit quaternion with ``w >= 0``; a half-turn (``w == 0``, where ``q`` and ``-q`` both
+    have it) gets the sign that makes its first non-zero of x, y, z positive, so each
+    rotation has one output (the tie-break of scipy's ``as_quat(canonical=True)``), and no
+    component is −0. Raises ValueError for a non-finite quaternion or one shorter than 1e-12
+    (zero, or too near it to have a direction)."""
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (4,):
         raise ValueError(f"a quaternion has 4 components (x, y, z, w), got shape {q.shape}")
@@ -108,7 +112,13 @@ def normalize_quat(q) -> np.ndarray:
     if not np.all(np.isfinite(q)) or np.any(norm < 1e-12):
         raise ValueError("quaternions must be finite, with a length of at least 1e-12")
     q = q / norm
-    return np.where(q[..., 3:4] < 0.0, -q, q)
+    w = q[..., 3:4]
+    if (w > 0.0).all():  # the common case, kept cheap (teleop converts every frame)
+        return q + 0.0  # + 0.0 turns −0 into 0
+    xyz = q[..., :3]
+    lead = np.take_along_axis(xyz, np.argmax(xyz != 0.0, axis=-1)[..., None], axis=-1)
+    flip = (w < 0.0) | ((w == 0.0) & (lead < 0.0))
+    return np.where(flip, -q, q) + 0.0
 
 
 def quat_to_matrix(q) -> np.ndarray:

@@ -90,8 +90,11 @@ def ms_to_isb(theta, phi=None, psi=None, convention: Convention = "coupled") -> 
 
 def isb_to_ms(alpha, beta=None, gamma=None, convention: Convention = "coupled") -> np.ndarray:
     """ISB Y-X'-Y'' (α, β, γ) → MoBL-ARMS (θ, φ, ψ), radians, ``(..., 3)``; inverse of
-    :func:`ms_to_isb`. ψ is wrapped to [−π, π)."""
+    :func:`ms_to_isb`. ψ is wrapped to [−π, π). ValueError for angles that are not finite
+    (as :func:`ms_to_isb` and :func:`isb_to_quat` refuse them)."""
     isb = as_angles(alpha, beta, gamma)
+    if not np.isfinite(isb).all():
+        raise ValueError("ISB angles must be finite")
     a, b, g = isb[..., 0], isb[..., 1], isb[..., 2]
     if convention == "coupled":
         psi = wrap_angle(g + a)

@@ -46,9 +46,10 @@ def test_humerus_angles_at_the_poles_and_for_no_direction_keep_their_docstring()
 
 
 def test_conversions_refuse_what_they_cannot_convert():
-    """matrix_to_quat read a 4x4 or a matrix of ones as the identity; ms_to_isb let NaN
-    through where ms_to_quat refused it; a NaN plane_hint gave NaN ('never NaN')."""
-    from exohil.kinematics import ms_to_isb, quat_to_ms
+    """matrix_to_quat read a 4x4 or a matrix of ones as the identity; ms_to_isb and
+    isb_to_ms let NaN through where ms_to_quat refused it; a NaN plane_hint gave NaN
+    ('never NaN')."""
+    from exohil.kinematics import isb_to_ms, ms_to_isb, quat_to_ms
     from exohil.kinematics.rotations import matrix_to_quat
 
     for bad, said in ((np.eye(4), r"\(\.\.\., 3, 3\)"), (np.ones(3), r"\(\.\.\., 3, 3\)"),
@@ -59,6 +60,9 @@ def test_conversions_refuse_what_they_cannot_convert():
     np.testing.assert_allclose(matrix_to_quat(np.eye(3)), [0, 0, 0, 1])
     with pytest.raises(ValueError, match="must be finite"):
         ms_to_isb(np.nan, 0.2, 0.3)
+    for angles in ((np.nan, -0.2, 0.3), (0.1, np.inf, 0.3), [[0.1, -0.2, 0.3], [0, 0, np.nan]]):
+        with pytest.raises(ValueError, match="ISB angles must be finite"):  # was NaN out
+            isb_to_ms(angles if isinstance(angles, list) else np.array(angles))
     with pytest.raises(ValueError, match="plane_hint must be finite"):
         quat_to_ms([0.0, 0.0, 0.0, 1.0], plane_hint=np.nan)
     with pytest.raises(ValueError, match="does not fit"):

@@ -25,6 +25,7 @@ from exohil.kinematics.rotations import (
     Z,
     elementary_matrix,
     matrix_to_quat,
+    normalize_quat,
     quat_to_matrix,
     wrap_angle,
 )
@@ -139,6 +140,22 @@ def test_matrix_quaternion_round_trip(q):
     back = matrix_to_quat(quat_to_matrix(q))
     assert rotation_angle_between(back, q) < 1e-9
     assert back[3] >= 0.0
+
+
+half_turn_axes = st.lists(st.sampled_from([-1.0, -0.5, -0.0, 0.0, 0.25, 1.0]), min_size=3,
+                          max_size=3).filter(lambda v: any(v))
+
+
+@given(half_turn_axes)
+def test_a_half_turn_has_one_quaternion_whichever_sign_comes_in(axis):
+    """At w = 0, q and −q are the same rotation and both have w ≥ 0: the output took the
+    input's sign (and kept a −0), so one rotation had two outputs."""
+    q = np.array([*axis, -0.0])
+    out, out_negated = normalize_quat(q), normalize_quat(-q)
+    np.testing.assert_array_equal(out, out_negated)
+    assert out[np.flatnonzero(out[:3])[0]] > 0.0
+    assert not ((out == 0.0) & np.signbit(out)).any()  # no −0 either
+    np.testing.assert_array_equal(matrix_to_quat(quat_to_matrix(q)).round(12), out.round(12))
 
 
 def test_vectorised_matches_scalar():
