@@ -6,27 +6,43 @@ Compiled with the host C++ compiler; skipped when there is none."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
 
+from exohil.formats.wire import decode_packet
+
 REPO = Path(__file__).resolve().parents[1]
 SKETCH_DIR = REPO / "firmware" / "exohil_due"
 PERIOD_US = 4000
 
-# argv: seconds [stall_at_s stall_s [busy_from_s busy_to_s]]; prints "seq t_us" per frame sent.
+# argv: seconds [stall_at_s stall_s [busy_from_s busy_to_s]], times since boot; environment:
+# T0_US (micros() at setup, 0.6 s after boot; default 600000), NO_HOST="FROM_S TO_S" (DTR
+# low). Prints "seq t_us HEX" per frame sent (HEX: the bytes written, delimiter included).
 DRIVER = r"""
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
-static uint64_t g_now = 600000;   /* 0.6 s after boot */
+static uint64_t start_us(void) {  /* T0_US in the environment, else 0.6 s after boot */
+    const char *t0 = getenv("T0_US"); return t0 ? strtoull(t0, NULL, 10) : 600000u;
+}
+static uint64_t g_now = start_us();
+static const uint64_t g_start = g_now;
 static double g_stall_at = -1, g_stall_s = 0, g_busy_from = -1, g_busy_to = -1;
+/* seconds since boot: setup() runs 0.6 s after boot, at micros() = T0_US (mod 2^32) */
+static double since_boot_s(void) { return 0.6 + (g_now - g_start) / 1e6; }
+static int no_host(void) {  /* NO_HOST="FROM_S TO_S" in the environment: DTR low then */
+    double from = -1, to = -1; const char *w = getenv("NO_HOST");
+    if (w) sscanf(w, "%lf %lf", &from, &to);
+    return since_boot_s() >= from && since_boot_s() < to;
+}
 static uint32_t micros(void) { return (uint32_t)(g_now++); }   /* each call costs 1 us */
 static void delay(uint32_t ms) { g_now += 1000u * (uint64_t)ms; }
 static int bank_busy(void) {
-    double t = g_now / 1e6; return t >= g_busy_from && t < g_busy_to;
+    double t = since_boot_s(); return t >= g_busy_from && t < g_busy_to;
 }
 enum { A0 = 54, A1, A2, A3 };
 static void analogReadResolution(int) {}
@@ -41,12 +57,12 @@ static Uotghs *uotghs(void) {
 #define CDC_TX 3
 struct Serial_ {
     void begin(uint32_t) {}
-    bool dtr() { return true; }
+    bool dtr() { return !no_host(); }
     int availableForWrite() { return 511; }
     operator bool() { bool r = g_now >= 500000; delay(10); return r; }
     size_t write(const uint8_t *buf, size_t n) {
         while (bank_busy()) g_now += 10;                  /* UDD_Send: no timeout */
-        if (g_stall_at >= 0 && g_now / 1e6 >= g_stall_at) {  /* one long stall */
+        if (g_stall_at >= 0 && since_boot_s() >= g_stall_at) {  /* one long stall */
             g_now += (uint64_t)(g_stall_s * 1e6); g_stall_at = -1;
         }
         uint8_t body[64]; size_t k = 0, i = 0;            /* decode seq and t_us */
@@ -57,7 +73,9 @@ struct Serial_ {
         }
         unsigned seq = body[1] | (body[2] << 8);
         uint32_t t = body[3] | (body[4] << 8) | (body[5] << 16) | ((uint32_t)body[6] << 24);
-        printf("%u %lu\n", seq, (unsigned long)t);
+        printf("%u %lu ", seq, (unsigned long)t);
+        for (size_t b = 0; b < n; ++b) printf("%02x", buf[b]);  /* the frame as sent */
+        printf("\n");
         g_now += 30;
         return n;
     }
@@ -97,12 +115,21 @@ def _run(exe: Path, *args: float) -> list[tuple[int, int]]:
     return _run_loops(exe, *args)[0]
 
 
-def _run_loops(exe: Path, *args: float) -> tuple[list[tuple[int, int]], int]:
+def _run_loops(exe: Path, *args: float, env: dict[str, str] | None = None
+               ) -> tuple[list[tuple[int, int]], int]:
     """(seq, t_us) of each frame sent, and how many times loop() ran."""
+    frames, loops = _run_bytes(exe, *args, env=env)
+    return [(seq, t_us) for seq, t_us, _ in frames], loops
+
+
+def _run_bytes(exe: Path, *args: float, env: dict[str, str] | None = None
+               ) -> tuple[list[tuple[int, int, bytes]], int]:
+    """(seq, t_us, bytes written) of each frame sent, and how many times loop() ran;
+    ``env``: T0_US, NO_HOST (see DRIVER)."""
     done = subprocess.run([str(exe), *map(str, args)], capture_output=True, text=True,
-                          check=True, timeout=60)
+                          check=True, timeout=60, env={**os.environ, **(env or {})})
     lines = (line.split() for line in done.stdout.splitlines())
-    return [(int(a), int(b)) for a, b in lines], int(done.stderr)
+    return [(int(a), int(b), bytes.fromhex(c)) for a, b, c in lines], int(done.stderr)
 
 
 def test_sketch_sends_at_250_hz(sketch: Path) -> None:
@@ -141,3 +168,34 @@ def test_host_not_reading_drops_frames_instead_of_blocking(sketch: Path) -> None
     assert len(frames) == pytest.approx(750 - 125, abs=3)  # the busy 0.5 s is one gap
     times = [t for _, t in frames]
     assert max(b - a for a, b in zip(times, times[1:], strict=False)) < 510_000
+
+
+def test_frames_decode_with_the_calibrated_values_across_the_micros_wrap(sketch: Path) -> None:
+    """What the sketch writes, read by formats/wire.py (COBS, CRC): one frame per write,
+    the header the driver read, the four pins' counts through the sketch's calibration
+    (placeholders: 100 mm + counts * 500 mm / 4095, in 0.01 mm), and the period kept as
+    micros() wraps at 2^32 µs one second in."""
+    t0 = 2**32 - 1_000_000
+    frames, _ = _run_bytes(sketch, 3.0, env={"T0_US": str(t0)})
+    counts = [(pin * 97) % 4096 for pin in (54, 55, 56, 57)]  # the model's analogRead
+    calibrated = [10000 + c * 50000 // 4095 for c in counts]
+    assert 745 <= len(frames) <= 751
+    for seq, t_us, data in frames:
+        assert data[-1] == 0 and data.count(0) == 1
+        frame = decode_packet(data[:-1], expected_sensors=4)
+        assert (frame.seq, frame.t_us, list(frame.raw)) == (seq, t_us, calibrated)
+    seqs = [seq for seq, _, _ in frames]
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
+    steps = [(b - a) % 2**32 for (_, a, _), (_, b, _) in zip(frames, frames[1:], strict=False)]
+    assert max(abs(s - PERIOD_US) for s in steps) < PERIOD_US // 4
+    assert any(b < a for (_, a, _), (_, b, _) in zip(frames, frames[1:], strict=False))
+
+
+def test_no_host_on_the_port_means_nothing_written_and_seq_counting_on(sketch: Path) -> None:
+    """DTR low (no host has the port open) for 0.5 s: no write in it, sampling and the
+    period count go on, so the host sees one gap of 125 frames when it opens again."""
+    frames, loops = _run_loops(sketch, 3.0, env={"NO_HOST": "1.0 1.5"})
+    assert loops == pytest.approx(750, abs=2)
+    seqs = [s for s, _ in frames]
+    gaps = [b - a for a, b in zip(seqs, seqs[1:], strict=False) if b - a != 1]
+    assert len(gaps) == 1 and gaps[0] - 1 == pytest.approx(125, abs=1)
