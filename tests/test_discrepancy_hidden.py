@@ -40,16 +40,30 @@ def test_first_named_effect_is_right_in_90_percent(results):
     assert len(wrong) <= 0.1 * len(effect_cases), wrong
 
 
+#: The named cases whose gap does not halve, as measured (2026-11-25; the same on 2026-12-06):
+#: label, gap before and after (mm). Both have a gap before under twice what the same suit
+#: and movement give without the effect (clean controls 0.153 and 0.161 mm).
+KNOWN_SHORT = {"saturation/alt/m2/s100": (0.260, 0.167), "saturation/lib/m1/s101": (0.315, 0.161)}
+
+
+class ShortfallChanged(Exception):
+    """Other cases fall short than KNOWN_SHORT says: a real failure, not the expected one."""
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "not met (measured 2026-11-25): 2 of the named cases shrink less than 50 %, both with a "
-    "gap before under twice what the same suit and movement give without the effect: "
-    "saturation/lib/m1/s101 0.315 -> 0.161 (its clean control is at 0.161 mm) and the soft "
-    "stop saturation/alt/m2/s100 0.260 -> 0.167 (clean control 0.153 mm); see "
-    "docs/discrepancy-results.md, Hidden effects"))
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "not met: 2 of the named cases shrink less than 50 %, both with a gap before under twice "
+    "what the same suit and movement give without the effect: " + "; ".join(
+        f"{label} {before:.3f} -> {after:.3f}" for label, (before, after) in KNOWN_SHORT.items())
+    + " (clean controls 0.153 and 0.161 mm); see docs/discrepancy-results.md, Hidden effects"))
 def test_gap_shrinks_by_half_whenever_an_effect_is_named(results):
-    short = [f"{case.label}: {before:.3f} -> {after:.3f}" for case, named, before, after
-             in results if named != "clean" and after > 0.5 * before]
+    """Expected to fail only as KNOWN_SHORT says: a case that newly falls short, or one that
+    no longer does, fails the test outright (ShortfallChanged), so its reason cannot go
+    stale; all of them halving makes it pass, which strict xfail reports as a failure too."""
+    short = {case.label: (before, after) for case, named, before, after in results
+             if named != "clean" and after > 0.5 * before}
+    if short and sorted(short) != sorted(KNOWN_SHORT):
+        raise ShortfallChanged(f"short of halving now: {short}; KNOWN_SHORT: {KNOWN_SHORT}")
     assert not short, short
 
 
