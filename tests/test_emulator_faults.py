@@ -8,8 +8,10 @@ the host has read everything; the reader waits for the last frame it must receiv
 
 from __future__ import annotations
 
+import contextlib
 import os
 import termios
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -279,36 +281,43 @@ def test_fault_log_is_seeded_and_adding_a_fault_does_not_reseed_others() -> None
     assert drops and drops == [r.seq for r in with_truncate if r.kind == "drop"]
 
 
+@contextlib.contextmanager
+def _finished_unread(emulator: ArduinoEmulator) -> Iterator[int]:
+    """A host that opens the port and flushes it ("ready", as pyserial's open() does), then
+    reads nothing while the whole stream runs: yields its fd once the stream has finished."""
+    fd = os.open(emulator.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    try:
+        termios.tcflush(fd, termios.TCIFLUSH)
+        emulator.begin()
+        assert emulator.wait_finished(WAIT_S)
+        yield fd
+    finally:
+        os.close(fd)
+
+
 def test_a_host_that_does_not_read_fills_the_buffer_and_frames_are_logged_not_read() -> None:
     """The pty fills up (~20 KiB); the emulator neither blocks nor dies, it logs the frames it
     could not hand over, and everything it did hand over reaches the host intact later."""
     n = 3000
     emulator = ArduinoEmulator(_values(n), rate_hz=20000.0, autostart=False, drain_timeout_s=0.05)
-    with emulator:
-        fd = os.open(emulator.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-        try:
-            termios.tcflush(fd, termios.TCIFLUSH)  # "ready", then read nothing while streaming
-            emulator.begin()
-            assert emulator.wait_finished(WAIT_S)
-            log = emulator.fault_log
-            full = [r.seq for r in log if r.kind == "not_read"]
-            assert full and all(r.details["reason"] == "buffer full"
-                                for r in log if r.kind == "not_read")
-            expected = [s for s in range(n) if s not in set(full)]
-            stats = LinkStats()
-            decoder = StreamDecoder(stats)
-            got: list[int] = []
-            for _ in range(100_000):  # bounded; ends once the last written frame is decoded
-                if got and got[-1] == expected[-1]:
-                    break
-                try:
-                    chunk = os.read(fd, 65536)
-                except BlockingIOError:
-                    os.sched_yield()
-                    continue
-                got += [f.seq % SEQ_MODULUS for f in decoder.feed(chunk, host_ns=0)]
-        finally:
-            os.close(fd)
+    with emulator, _finished_unread(emulator) as fd:
+        log = emulator.fault_log
+        full = [r.seq for r in log if r.kind == "not_read"]
+        assert full and all(r.details["reason"] == "buffer full"
+                            for r in log if r.kind == "not_read")
+        expected = [s for s in range(n) if s not in set(full)]
+        stats = LinkStats()
+        decoder = StreamDecoder(stats)
+        got: list[int] = []
+        for _ in range(100_000):  # bounded; ends once the last written frame is decoded
+            if got and got[-1] == expected[-1]:
+                break
+            try:
+                chunk = os.read(fd, 65536)
+            except BlockingIOError:
+                os.sched_yield()
+                continue
+            got += [f.seq % SEQ_MODULUS for f in decoder.feed(chunk, host_ns=0)]
     assert got == expected
     assert stats.crc_errors == 0 and stats.decode_errors == 0
 
@@ -322,20 +331,13 @@ def test_frames_a_host_has_not_read_when_the_port_closes_are_logged() -> None:
     n = 3000
     emulator = ArduinoEmulator(_values(n), rate_hz=20000.0, autostart=False, drain_timeout_s=0.05)
     stream = bytearray()
-    with emulator:
-        fd = os.open(emulator.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    with emulator, _finished_unread(emulator) as fd:
+        stream += os.read(fd, 3001)  # a little, ending inside a frame
+        emulator.stop()
         try:
-            termios.tcflush(fd, termios.TCIFLUSH)
-            emulator.begin()
-            assert emulator.wait_finished(WAIT_S)
-            stream += os.read(fd, 3001)  # a little, ending inside a frame
-            emulator.stop()
-            try:
-                stream += os.read(fd, 65536)
-            except OSError:  # EIO: the port is gone
-                pass
-        finally:
-            os.close(fd)
+            stream += os.read(fd, 65536)
+        except OSError:  # EIO: the port is gone
+            pass
     log = emulator.fault_log
     stats = LinkStats()
     decoded = [f.seq for f in StreamDecoder(stats).feed(bytes(stream), host_ns=0)]
@@ -355,14 +357,8 @@ def test_a_disconnect_logs_every_frame_a_host_far_behind_had_not_read() -> None:
     n = 2000
     emulator = ArduinoEmulator(_values(n), rate_hz=20000.0, autostart=False,
                                drain_timeout_s=0.02, faults="disconnect:at_s=0.05,for_s=0.01")
-    with emulator:
-        fd = os.open(emulator.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-        try:
-            termios.tcflush(fd, termios.TCIFLUSH)
-            emulator.begin()
-            assert emulator.wait_finished(WAIT_S)
-        finally:
-            os.close(fd)
+    with emulator, _finished_unread(emulator):
+        pass
     log = emulator.fault_log
     assert sorted(r.seq for r in log if r.kind in LOSING_KINDS) == list(range(n))
     in_flight = [r.seq for r in log if r.details.get("in_flight")]
