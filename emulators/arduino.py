@@ -44,6 +44,8 @@ from exohil.realtime import SPIN_S, request_realtime, sleep_until
 _IDLE_POLL_S = 0.001
 #: How often a stream started with ``begin(when_attached=True)`` looks for a host, s.
 _ATTACH_POLL_S = 0.005
+#: How many of the frames last written keep their bytes, to tell which ones a host had not
+#: read when the port vanishes (a pty holds about 1000 frames).
 _RECENT_FRAMES = 8192
 #: How many recent frames keep their write time for :meth:`ArduinoEmulator.write_time_ns`
 #: (2**16 frames: 262 s at 250 Hz).
@@ -144,7 +146,7 @@ class ArduinoEmulator:
         self._port = VirtualSerialPort()
         self.port = self._port.path
         self._log: list[FaultRecord] = []
-        self._recent: deque[tuple[int, int]] = deque(maxlen=_RECENT_FRAMES)
+        self._recent: deque[tuple[int, bytes]] = deque(maxlen=_RECENT_FRAMES)
         self.send_times: list[tuple[int, int]] | None = [] if record_send_times else None
         self._write_seq = np.full(_WRITE_TIMES, -1, dtype=np.int64)
         self._write_ns = np.zeros(_WRITE_TIMES, dtype=np.int64)
@@ -382,20 +384,17 @@ class ArduinoEmulator:
         lost = self._port.disconnect()
         if lost is not None:
             self._log_fault(lost, "disconnect", in_flight=True)
+        self._recent.clear()  # written to a port that is gone
 
     def _log_unread(self, kind: str, **details: Any) -> None:
-        """Take the bytes the host has not read out of the port, pending tail included, and
-        log the most recent frames they cover as ``kind``: the port is about to vanish and
-        the host loses them. A frame the host read in part is logged too (it cannot decode
-        it). Without a second open of the slave only the pending tail is counted."""
-        unread = (self._port.take_unread() or 0) + self._port.pending_bytes
+        """Take the bytes the host has not read out of the port and log the frames it can
+        no longer receive whole as ``kind`` (:func:`_frames_not_received`): the port is
+        about to vanish. Without a second open of the slave only a frame whose tail was
+        never written is logged."""
+        pieces = self._port.take_unread() or []
+        unsent = self._port.pending_bytes
         self._port.discard_pending()
-        lost: list[int] = []
-        while unread > 0 and self._recent:
-            seq, size = self._recent.pop()
-            lost.append(seq)
-            unread -= size
-        for seq in reversed(lost):
+        for seq in _frames_not_received(list(self._recent), pieces, unsent):
             self._log_fault(seq, kind, **details)
 
     def _deliver(self, seq: int, data: bytes) -> None:
@@ -425,9 +424,37 @@ class ArduinoEmulator:
             return
         self.frames_written += 1
         self.bytes_written += len(data)
-        self._recent.append((seq, len(data)))
+        self._recent.append((seq, data))
         if self.send_times is not None:
             self.send_times.append((seq, time.perf_counter_ns()))
+
+
+def _frames_not_received(recent: list[tuple[int, bytes]], pieces: list[bytes],
+                         unsent: int) -> list[int]:
+    """Of the frames ``recent`` ((seq, bytes), in the order written; the last one's final
+    ``unsent`` bytes never written), the seqs of those a host cannot have received whole,
+    ascending: each with a byte among ``pieces`` (what was read out of the port, in order;
+    the host may have read between them) and the one not all written.
+
+    Each piece is found in the bytes written, searching back from where the next piece
+    starts (the last from the end): a frame carries its seq and time, so a piece of a
+    frame's length or more is found in one place only. A piece not found is taken to end
+    where the next one starts. So a host that reads while the port is emptied neither
+    loses frames the log misses nor has frames it decoded logged lost: a frame it read
+    whole between two pieces has no byte in either, and one cut by a piece is logged."""
+    stream = b"".join(data for _, data in recent)
+    stream = stream[:len(stream) - unsent]
+    ends = np.cumsum([len(data) for _, data in recent])  # frame k ends before byte ends[k]
+    lost = {len(recent) - 1} if unsent and recent else set()
+    end = len(stream)
+    for piece in reversed(pieces):
+        at = stream.rfind(piece, 0, end)
+        if at < 0:
+            at = max(0, end - len(piece))
+        first, last = np.searchsorted(ends, [at, at + len(piece) - 1], side="right")
+        lost.update(range(int(first), min(int(last), len(recent) - 1) + 1))
+        end = at
+    return [recent[k][0] for k in sorted(lost)]
 
 
 def _on_sequence_grid(seq: np.ndarray, values: np.ndarray,

@@ -116,39 +116,40 @@ class VirtualSerialPort:
         """Bytes of the last frame accepted that are not written to the pty yet."""
         return len(self._pending)
 
-    def take_unread(self, settle_s: float = 0.002) -> int | None:
-        """Read out every byte written that the host has not read yet, and return how many
-        (0 without a host); None when the slave cannot be opened a second time.
+    def take_unread(self, settle_s: float = 0.002) -> list[bytes] | None:
+        """Read out every byte written that the host has not read yet: the pieces read, in
+        order ([] without a host); None when the slave cannot be opened a second time.
 
         For a port about to vanish, whose unread bytes the host loses anyway: unlike
-        :meth:`unread_bytes`, the count is exact however far behind the host is (the tty
+        :meth:`unread_bytes`, this sees them all however far behind the host is (the tty
         flip buffer holds tens of KiB beyond the line discipline's 4 KiB). Each ``poll()``
         moves bytes still in the flip buffer into the line discipline; reading stops once
-        none has arrived for ``settle_s``. The pending tail is not included
-        (:attr:`pending_bytes`)."""
+        none has arrived for ``settle_s``. A host still reading meanwhile takes the bytes
+        between two pieces (the caller finds each piece in what it wrote). The pending tail
+        is not included (:attr:`pending_bytes`)."""
         if self._master is None or not self.host_attached():
-            return 0
+            return []
         try:
             fd = os.open(self._slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         except OSError:
             return None
-        taken = 0
+        pieces: list[bytes] = []
         try:
             poller = select.poll()
             poller.register(fd, select.POLLIN)
             while poller.poll(settle_s * 1000.0):
                 try:
-                    chunk = os.read(fd, 65536)
+                    piece = os.read(fd, 65536)
                 except BlockingIOError:  # the host read it first
                     continue
                 except OSError:  # EIO: the port is going
                     break
-                if not chunk:
+                if not piece:
                     break
-                taken += len(chunk)
+                pieces.append(piece)
         finally:
             os.close(fd)
-        return taken
+        return pieces
 
     def drain(self, timeout_s: float, settle_s: float = 0.005) -> bool:
         """Wait until the host has read everything written (no unread byte for ``settle_s``),

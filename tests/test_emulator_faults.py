@@ -11,6 +11,8 @@ from __future__ import annotations
 import contextlib
 import os
 import termios
+import threading
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -363,6 +365,106 @@ def test_a_disconnect_logs_every_frame_a_host_far_behind_had_not_read() -> None:
     assert sorted(r.seq for r in log if r.kind in LOSING_KINDS) == list(range(n))
     in_flight = [r.seq for r in log if r.details.get("in_flight")]
     assert len(in_flight) * (emulator.bytes_written // emulator.frames_written) > 4096
+
+
+def test_frames_taken_around_a_host_still_reading_are_told_apart_exactly() -> None:
+    """The port emptied while the host still reads: the emulator takes piece A, the host
+    reads the next 120 bytes, the emulator takes piece B to the end. Logged are exactly the
+    frames with a byte in A or B (and a frame whose tail was never written), not those the
+    host read whole between them; a count from the end would log the wrong ones."""
+    from exohil.emulators.arduino import _frames_not_received
+    from exohil.formats.wire import WireFrame, encode_frame
+
+    recent = [(seq, encode_frame(WireFrame(seq, seq * 500, (seq, 2 * seq, 3, 4))))
+              for seq in range(100, 160)]
+    stream = b"".join(data for _, data in recent)
+    starts = np.cumsum([0] + [len(data) for _, data in recent])
+    read_before, stolen = 523, 120  # the host read 523 bytes, then 120 between A and B
+    a_end = read_before + 200
+    pieces = [stream[read_before:a_end], stream[a_end + stolen:]]
+
+    def overlapping(lo: int, hi: int) -> set[int]:
+        return {recent[k][0] for k in range(len(recent)) if starts[k] < hi and starts[k + 1] > lo}
+
+    expected = overlapping(read_before, a_end) | overlapping(a_end + stolen, len(stream))
+    assert _frames_not_received(recent, pieces, 0) == sorted(expected)
+    host_whole = {recent[k][0] for k in range(len(recent))
+                  if starts[k] >= a_end and starts[k + 1] <= a_end + stolen}
+    assert host_whole and not host_whole & expected  # frames the host read whole: not lost
+    # the last frame's final 7 bytes never written: it is lost however the rest was read
+    cut = _frames_not_received(recent, [stream[read_before:len(stream) - 7]], 7)
+    assert cut == sorted(overlapping(read_before, len(stream)))
+    assert _frames_not_received(recent, [], 0) == []
+
+
+class _SlowHost(threading.Thread):
+    """A host that reads ``chunk`` bytes every ``pause_s``, reopening the port whenever it
+    vanishes (flushing it on open, as pyserial does), until told to stop: the bytes of each
+    connection, apart (a frame cut by a disconnect must not run into the next one's)."""
+
+    def __init__(self, path: str, chunk: int, pause_s: float) -> None:
+        super().__init__(daemon=True)
+        self.path, self.chunk, self.pause_s = path, chunk, pause_s
+        self.connections: list[bytearray] = []
+        self.attached = threading.Event()
+        self.done = threading.Event()
+
+    def run(self) -> None:
+        while not self.done.is_set():
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+            except OSError:  # vanished: wait for it to come back
+                time.sleep(0.001)
+                continue
+            termios.tcflush(fd, termios.TCIFLUSH)
+            self.connections.append(bytearray())
+            self.attached.set()
+            try:
+                while not self.done.is_set():
+                    try:
+                        data = os.read(fd, self.chunk)
+                    except BlockingIOError:  # nothing yet
+                        time.sleep(self.pause_s)
+                        continue
+                    except OSError:  # EIO: the port vanished
+                        break
+                    if not data:  # hung up
+                        break
+                    self.connections[-1] += data
+                    time.sleep(self.pause_s)
+            finally:
+                os.close(fd)
+
+
+@pytest.mark.parametrize("chunk, pause_s, faults", [
+    (4096, 0.001, None),  # mostly keeps up
+    (400, 0.01, None),  # far behind: the pty fills, the rest is unread at the end
+    (300, 0.005, "disconnect:at_s=0.05,for_s=0.02"),  # behind when the port vanishes
+    (2000, 0.02, "disconnect:at_s=0.05,for_s=0.02;stall:every_s=0.04,duration_ms=5"),
+])
+def test_every_frame_is_decoded_or_logged_however_slowly_the_host_reads(
+        chunk: int, pause_s: float, faults: str | None) -> None:
+    """Whatever share of the stream a host reads, each frame generated is decoded by it or
+    in the fault log, never both: frames refused while the pty is full, lost when the port
+    vanishes under a host that is behind, sent while it reopens the port, and left unread
+    when the emulator stops."""
+    n = 4000
+    emulator = ArduinoEmulator(_values(n), rate_hz=20000.0, autostart=False,
+                               drain_timeout_s=0.02, faults=faults)
+    with emulator:
+        host = _SlowHost(emulator.port, chunk, pause_s)
+        host.start()
+        assert host.attached.wait(WAIT_S)
+        emulator.begin()
+        assert emulator.wait_finished(WAIT_S)
+        emulator.stop()
+        host.done.set()
+        host.join(WAIT_S)
+    decoded = [f.seq for stream in host.connections
+               for f in StreamDecoder(LinkStats()).feed(bytes(stream), host_ns=0)]
+    lost = [r.seq for r in emulator.fault_log if r.kind in LOSING_KINDS]
+    assert sorted(decoded + lost) == list(range(n))
+    assert decoded  # the host read something: the check is not all log
 
 
 def test_a_stream_begun_when_attached_waits_for_a_host():
