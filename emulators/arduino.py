@@ -225,6 +225,15 @@ class ArduinoEmulator:
         return self._finished.is_set()
 
     @property
+    def frames_read(self) -> int:
+        """Frames written to the port that the host received whole: ``frames_written`` less
+        those logged lost after they were written (the port vanishing or closing with them
+        unread, a frame whose tail was never written). Exact once :meth:`stop` has returned,
+        but for frames a host discards itself by closing the port with them unread, which
+        the emulator cannot see."""
+        return self.frames_written - sum(1 for r in self._log if _lost_after_written(r))
+
+    @property
     def fault_log(self) -> list[FaultRecord]:
         """A copy of the fault log so far: complete once :meth:`stop` has returned (once
         finished, only frames a host has still not read when the port closes are added)."""
@@ -427,6 +436,13 @@ class ArduinoEmulator:
         self._recent.append((seq, data))
         if self.send_times is not None:
             self.send_times.append((seq, time.perf_counter_ns()))
+
+
+def _lost_after_written(record: FaultRecord) -> bool:
+    """Whether ``record`` logs a frame lost after it was written to the port."""
+    return ((record.kind == "disconnect" and bool(record.details.get("in_flight")))
+            or (record.kind == "not_read"
+                and record.details.get("reason") in ("port closed", "host closed the port")))
 
 
 def _frames_not_received(recent: list[tuple[int, bytes]], pieces: list[bytes],

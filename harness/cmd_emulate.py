@@ -112,9 +112,9 @@ def emulate_command(recording: Path, rate: float | None, loop: bool, faults: str
         signal.signal(signal.SIGTERM, previous)
 
 
-def _done(generated: int, written: int, faults: str) -> None:
-    click.echo(f"done: {generated} frames generated, {written} handed to the host; "
-               f"faults: {faults}", err=True)
+def _done(generated: int, written: int, read: int, faults: str) -> None:
+    click.echo(f"done: {generated} frames generated, {written} handed to the host, {read} "
+               f"read by it; faults: {faults}", err=True)
 
 
 def _emulate(recording: Path, rate: float | None, loop: bool, faults: str | None, seed: int,
@@ -148,7 +148,7 @@ def _emulate(recording: Path, rate: float | None, loop: bool, faults: str | None
     except KeyboardInterrupt:  # stopped before streaming: the end a later stop has, at 0
         if fault_log is not None and checked:
             write_text(fault_log, "")
-        _done(0, 0, "none")
+        _done(0, 0, 0, "none")
         return
     try:
         try:
@@ -177,7 +177,7 @@ def _emulate(recording: Path, rate: float | None, loop: bool, faults: str | None
     if emulator.error is not None:
         raise click.ClickException(f"emulator failed: {emulator.error}")
     counts = Counter(record.kind for record in emulator.fault_log)
-    _done(emulator.frames_generated, emulator.frames_written,
+    _done(emulator.frames_generated, emulator.frames_written, emulator.frames_read,
           ", ".join(f"{kind} {n}" for kind, n in sorted(counts.items())) or "none")
 
 

@@ -102,8 +102,9 @@ def recording_path(request, tmp_path: Path) -> Path:
     return _synthetic_recording(tmp_path / "synthetic.mcap")
 
 
-def _emulate(*args: str) -> list[tuple[int, int, list[int]]]:
-    """Run `exohil emulate ARGS`, read its port until it exits; the frames decoded."""
+def _emulate(*args: str, stderr: list[str] | None = None) -> list[tuple[int, int, list[int]]]:
+    """Run `exohil emulate ARGS`, read its port until it exits; the frames decoded (and its
+    stderr lines appended to ``stderr``)."""
     proc = subprocess.Popen([str(Path(sys.executable).parent / "exohil"), "emulate", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -126,6 +127,8 @@ def _emulate(*args: str) -> list[tuple[int, int, list[int]]]:
             stream += chunk
         os.close(fd)
         assert proc.wait(timeout=30) == 0
+        if stderr is not None:
+            stderr += proc.stderr.read().splitlines()
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -146,8 +149,11 @@ def test_emulate_streams_frames_an_independent_reader_decodes(recording_path: Pa
     rate, duration = 2000, 2.0
     generated = int(rate * duration)
     fault_log = tmp_path / "faults.jsonl"
+    stderr: list[str] = []
     frames = _emulate(str(recording_path), "--rate", str(rate), "--duration", str(duration),
-                      "--loop", "--fault-log", str(fault_log))
+                      "--loop", "--fault-log", str(fault_log), stderr=stderr)
+    assert stderr[-1].startswith(f"done: {generated} frames generated, ")
+    assert f", {len(frames)} read by it; " in stderr[-1]  # the frames this reader decoded
     seqs = [seq for seq, _, _ in frames]
     # the emulator replays the recording's own numbering: sequence numbers the recording lacks
     # (the foreign sample has gaps) are never sent, looped over its seq span
@@ -324,7 +330,8 @@ def test_a_sigterm_while_emulate_starts_up_ends_it_as_a_later_one_does(tmp_path:
     assert proc.returncode == 0, (proc.returncode, proc.stderr)
     assert proc.stdout == ""  # no port was made
     assert proc.stderr.strip().splitlines()[-1] == \
-        "done: 0 frames generated, 0 handed to the host; faults: none", proc.stderr
+        "done: 0 frames generated, 0 handed to the host, 0 read by it; faults: none", \
+        proc.stderr
     assert log.read_text() == ""
 
 

@@ -465,6 +465,7 @@ def test_every_frame_is_decoded_or_logged_however_slowly_the_host_reads(
     lost = [r.seq for r in emulator.fault_log if r.kind in LOSING_KINDS]
     assert sorted(decoded + lost) == list(range(n))
     assert decoded  # the host read something: the check is not all log
+    assert emulator.frames_read == len(decoded)
 
 
 def test_a_stream_begun_when_attached_waits_for_a_host():
