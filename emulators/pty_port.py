@@ -91,6 +91,15 @@ class VirtualSerialPort:
             flushed = flushed or bool(packet[0] & termios.TIOCPKT_FLUSHREAD)
         return flushed
 
+    def _open_slave_again(self) -> int | None:
+        """A second, non-blocking fd on the slave the host holds (the caller closes it);
+        None where it cannot be opened again (a host that made its open exclusive with
+        TIOCEXCL)."""
+        try:
+            return os.open(self._slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError:
+            return None
+
     def unread_bytes(self) -> int:
         """Bytes written that the host has not read yet, 0 without a host.
 
@@ -100,9 +109,8 @@ class VirtualSerialPort:
         anyway)."""
         if self._master is None or not self.host_attached():
             return 0
-        try:
-            fd = os.open(self._slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-        except OSError:
+        fd = self._open_slave_again()
+        if fd is None:
             return 0
         try:
             select.select([fd], [], [], 0)
@@ -129,9 +137,8 @@ class VirtualSerialPort:
         is not included (:attr:`pending_bytes`)."""
         if self._master is None or not self.host_attached():
             return []
-        try:
-            fd = os.open(self._slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-        except OSError:
+        fd = self._open_slave_again()
+        if fd is None:
             return None
         pieces: list[bytes] = []
         try:
