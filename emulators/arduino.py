@@ -47,6 +47,9 @@ _ATTACH_POLL_S = 0.005
 #: How many of the frames last written keep their bytes, to tell which ones a host had not
 #: read when the port vanishes (a pty holds about 1000 frames).
 _RECENT_FRAMES = 8192
+#: ``not_read`` reasons of frames lost after they were written to the port
+_PORT_CLOSED = "port closed"
+_HOST_CLOSED = "host closed the port"
 #: How many recent frames keep their write time for :meth:`ArduinoEmulator.write_time_ns`
 #: (2**16 frames: 262 s at 250 Hz).
 _WRITE_TIMES = 1 << 16
@@ -208,7 +211,7 @@ class ArduinoEmulator:
         if self._thread.is_alive():
             self._thread.join(timeout_s)
         if not self._thread.is_alive() and self._port.host_attached():
-            self._log_unread("not_read", reason="port closed")
+            self._log_unread("not_read", reason=_PORT_CLOSED)
         self._port.close()
 
     def wait_finished(self, timeout_s: float | None = None) -> bool:
@@ -411,7 +414,7 @@ class ArduinoEmulator:
             if self._attached_at is not None:
                 lost = self._port.discard_pending()
                 if lost is not None:
-                    self._log_fault(lost, "not_read", reason="host closed the port")
+                    self._log_fault(lost, "not_read", reason=_HOST_CLOSED)
             self._attached_at = None
             self._host_ready = False
             self._log_fault(seq, "not_read", reason="no host")
@@ -442,7 +445,7 @@ def _lost_after_written(record: FaultRecord) -> bool:
     """Whether ``record`` logs a frame lost after it was written to the port."""
     return ((record.kind == "disconnect" and bool(record.details.get("in_flight")))
             or (record.kind == "not_read"
-                and record.details.get("reason") in ("port closed", "host closed the port")))
+                and record.details.get("reason") in (_PORT_CLOSED, _HOST_CLOSED)))
 
 
 def _frames_not_received(recent: list[tuple[int, bytes]], pieces: list[bytes],
