@@ -34,10 +34,9 @@ static const uint64_t g_start = g_now;
 static double g_stall_at = -1, g_stall_s = 0, g_busy_from = -1, g_busy_to = -1;
 /* seconds since boot: setup() runs 0.6 s after boot, at micros() = T0_US (mod 2^32) */
 static double since_boot_s(void) { return 0.6 + (g_now - g_start) / 1e6; }
-static int no_host(void) {  /* NO_HOST="FROM_S TO_S" in the environment: DTR low then */
-    double from = -1, to = -1; const char *w = getenv("NO_HOST");
-    if (w) sscanf(w, "%lf %lf", &from, &to);
-    return since_boot_s() >= from && since_boot_s() < to;
+static double g_no_host[2] = {-1, -1};  /* NO_HOST="FROM_S TO_S": DTR low then (main) */
+static int no_host(void) {
+    double t = since_boot_s(); return t >= g_no_host[0] && t < g_no_host[1];
 }
 static uint32_t micros(void) { return (uint32_t)(g_now++); }   /* each call costs 1 us */
 static void delay(uint32_t ms) { g_now += 1000u * (uint64_t)ms; }
@@ -84,6 +83,7 @@ static Serial_ SerialUSB;
 #include "exohil_due.ino"
 int main(int argc, char **argv) {
     double seconds = atof(argv[1]);
+    if (getenv("NO_HOST")) sscanf(getenv("NO_HOST"), "%lf %lf", &g_no_host[0], &g_no_host[1]);
     if (argc > 3) { g_stall_at = atof(argv[2]); g_stall_s = atof(argv[3]); }
     if (argc > 5) { g_busy_from = atof(argv[4]); g_busy_to = atof(argv[5]); }
     setup();
