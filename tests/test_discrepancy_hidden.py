@@ -40,10 +40,12 @@ def test_first_named_effect_is_right_in_90_percent(results):
     assert len(wrong) <= 0.1 * len(effect_cases), wrong
 
 
-#: The named cases whose gap does not halve, as measured (2026-11-25; the same on 2026-12-06):
-#: label, gap before and after (mm). Both have a gap before under twice what the same suit
-#: and movement give without the effect (clean controls 0.153 and 0.161 mm).
-KNOWN_SHORT = {"saturation/alt/m2/s100": (0.260, 0.167), "saturation/lib/m1/s101": (0.315, 0.161)}
+#: The named cases whose gap does not halve, as measured (2026-12-06, with the static map's
+#: constant unshrunk; the first two since 2026-11-25, the third named clean before): label,
+#: gap before and after (mm). Each has a gap before under twice what the same suit and
+#: movement give without the effect (clean controls 0.152, 0.161 and 0.163 mm).
+KNOWN_SHORT = {"saturation/alt/m2/s100": (0.258, 0.166), "saturation/lib/m1/s101": (0.307, 0.161),
+               "saturation/alt/m1/s101": (0.189, 0.160)}
 
 
 class ShortfallChanged(Exception):
@@ -52,10 +54,12 @@ class ShortfallChanged(Exception):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "not met: 2 of the named cases shrink less than 50 %, both with a gap before under twice "
+    f"not met: {len(KNOWN_SHORT)} of the named cases shrink less than 50 %, each with a gap "
+    "before under twice "
     "what the same suit and movement give without the effect: " + "; ".join(
         f"{label} {before:.3f} -> {after:.3f}" for label, (before, after) in KNOWN_SHORT.items())
-    + " (clean controls 0.153 and 0.161 mm); see docs/discrepancy-results.md, Hidden effects"))
+    + " (clean controls 0.152, 0.161 and 0.163 mm); see docs/discrepancy-results.md, Hidden "
+    "effects"))
 def test_gap_shrinks_by_half_whenever_an_effect_is_named(results):
     """Expected to fail only as KNOWN_SHORT says: a case that newly falls short, or one that
     no longer does, fails the test outright (ShortfallChanged), so its reason cannot go

@@ -871,12 +871,13 @@ class Fit:
 
 
 def map_ridge(inputs: Inputs, spec: Spec) -> Ridge:
-    """The ridge (:class:`~.folds.Ridge`) of a design whose static map is ``spec``'s."""
+    """The ridge (:class:`~.folds.Ridge`) of a design whose static map is ``spec``'s: its
+    constant (the first column of :func:`legendre_products`) unshrunk."""
     n_static = static_basis(inputs, spec.degree, spec.local).shape[1]
     start = math.comb(spec.degree + inputs.u.shape[1], spec.degree)
     count = inputs.centres.shape[0] if spec.local else 0
     return Ridge(n_static=n_static, static=spec.ridge, local=(start, start + count),
-                 local_ridge=spec.local_ridge)
+                 local_ridge=spec.local_ridge, free_constant=True)
 
 
 #: One sensor's share of a fit: its fold coefficients ((N_BLOCKS + 1, P): each held-out
