@@ -1851,13 +1851,19 @@ def test_the_report_says_why_stops_were_left_to_the_curve(hysteresis_outcome):
 def test_soft_knees_at_both_ends_are_both_found(clean_101):
     """Every sensor bends softly above its 60 % and below its 30 % quantile. The upper knee
     is found first; the lower one must then be searched with the upper kept soft (it used to
-    be turned into a hard stop at the knee, which no lower knee could beat)."""
+    be turned into a hard stop at the knee, which no lower knee could beat).
+
+    Each knee's softness is half its reach. At 0.3 of it (until 2026-12-06) 17–63 % of the
+    readings beyond a knee lie within 2 σ of its asymptote, a plateau: once a hard stop's
+    map was fitted through its plateau (censored) rather than off it, hard stops there took
+    two of the six ends on the held-out blocks, and the model left 0.1145 mm against 0.1147
+    with the knees. At half the reach none lie so near."""
     rec, clean = clean_101
     y = rec.sensors.values.copy()
     for j in range(y.shape[1]):
         c = y[:, j]
         lo, hi = np.quantile(c, 0.3), np.quantile(c, 0.6)
-        y[:, j] = Stops(lo, hi, 0.3 * (lo - c.min()), 0.3 * (c.max() - hi)).apply(c)
+        y[:, j] = Stops(lo, hi, 0.5 * (lo - c.min()), 0.5 * (c.max() - hi)).apply(c)
     sensors = SensorStream(seq=rec.sensors.seq, t=rec.sensors.t, values=y)
     s = run(replace(rec, sensors=sensors), "two knees").summary
     assert s["effects"][:1] == ["saturation"], s["effects"]

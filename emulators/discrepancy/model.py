@@ -33,10 +33,11 @@ held fixed as the *input* of the history-dependent terms) the model is
   while candidates are compared; a named drift may take a higher degree, at most one per
   5 s of recording, chosen on held-out blocks).
 * Stops (``saturation``): at an end of its range the sensor stops following the pose: a hard
-  stop (it sits on a plateau while the joint moves; the map is fitted off the plateau and
-  clipped at its level) or a soft knee (the reading bends toward an asymptote, a tanh or an
-  exponential approach; the map is fitted through the knee by Gauss–Newton). Which, and
-  where, is chosen on held-out blocks (``stops.py``).
+  stop (it sits on a plateau while the joint moves; the map is fitted through the plateau as
+  a censored reading, which bounds it there, and clipped at its level) or a soft knee (the
+  reading bends toward an asymptote, a tanh or an exponential approach; the map is fitted
+  through the knee by Gauss–Newton). Which, and where, is chosen on held-out blocks
+  (``stops.py``).
 """
 
 from __future__ import annotations
