@@ -246,8 +246,8 @@ def choose_stops(trial: Trial, y: np.ndarray, ridge: Ridge, j: int, red: Reduced
     quantile and its neighbours the other ``KNEE_BENDS`` shapes, then halfway from the best
     of them to its neighbours with its shape. A compressive end of range without a plateau
     is thus told from a hard stop by the data, not assumed. Each option is scored with the
-    map fitted through it (:func:`fold_fits`, no iteration at a fold's own prediction for
-    soft knees alone). Each end's knee is searched with the other
+    map fitted through it (:func:`fold_fits`, without the iteration at each fold's own
+    prediction). Each end's knee is searched with the other
     end as found without knees; the better end is kept and the other end's knee searched
     again given it.
     """
@@ -346,9 +346,8 @@ def fold_fits(trial: Trial, y: np.ndarray, ridge: Ridge, stops: Stops, sigma: fl
     pulled toward the plateau, where a fit off it extrapolates), then through the stops on
     every valid frame, the plateau's rows censored, with the iterations of a soft knee.
     Fitted off the plateau alone, a fold is free over the poses where the reading sits on
-    it: extrapolated there, it left one held-out block 7.7 mm RMS where the
-    noise is 0.15 (the sensor 2.6 mm; a hard stop of the hidden-effect sweep,
-    saturation/lib/m1/s1003)."""
+    it: extrapolated there, it left one held-out block 7.7 mm RMS where the noise is 0.15
+    (the sensor 2.6 mm; a hard stop of the hidden-effect sweep, saturation/lib/m1/s1003)."""
     if not stops.hard:
         if not stops.soft:
             return plain
