@@ -265,52 +265,79 @@ def choose_stops(trial: Trial, y: np.ndarray, ridge: Ridge, j: int, red: Reduced
         held = np.concatenate([red.times(coefs[b], rows) for b, rows in enumerate(blocks)])
         return float(np.mean((measured - stops.apply(held[scored])) ** 2))
 
-    def consider(options: list[Stops]) -> float:
+    def consider(options: list[Stops]) -> tuple[float, Stops]:
         """Score every option, the map fitted through it with the shared iterations alone
-        (:func:`fold_fits`); the best score."""
+        (:func:`fold_fits`); the best score and its option."""
         nonlocal best
         scores = [heldout_mse(fold_fits(trial, y, ridge, stop, sigma, red, plain, own=0),
                               stop) for stop in options]
         k = int(np.argmin(scores))
         if best is None or scores[k] < best[0]:
             best = (scores[k], options[k])
-        return scores[k]
+        return scores[k], options[k]
 
     def side(end: int, other: Stops) -> None:
         """Knees at the lower (0) or upper (1) end, the other end as in ``other``: the
         ``KNEE_SHARES`` grid with the first of the ``KNEE_BENDS``; then, if a knee beat
-        ``other``, the other shapes at the best share and its neighbours, and the shares
-        halfway (geometrically) from the best to its neighbours with the best shape."""
+        ``other`` with no stop at this end, the other shapes at the best share and its
+        neighbours, and the shares halfway (geometrically) from the best to its neighbours
+        with the best knee's shape.
+
+        A knee is shaped wherever it beats no stop at this end, not only where it beats a
+        plateau ``other`` has there: the first shape can be far from a knee's (a bend
+        that starts at once, fitted with a tanh knee, left 4 times the mean square of an
+        exponential one on saturation/other/m1/s100's second sensor, 60 s), so a plateau
+        that beats the first shape's knees may lose to another shape's. Where the plateau
+        beats them, the other shapes are tried at the best share first, and the knee is
+        shaped further only where one beats the plateau: shaping every such end cost 15 %
+        more time on the fixture (in one process), and the plateau mostly wins."""
+        knee: tuple[float, Stops | None] = (math.inf, None)  # the best knee at this end
 
         def at(share: float, shapes: Iterable[str]) -> float:
+            nonlocal knee
             level = float(np.quantile(seen, share if end == 0 else 1.0 - share))
             reach = abs(level - extremes[end])
             if reach <= 3.0 * sigma:
                 return math.inf
             knees = [(f * reach, shape) for shape in shapes for f in KNEE_SOFTNESS]
             # only this end changes: the other keeps its level, softness and shape as found
-            return consider([replace(other, lo=level, soft_lo=soft, shape_lo=shape)
-                             if end == 0 else
-                             replace(other, hi=level, soft_hi=soft, shape_hi=shape)
-                             for soft, shape in knees])
+            found = consider([replace(other, lo=level, soft_lo=soft, shape_lo=shape)
+                              if end == 0 else
+                              replace(other, hi=level, soft_hi=soft, shape_hi=shape)
+                              for soft, shape in knees])
+            knee = min(knee, found, key=lambda item: item[0])
+            return found[0]
 
+        free = (replace(other, lo=-math.inf, soft_lo=0.0) if end == 0 else
+                replace(other, hi=math.inf, soft_hi=0.0))  # no stop at this end
+        assert best is not None
+        without = best[0] if free == other else consider([free])[0]
+        beaten = best[0]  # the best so far: below ``without`` where a plateau here beats it
         grid = list(KNEE_SHARES)
         first, *others = KNEE_BENDS
-        before = best[0] if best is not None else math.inf
         scores = [at(share, [first]) for share in grid]
         k = int(np.argmin(scores))
-        if scores[k] < before:  # a knee helps here: shape it, then place it better
-            # another shape may prefer a neighbouring level (an exponential bend starts
-            # at once, so its knee sits nearer the extreme than a tanh's)
-            near = [n for n in (k - 1, k, k + 1) if 0 <= n < len(grid)]
-            for n in near:
-                scores[n] = min(scores[n], at(grid[n], others))
-            k = min(near, key=lambda n: scores[n])
-            assert best is not None
-            shape = best[1].shape_lo if end == 0 else best[1].shape_hi
-            for n in (k - 1, k + 1):
-                if 0 <= n < len(grid):
-                    at(math.sqrt(grid[k] * grid[n]), [shape])
+        if scores[k] >= without:  # no knee helps here
+            return
+        # a knee helps here: shape it, then place it better; another shape may prefer a
+        # neighbouring level (an exponential bend starts at once, so its knee sits nearer
+        # the extreme than a tanh's)
+        near = [n for n in (k - 1, k, k + 1) if 0 <= n < len(grid)]
+        if scores[k] >= beaten:  # a plateau here beats the first shape's knees: shaped
+            # further only where another shape beats it at the best level
+            scores[k] = min(scores[k], at(grid[k], others))
+            if scores[k] >= beaten:
+                return
+            near.remove(k)  # its shapes are tried
+        for n in near:
+            scores[n] = min(scores[n], at(grid[n], others))
+        near = [n for n in (k - 1, k, k + 1) if 0 <= n < len(grid)]
+        k = min(near, key=lambda n: scores[n])
+        assert knee[1] is not None
+        shape = knee[1].shape_lo if end == 0 else knee[1].shape_hi
+        for n in (k - 1, k + 1):
+            if 0 <= n < len(grid):
+                at(math.sqrt(grid[k] * grid[n]), [shape])
 
     consider([NO_STOPS])
     consider([Stops(*plateaus(trial, j))])
