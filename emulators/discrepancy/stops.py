@@ -289,7 +289,7 @@ def choose_stops(trial: Trial, y: np.ndarray, ridge: Ridge, j: int, red: Reduced
         exponential one on saturation/other/m1/s100's second sensor, 60 s), so a plateau
         that beats the first shape's knees may lose to another shape's. Where the plateau
         beats them, the other shapes are tried at the best share first, and the knee is
-        shaped further only where one beats the plateau: shaping every such end cost 15 %
+        shaped further only where one beats the plateau: shaping every such end cost 13–16 %
         more time on the fixture (in one process), and the plateau mostly wins."""
         knee: tuple[float, Stops | None] = (math.inf, None)  # the best knee at this end
 
