@@ -323,15 +323,16 @@ def choose_stops(trial: Trial, y: np.ndarray, ridge: Ridge, j: int, red: Reduced
         # neighbouring level (an exponential bend starts at once, so its knee sits nearer
         # the extreme than a tanh's)
         near = [n for n in (k - 1, k, k + 1) if 0 <= n < len(grid)]
+        shaped: set[int] = set()  # the levels whose other shapes are tried
         if scores[k] >= beaten:  # a plateau here beats the first shape's knees: shaped
             # further only where another shape beats it at the best level
             scores[k] = min(scores[k], at(grid[k], others))
             if scores[k] >= beaten:
                 return
-            near.remove(k)  # its shapes are tried
+            shaped.add(k)
         for n in near:
-            scores[n] = min(scores[n], at(grid[n], others))
-        near = [n for n in (k - 1, k, k + 1) if 0 <= n < len(grid)]
+            if n not in shaped:
+                scores[n] = min(scores[n], at(grid[n], others))
         k = min(near, key=lambda n: scores[n])
         assert knee[1] is not None
         shape = knee[1].shape_lo if end == 0 else knee[1].shape_hi
