@@ -1557,6 +1557,13 @@ def test_a_soft_stop_of_another_shape_is_named_and_fitted_through(tmp_path):
                                    "knee shape 'cubic'")
 
 
+def _with_clean_control(case: Case) -> tuple[dict, dict]:
+    """The workflow's summaries of a hidden-effect case and of its clean control (the same
+    suit and movement without the effect)."""
+    return (run(make_recording(case), "case").summary,
+            run(make_recording(replace(case, kind="clean")), "control").summary)
+
+
 def test_a_hard_stop_held_out_with_its_poses_is_fitted_through_its_plateau():
     """The effect library's hard stop at each sensor's 10 % quantile (the sweep's seed 1003):
     T0 sits on its stop mostly in one held-out block. Fitted off the plateau, that fold's
@@ -1565,9 +1572,7 @@ def test_a_hard_stop_held_out_with_its_poses_is_fitted_through_its_plateau():
     through the plateau as a censored reading, every sensor's lower stop is hard and the
     gap ends within a tenth of the control's (0.158 mm; 0.162 with the first form of the
     change, each fold at its own prediction from the first iteration)."""
-    case = Case("saturation", "lib", 1, seed=1003, duration_s=90.0)
-    s = run(make_recording(case), "hard stops").summary
-    control = run(make_recording(replace(case, kind="clean")), "control").summary
+    s, control = _with_clean_control(Case("saturation", "lib", 1, seed=1003, duration_s=90.0))
     assert s["effects"][:1] == ["saturation"], s["effects"]
     params = s["steps"][0]["params"]
     assert all(lo is not None and soft_lo == 0.0 for (lo, _), (soft_lo, _)
@@ -1584,9 +1589,7 @@ def test_a_knee_is_shaped_where_a_plateau_beats_its_first_shape():
     against its clean control's 0.151. Shaped wherever a knee beats no stop at its end,
     the upper knee is found exponential first, and T1 ends within a tenth of the
     control's (0.157 mm)."""
-    case = Case("saturation", "other", 1, seed=100, duration_s=60.0)
-    s = run(make_recording(case), "soft stops").summary
-    control = run(make_recording(replace(case, kind="clean")), "control").summary
+    s, control = _with_clean_control(Case("saturation", "other", 1, seed=100, duration_s=60.0))
     assert s["effects"][:1] == ["saturation"], s["effects"]
     t1, t1_control = s["sensor_gap_after"][1], control["sensor_gap_after"][1]
     assert t1 < 1.1 * t1_control, (t1, t1_control)
