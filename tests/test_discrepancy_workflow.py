@@ -133,6 +133,8 @@ from exohil.emulators.discrepancy.timing import (
     filter_words,
     late_words,
     lead_search,
+    offset_words,
+    read_before_words,
 )
 from exohil.emulators.discrepancy.workflow import (
     _against_curve,
@@ -1212,6 +1214,49 @@ def test_a_clock_seconds_early_is_found_by_the_search_and_read_away(
     assert "run 1.5 s behind the motion capture" in words and "taken as 1.5 s early" in words
 
 
+@pytest.mark.parametrize("late_s", [0.3, -1.5])
+def test_a_clock_read_by_the_static_map_is_read_again_with_the_loop_modelled(late_s):
+    """A hysteresis loop (lib, m2, seed 102, 60 s) with its motion capture stamped 0.3 s
+    late or 1.5 s early: the loop trails every move, and the static map took 17 ms of it
+    for the clock's lead (0.283 s late, 1.517 s early). Hysteresis was named at that clock
+    and the final model's screen found no lead left: 0.802 mm, where on time the loop
+    leaves 0.181. Read again with the loop in the pose modelled, the clock is 0.299 s
+    (1.501 s) and the loop is named at it, 0.184 mm."""
+    rec = make_recording(Case("hysteresis", "lib", 2, seed=102))
+    on_time = run(rec, "on time").summary
+    summary = run(_stamped_late(rec, late_s), "stamped").summary
+    clock = summary["clock_offset"]
+    looped = clock["with_loop"]
+    assert clock["applied"] and looped["applied"]
+    assert abs(looped["static_read_s"] - late_s) > 0.01
+    assert clock["mocap_late_s"] == looped["mocap_late_s"] == pytest.approx(late_s, abs=0.002)
+    assert summary["effects"] == on_time["effects"] == ["hysteresis"]
+    assert summary["gap_after"] < 1.05 * on_time["gap_after"]
+    assert summary["timing_after_effects"]["clock_offset"] is None
+    words, read = clock_words(clock, "mm"), offset_words(clock["mocap_late_s"])
+    assert f"{offset_words(looped['static_read_s'])}, where the static map's" in words
+    assert f"then with the loop in the pose modelled, {read}" in words
+    assert f"its clock is taken as {read}" in words
+
+
+def test_a_run_before_that_read_its_clock_with_the_loop_says_both_reads():
+    """Where the run before the offset was found again had read its clock with the loop in
+    the pose modelled, its sentence says the static map's read and the loop's, each with
+    the gaps it went by (the static map's are those of its own read)."""
+    before = {"mocap_late_s": -1.552, "gap_without": 32.14, "gap_with": 1.23,
+              "searched": {"lead_s": -1.57, "share": 0.9972},
+              "with_loop": {"mocap_late_s": -1.552, "static_read_s": -1.567, "applied": True,
+                            "gap_without": 0.7958, "gap_with": 0.4198}}
+    words = read_before_words(before, "mm")
+    assert words.startswith("; the run before had read it 1.57 s early: a search over leads")
+    assert words.endswith("its static map's held-out gap went 32.14 -> 1.23 mm, then 1.55 s "
+                          "early with the loop in the pose modelled (the loop's held-out gap "
+                          "0.7958 -> 0.4198 mm)")
+    turned_down = {**before, "mocap_late_s": -1.567,
+                   "with_loop": {**before["with_loop"], "applied": False}}
+    assert read_before_words(turned_down, "mm").endswith("went 32.14 -> 1.23 mm")
+
+
 def test_readings_a_lag_behind_the_motion_capture_are_not_read_as_a_clock(
         default_suit_calibration):
     """The default suit with its effects (its lag a 30 ms low-pass and 8 ms of delay): the
@@ -1369,7 +1414,8 @@ def test_an_offset_found_again_after_the_effects_says_how_the_run_before_read_it
 
     monkeypatch.setattr(workflow, "_run", second_run)
     outcome = workflow._offset_again(rec, "early", (), lambda line: None, 1, first)
-    before = {k: read[k] for k in ("mocap_late_s", "gap_without", "gap_with", "searched")}
+    before = {k: read[k] for k in ("mocap_late_s", "gap_without", "gap_with", "searched",
+                                   "with_loop") if k in read}
     assert again == [{**found, "read_before": before}]
     assert outcome.summary["timing_after_effects"]["clock_offset"]["read_before"] == before
     words = clock_words({"mocap_late_s": found["mocap_late_s"], "applied": True,

@@ -41,6 +41,9 @@ from exohil.formats.recording import Recording
 
 #: A static map chosen for a trial and its scaled inputs (the workflow's calibration step).
 MapFit = Callable[[Trial, Inputs], Fit]
+#: A loop in the pose added to a spec on a trial and its inputs (the workflow's hysteresis
+#: candidate), for a clock read with it (:func:`refine_with_loop`).
+LoopFit = Callable[[Trial, Inputs, Spec], Fit]
 #: Readings that run ahead of the motion capture are a clock offset (:func:`clock_offset`),
 #: corrected when it explains at least this share of what the static map leaves above the
 #: noise, found in at most ``CLOCK_STEPS`` static refits.
@@ -371,6 +374,44 @@ def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static
     return trial, scaled, static, evidence
 
 
+def refine_with_loop(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
+                     clock: dict | None, floor: float, loop: LoopFit, static_map: MapFit
+                     ) -> tuple[Trial, Inputs, Fit, dict | None]:
+    """A clock offset read by :func:`clock_offset` (``clock``, applied) read again with a
+    loop in the pose modelled (``loop``), with the trial, its scaled inputs, static map and
+    evidence (``with_loop``); as they are where no offset was read.
+
+    A loop trails its pose on every branch, as a lag does, so a static map takes part of
+    it for the clock's lead: the fixture's suit stamped 1.5 s early was read 1.567 s early
+    by the search and the static map's first order, where its final model found 1.555 s
+    and, run again from the start so read, ended at 0.238 mm against 0.618 (twice the
+    time). Here the loop is fitted at the clock as read and its lead read to first order
+    (:func:`lead_s`), then refined as the static map's was (:func:`read_later`), the loop
+    refitted; it is kept where the loop so read clears rules 1 and 2 over the loop as read
+    before and explains at least ``CLOCK_SHARE`` of what that left above the noise
+    (:func:`reread_evidence`), and the static map is chosen again on the trial so read.
+    That recording is read 1.552 s early (the loop's held-out gap 0.7958 -> 0.4198 mm)
+    and ends at 0.2088 mm in one run. A lead within a tenth of a frame is left as read."""
+    if clock is None or not clock["applied"]:
+        return trial, scaled, static, clock
+    looped = loop(trial, make_inputs(trial, static.spec), static.spec)
+    lead, _ = lead_s(trial, looped)
+    if abs(lead) * trial.rate_hz < 0.1:
+        return trial, scaled, static, clock
+    shifted, _, refit = read_later(rec, name, trial, lead, looped.spec,
+                                   lambda tr, inp: fit(tr, inp, looped.spec))
+    evidence = {"mocap_late_s": round(shifted.mocap_late_s, 6),
+                "static_read_s": clock["mocap_late_s"], **reread_evidence(looped, refit, floor)}
+    if not evidence["applied"]:
+        return trial, scaled, static, {**clock, "with_loop": evidence}
+    trial, scaled = read_trial(rec, name, shifted.mocap_late_s, trial.mocap_low_pass_hz, None,
+                               trial.mocap_skew)
+    static = static_map(trial, scaled)
+    evidence["static_gap"] = significant(static.gap)
+    return trial, scaled, static, {**clock, "mocap_late_s": evidence["mocap_late_s"],
+                                   "with_loop": evidence}
+
+
 def clock_skew(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
                floor: float, static_map: MapFit) -> tuple[Trial, Inputs, Fit, dict | None]:
     """The trial read with the motion capture's clock rate where the readings' lead over it
@@ -537,8 +578,16 @@ def clock_words(clock: dict, units: str) -> str:
     late_s = clock["mocap_late_s"]
     head = f"the readings run {side_words(late_s)} the motion capture"
     searched = clock.get("searched")
+    looped = clock.get("with_loop")
+    first = ""
+    if looped is not None and looped["applied"]:  # the static map's gaps are the first read's
+        first = (f", {offset_words(looped['static_read_s'])}, where the static map's held-out "
+                 f"gap went {clock['gap_without']:.4g} -> {clock['gap_with']:.4g} {units}")
+    read_so = first + ("" if looped is None else loop_words(looped, units))
     if searched is not None:
-        head += f" ({search_words(searched)}; refined to first order)"
+        head += f" ({search_words(searched)}; refined to first order{read_so})"
+    elif read_so:
+        head += f" (to first order{read_so})"
     later = clock.get("after_effects")
     if later is not None:
         head += (f" (found once the effects were modelled: read so late, the model explained "
@@ -546,7 +595,8 @@ def clock_words(clock: dict, units: str) -> str:
                  f"{read_before_words(later.get('read_before'), units)})")
     if clock["applied"]:
         gaps = (f" (the static map's held-out gap {clock['gap_without']:.4g} -> "
-                f"{clock['gap_with']:.4g} {units})" if "gap_without" in clock else "")
+                f"{clock['gap_with']:.4g} {units})" if "gap_without" in clock and not first
+                else "")
         why = ("which no suit can do" if late_s >= 0.0 else
                "longer than any suit lags its pose")
         return (f"{head}, {why}: its clock is taken as {offset_words(late_s)} and read "
@@ -560,6 +610,20 @@ def clock_words(clock: dict, units: str) -> str:
                f"{clock['removed_rms']:.4g} {units}, {clock['blocks_improved']} blocks "
                f"improved of {clock['blocks_needed']} needed)")
     return f"{head}{'' if searched else ' to first order'}, but {why}: left to the effects"
+
+
+def loop_words(looped: dict, units: str) -> str:
+    """How the clock read with a loop in the pose modelled (:func:`refine_with_loop`'s
+    ``with_loop``) went, as a clause after "refined to first order"."""
+    gaps = f"{looped['gap_without']:.4g} -> {looped['gap_with']:.4g} {units}"
+    if not looped["applied"]:
+        return (f"; with the loop in the pose modelled it read "
+                f"{offset_words(looped['mocap_late_s'])}, not kept (the loop's held-out gap "
+                f"{gaps}, {looped['share_of_excess']:.0%} of its excess)")
+    return (f"; then with the loop in the pose modelled, "
+            f"{offset_words(looped['mocap_late_s'])}, where the loop's held-out gap went "
+            f"{gaps} and the static map's is {looped['static_gap']:.4g} {units}: a static map "
+            f"takes part of a loop's lag for the clock's")
 
 
 def search_words(searched: dict) -> str:
@@ -578,9 +642,16 @@ def read_before_words(read_before: dict | None, units: str) -> str:
         return ""
     how = (f": {search_words(read_before['searched'])}, and" if "searched" in read_before
            else " to first order, and")
-    return (f"; the run before had read it {offset_words(read_before['mocap_late_s'])}{how} "
+    first, loop = read_before["mocap_late_s"], ""
+    looped = read_before.get("with_loop")
+    if looped is not None and looped["applied"]:  # the static map read it first
+        first = looped["static_read_s"]
+        loop = (f", then {offset_words(looped['mocap_late_s'])} with the loop in the pose "
+                f"modelled (the loop's held-out gap {looped['gap_without']:.4g} -> "
+                f"{looped['gap_with']:.4g} {units})")
+    return (f"; the run before had read it {offset_words(first)}{how} "
             f"its static map's held-out gap went {read_before['gap_without']:.4g} -> "
-            f"{read_before['gap_with']:.4g} {units}")
+            f"{read_before['gap_with']:.4g} {units}{loop}")
 
 
 def side_words(late_s: float) -> str:

@@ -88,6 +88,7 @@ from exohil.emulators.discrepancy.timing import (
     mocap_filter,
     rate_after_effects,
     read_trial,
+    refine_with_loop,
     skew_words,
 )
 from exohil.emulators.discrepancy.workers import forked_map, one_blas_thread, workers_for
@@ -767,7 +768,7 @@ def _clock_read(clock: dict) -> dict:
     evidence, applied), for the evidence of an offset found again once the effects were
     modelled (``read_before``): the run again from the start would otherwise show only the
     last step of the way there."""
-    keys = ("mocap_late_s", "gap_without", "gap_with", "searched")
+    keys = ("mocap_late_s", "gap_without", "gap_with", "searched", "with_loop")
     return {k: clock[k] for k in keys if k in clock}
 
 
@@ -988,8 +989,15 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     else:
         filtered = filter_found
     progress(f"    {filter_words(filtered, trial.units)}")
-    trial, scaled, static_fit, clock = clock_offset(rec, name, trial, scaled, static_fit,
-                                                    floor, static_map)
+    def loop(other: Trial, inputs: Inputs, spec: Spec) -> Fit:
+        """The hysteresis candidate added to ``spec`` on ``other``, a trial read another
+        way (its loop in the pose reads ŝ's slopes: formed in ``workers`` processes)."""
+        static_slopes(inputs, workers)
+        return best_candidate(other, inputs, "hysteresis", spec)
+
+    trial, scaled, static_fit, clock = refine_with_loop(
+        rec, name, *clock_offset(rec, name, trial, scaled, static_fit, floor, static_map),
+        floor, loop, static_map)
     if clock is not None:
         progress(f"    {clock_words(clock, trial.units)}")
     trial, scaled, static_fit, skew = clock_skew(rec, name, trial, scaled, static_fit, floor,
