@@ -1214,24 +1214,27 @@ def test_a_clock_seconds_early_is_found_by_the_search_and_read_away(
     assert "run 1.5 s behind the motion capture" in words and "taken as 1.5 s early" in words
 
 
-@pytest.mark.parametrize("late_s", [0.3, -1.5])
-def test_a_clock_read_by_the_static_map_is_read_again_with_the_loop_modelled(late_s):
+@pytest.mark.parametrize("seed, late_s", [(102, 0.3), (102, -1.5), (100, -1.5)])
+def test_a_clock_read_by_the_static_map_is_read_again_with_the_loop_modelled(seed, late_s):
     """A hysteresis loop (lib, m2, seed 102, 60 s) with its motion capture stamped 0.3 s
     late or 1.5 s early: the loop trails every move, and the static map took 17 ms of it
     for the clock's lead (0.283 s late, 1.517 s early). Hysteresis was named at that clock
     and the final model's screen found no lead left: 0.802 mm, where on time the loop
     leaves 0.181. Read again with the loop in the pose modelled, the clock is 0.299 s
-    (1.501 s) and the loop is named at it, 0.184 mm."""
-    rec = make_recording(Case("hysteresis", "lib", 2, seed=102))
+    (1.501 s) and the loop is named at it, 0.184 mm. Seed 100 stamped 1.5 s early was read
+    1.514 s early, and the workflow ran again from the start once the screen found the
+    rest (0.1626 mm, 0.1635 on time); with the loop fitted on the first ŝ, its clock was
+    1.7 ms off (0.170 mm), and driven by its own static part 0.4 ms (0.162 mm)."""
+    rec = make_recording(Case("hysteresis", "lib", 2, seed=seed))
     on_time = run(rec, "on time").summary
     summary = run(_stamped_late(rec, late_s), "stamped").summary
     clock = summary["clock_offset"]
     looped = clock["with_loop"]
     assert clock["applied"] and looped["applied"]
     assert abs(looped["static_read_s"] - late_s) > 0.01
-    assert clock["mocap_late_s"] == looped["mocap_late_s"] == pytest.approx(late_s, abs=0.002)
+    assert clock["mocap_late_s"] == looped["mocap_late_s"] == pytest.approx(late_s, abs=0.001)
     assert summary["effects"] == on_time["effects"] == ["hysteresis"]
-    assert summary["gap_after"] < 1.05 * on_time["gap_after"]
+    assert summary["gap_after"] < 1.02 * on_time["gap_after"]
     assert summary["timing_after_effects"]["clock_offset"] is None
     words, read = clock_words(clock, "mm"), offset_words(clock["mocap_late_s"])
     assert f"{offset_words(looped['static_read_s'])}, where the static map's" in words
