@@ -1295,6 +1295,9 @@ def test_a_loop_read_turned_down_is_said_once_beside_the_first_order():
                      "loop's held-out gap 0.1562 -> 0.1561 dR/R0, 0% of its excess), but "
                      "reading the motion capture so much later explains only 3% of what the "
                      "static map leaves above the noise: left to the effects")
+    worse = {**clock, "with_loop": {**clock["with_loop"], "gap_with": 0.1566,
+                                    "share_of_excess": -0.0021}}
+    assert "0.1562 -> 0.1566 dR/R0, none of its excess)" in clock_words(worse, "dR/R0")
 
 
 def test_readings_a_lag_behind_the_motion_capture_are_not_read_as_a_clock(

@@ -629,9 +629,10 @@ def loop_words(looped: dict, units: str) -> str:
     ``with_loop``) went, as a clause after "refined to first order"."""
     gaps = f"{looped['gap_without']:.4g} -> {looped['gap_with']:.4g} {units}"
     if not looped["applied"]:
+        share = looped["share_of_excess"]
         return (f"; with the loop in the pose modelled it read "
                 f"{offset_words(looped['mocap_late_s'])}, not kept: the loop's held-out gap "
-                f"{gaps}, {looped['share_of_excess']:.0%} of its excess")
+                f"{gaps}, {f'{share:.0%} of' if share > 0 else 'none of'} its excess")
     return (f"; then with the loop in the pose modelled, "
             f"{offset_words(looped['mocap_late_s'])}, where the loop's held-out gap went "
             f"{gaps} and the static map's is {looped['static_gap']:.4g} {units}: a static map "
