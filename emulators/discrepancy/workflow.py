@@ -318,12 +318,6 @@ def _static_input_rounds(trial: Trial, inputs: Inputs, cand: Fit) -> list[tuple[
     return rounds
 
 
-def _on_own_static(trial: Trial, inputs: Inputs, cand: Fit) -> Fit:
-    """``cand`` after the rounds of :func:`_static_input_rounds` (driven by its own static
-    part where its history terms read ŝ)."""
-    return _static_input_rounds(trial, inputs, cand)[-1][0]
-
-
 def _rounds_done(fits: list[Fit]) -> dict | None:
     """JSON ``evidence.own_static_input`` of the rounds ``fits`` (:func:`_static_input_rounds`)."""
     if not fits[0].spec.reads_static():
@@ -1001,13 +995,13 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
         way, driven by its own static part as a named loop is (its loop in the pose reads
         ŝ's slopes: formed in ``workers`` processes)."""
         static_slopes(inputs, workers)
-        return _on_own_static(other, inputs, best_candidate(other, inputs, "hysteresis", spec))
+        return _static_input_again(other, inputs,
+                                   best_candidate(other, inputs, "hysteresis", spec))[0]
 
     trial, scaled, static_fit, clock = refine_with_loop(
         rec, name, *clock_offset(rec, name, trial, scaled, static_fit, floor, static_map),
-        floor, loop, lambda other, inputs, spec: _on_own_static(other, inputs,
-                                                                fit(other, inputs, spec)),
-        static_map)
+        floor, loop, lambda other, inputs, spec: _static_input_again(
+            other, inputs, fit(other, inputs, spec))[0], static_map)
     if clock is not None:
         progress(f"    {clock_words(clock, trial.units)}")
     trial, scaled, static_fit, skew = clock_skew(rec, name, trial, scaled, static_fit, floor,
