@@ -51,6 +51,7 @@ from exohil.emulators.discrepancy.data import (
 )
 from exohil.emulators.discrepancy.filters import (
     NEGLIGIBLE,
+    PLAY_CHUNK,
     apply_lag,
     delay,
     low_pass,
@@ -88,12 +89,17 @@ from exohil.emulators.discrepancy.localise import (
     steps_words,
 )
 from exohil.emulators.discrepancy.model import (
+    LOCAL_CENTRES,
+    LOCAL_REACH,
+    LOCAL_ROWS,
     PLAY_FRACTIONS,
     Fit,
     Inputs,
     Spec,
+    fibonacci_sphere,
     fit,
     hysteresis_columns,
+    local_terms,
     loop_width_terms,
     make_inputs,
     map_ridge,
@@ -1039,6 +1045,44 @@ def test_play_delay_and_low_pass():
                                [0, 0, 0, 1, 2, 3])
     step = low_pass(np.r_[np.zeros(3), np.ones(2000)][:, None], 0.1, 1000.0)[:, 0]
     assert step[2] == 0.0 and abs(step[3 + 100] - (1 - np.exp(-1))) < 0.01
+
+
+@pytest.mark.parametrize("n", [2, 3, PLAY_CHUNK, PLAY_CHUNK + 1, PLAY_CHUNK + 2,
+                               3 * PLAY_CHUNK + 7])
+def test_a_play_run_in_chunks_is_the_frame_by_frame_operator_exactly(n):
+    """The chunks' composed clamps give each frame's clamp of the last output, bit for bit,
+    across every chunk edge, with a zero half-width, and with a NaN that the frame-by-frame
+    operator carries on."""
+    rng = np.random.default_rng(n)
+    x = np.cumsum(rng.standard_normal((n, 3)), axis=0)
+    x[n // 2, 2] = np.nan
+    thresholds = np.abs(rng.standard_normal((3, 4)))
+    thresholds[0, 0] = 0.0
+    expected = np.empty((n, 3, 4))
+    expected[0] = x[0][:, None]
+    for i in range(1, n):
+        expected[i] = np.minimum(np.maximum(expected[i - 1], x[i][:, None] - thresholds),
+                                 x[i][:, None] + thresholds)
+    out = play(x, thresholds)
+    assert out.shape == (n, 3, 4)
+    np.testing.assert_array_equal(out, expected)
+    assert np.isnan(out[n // 2:, 2]).all() and np.isfinite(out[:, :2]).all()
+
+
+def test_local_functions_formed_a_chunk_of_frames_at_a_time_are_the_dense_formula():
+    """Each frame's local functions are the Wendland function of its chord distance to each
+    centre, zero beyond the reach, whichever chunk of frames it is formed in."""
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal((2 * LOCAL_ROWS + 3, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    centres = fibonacci_sphere(LOCAL_CENTRES)[::3]
+    r = np.sqrt(np.maximum(2.0 - 2.0 * (u @ centres.T), 0.0)) / (
+        LOCAL_REACH * np.sqrt(4.0 * np.pi / LOCAL_CENTRES))
+    expected = np.where(r < 1.0, (1.0 - r) ** 4 * (4.0 * r + 1.0), 0.0)
+    out = local_terms(u, centres)
+    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=0.0)
+    assert 0.05 < np.mean(out > 0) < 0.5  # near and far pairs both
+    assert local_terms(u, centres[:0]).shape == (u.shape[0], 0)
 
 
 @pytest.mark.parametrize("tau_s", [0.002, 0.01, 0.2])

@@ -103,6 +103,8 @@ LOCAL_CENTRES = 400
 LOCAL_KEEP = 2.5
 LOCAL_REACH = 3.75
 LOCAL_DEGREE = 3
+#: Frames whose local functions are formed at once (:func:`local_terms`).
+LOCAL_ROWS = 4096
 #: Ridges of the local functions tried (chosen on the held-out blocks), each relative to the
 #: functions' mean energy in the fold and the same for all of them: a function that only a
 #: few fitted frames reach is held near zero instead of given whatever coefficient those
@@ -451,14 +453,21 @@ def local_terms(u: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """(N, K) the local basis: the compact Wendland function (1 − r)⁴(4r + 1) of each
     centre, r its chord distance from u (N, 3) in units of ``LOCAL_REACH`` lattice spacings
     (zero beyond)."""
-    if centres.shape[0] == 0:
-        return np.zeros((u.shape[0], 0))
     reach = LOCAL_REACH * np.sqrt(4.0 * np.pi / LOCAL_CENTRES)
-    chord = _chord(u, centres)
-    near = chord < reach  # a fifth of the pairs on a four-minute trial; the rest are zero
-    r = chord[near] / reach
-    out = np.zeros(chord.shape)
-    out[near] = (1.0 - r) ** 4 * (4.0 * r + 1.0)
+    out = np.zeros((u.shape[0], centres.shape[0]))
+    # a fifth of the pairs on a four-minute trial are near; the rest stay zero. The chord
+    # √(2 − 2·cos) is formed only where the cosine is near enough (by a margin for
+    # rounding), and decides as :func:`_chord`'s would; a few thousand rows at a time stay
+    # in cache: a third of the time of every chord formed at once (0.36 s a call, 13
+    # calls before step 2 of a four-minute recording whose clock is moved)
+    near_cos = 1.0 - 0.5 * reach**2 - 1e-9
+    for start in range(0, u.shape[0], LOCAL_ROWS):
+        cos = u[start:start + LOCAL_ROWS] @ centres.T
+        near = np.flatnonzero(cos > near_cos)
+        chord = np.sqrt(np.maximum(2.0 - 2.0 * cos.ravel()[near], 0.0))
+        inside = chord < reach
+        r = chord[inside] / reach
+        out[start:start + LOCAL_ROWS].ravel()[near[inside]] = (1.0 - r) ** 4 * (4.0 * r + 1.0)
     return out
 
 
