@@ -414,8 +414,8 @@ def refine_with_loop(rec: Recording, name: str, trial: Trial, scaled: Inputs, st
                 **offset_evidence(shifted.mocap_late_s, looped, refit, floor, earliest)}
     if not evidence["applied"]:
         return trial, scaled, static, {**clock, "with_loop": evidence}
-    trial, scaled = read_trial(rec, name, shifted.mocap_late_s, trial.mocap_low_pass_hz, None,
-                               trial.mocap_skew)
+    # the trial the last refit read (read as this one was, at the kept clock), scaled anew
+    trial, scaled = shifted, make_inputs(shifted)
     static = static_map(trial, scaled)
     evidence["static_gap"] = significant(static.gap)
     return trial, scaled, static, {**clock, "mocap_late_s": evidence["mocap_late_s"],
