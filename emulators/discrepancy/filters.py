@@ -38,10 +38,10 @@ def play(x: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
     """
     n, s = x.shape
     k = thresholds.shape[1]
-    chunks = max(1, -(-(n - 1) // PLAY_CHUNK))
-    out = np.empty((1 + chunks * PLAY_CHUNK, s, k))  # the chunks padded at the end
     if n <= 1:
         return np.broadcast_to(x[:, :, None], (n, s, k)).copy()
+    chunks = -(-(n - 1) // PLAY_CHUNK)
+    out = np.empty((1 + chunks * PLAY_CHUNK, s, k))  # the chunks padded at the end
     out[0] = x[0][:, None]
     # each later frame's clamp, laid out by place in its chunk ([i]: every chunk's frame i,
     # contiguous); the padding's clamps keep every value

@@ -433,7 +433,12 @@ def fibonacci_sphere(n: int) -> np.ndarray:
 
 def _chord(u: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """(N, K) chord distances between unit vectors u (N, 3) and ``centres`` (K, 3)."""
-    return np.sqrt(np.maximum(2.0 - 2.0 * (u @ centres.T), 0.0))
+    return _chord_of_cos(u @ centres.T)
+
+
+def _chord_of_cos(cos: np.ndarray) -> np.ndarray:
+    """The chord distance √(2 − 2·cos) between unit vectors whose cosine is ``cos``."""
+    return np.sqrt(np.maximum(2.0 - 2.0 * cos, 0.0))
 
 
 def local_centres(u: np.ndarray) -> np.ndarray:
@@ -456,15 +461,15 @@ def local_terms(u: np.ndarray, centres: np.ndarray) -> np.ndarray:
     reach = LOCAL_REACH * np.sqrt(4.0 * np.pi / LOCAL_CENTRES)
     out = np.zeros((u.shape[0], centres.shape[0]))
     # a fifth of the pairs on a four-minute trial are near; the rest stay zero. The chord
-    # √(2 − 2·cos) is formed only where the cosine is near enough (by a margin for
-    # rounding), and decides as :func:`_chord`'s would; a few thousand rows at a time stay
-    # in cache: a third of the time of every chord formed at once (0.36 s a call, 13
-    # calls before step 2 of a four-minute recording whose clock is moved)
+    # (:func:`_chord_of_cos`) is formed only where the cosine is near enough (by a margin
+    # for rounding), and decides; a few thousand rows at a time stay in cache: a third of
+    # the time of every chord formed at once (0.36 s a call, 13 calls before step 2 of a
+    # four-minute recording whose clock is moved)
     near_cos = 1.0 - 0.5 * reach**2 - 1e-9
     for start in range(0, u.shape[0], LOCAL_ROWS):
         cos = u[start:start + LOCAL_ROWS] @ centres.T
         near = np.flatnonzero(cos > near_cos)
-        chord = np.sqrt(np.maximum(2.0 - 2.0 * cos.ravel()[near], 0.0))
+        chord = _chord_of_cos(cos.ravel()[near])
         inside = chord < reach
         r = chord[inside] / reach
         out[start:start + LOCAL_ROWS].ravel()[near[inside]] = (1.0 - r) ** 4 * (4.0 * r + 1.0)
