@@ -50,6 +50,7 @@ from exohil.emulators.discrepancy.data import (
     true_runs,
 )
 from exohil.emulators.discrepancy.filters import (
+    FILTER_ROWS,
     NEGLIGIBLE,
     PLAY_CHUNK,
     apply_lag,
@@ -1085,6 +1086,36 @@ def test_local_functions_formed_a_chunk_of_frames_at_a_time_are_the_dense_formul
     np.testing.assert_allclose(out, expected, rtol=1e-12, atol=0.0)
     assert 0.05 < np.mean(out > 0) < 0.5  # near and far pairs both
     assert local_terms(u, centres[:0]).shape == (u.shape[0], 0)
+
+
+@pytest.mark.parametrize("delay_s", [0.0, 0.004, 0.013, 0.15, -0.013, 0.6])
+@pytest.mark.parametrize("n", [1, 3, FILTER_ROWS + 1, 2 * FILTER_ROWS + 7])
+def test_a_delay_formed_a_chunk_at_a_time_is_the_whole_formula_exactly(n, delay_s):
+    """Each frame of a delay is (1 − frac)·x[i − k] + frac·x[i − k − 1], its source row
+    held at either end, bit for bit across every chunk edge, the ends and NaN included."""
+    rng = np.random.default_rng(n)
+    x = rng.standard_normal((n, 3, 2))
+    x[n // 2, 1] = np.nan
+    samples = delay_s * 250.0
+    k = int(np.floor(samples))
+    frac = samples - k
+    rows = np.arange(n)
+    expected = x[np.clip(rows - k, 0, n - 1)] * (1.0 - frac)
+    if frac:
+        expected = expected + x[np.clip(rows - k - 1, 0, n - 1)] * frac
+    out = delay(x, delay_s, 250.0)
+    np.testing.assert_array_equal(out, expected)
+
+
+def test_a_low_pass_formed_a_chunk_at_a_time_is_one_filter_run_exactly():
+    """Over a stretch where nothing decays to ``NEGLIGIBLE`` the low-pass carried from
+    chunk to chunk through its state is one run of the filter, bit for bit."""
+    rng = np.random.default_rng(3)
+    x = 1.0 + rng.random((3 * FILTER_ROWS + 5, 4))
+    pole = np.exp(-1.0 / (250.0 * 0.2))
+    b, a = [0.0, 1.0 - pole], [1.0, -pole]
+    whole, _ = lfilter(b, a, x, axis=0, zi=lfilter_zi(b, a)[:, None] * x[0][None, :])
+    np.testing.assert_array_equal(low_pass(x, 0.2, 250.0), whole)
 
 
 @pytest.mark.parametrize("tau_s", [0.002, 0.01, 0.2])
