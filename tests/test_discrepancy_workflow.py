@@ -100,11 +100,14 @@ from exohil.emulators.discrepancy.model import (
     fibonacci_sphere,
     fit,
     hysteresis_columns,
+    legendre_products,
     local_terms,
     loop_width_terms,
     make_inputs,
     map_ridge,
     restrict_to_coverage,
+    segment_lengths,
+    static_terms,
 )
 from exohil.emulators.discrepancy.profile import (
     calibrated_suit,
@@ -1086,6 +1089,16 @@ def test_local_functions_formed_a_chunk_of_frames_at_a_time_are_the_dense_formul
     np.testing.assert_allclose(out, expected, rtol=1e-12, atol=0.0)
     assert 0.05 < np.mean(out > 0) < 0.5  # near and far pairs both
     assert local_terms(u, centres[:0]).shape == (u.shape[0], 0)
+    wide = np.full((u.shape[0], centres.shape[0] + 2), 7.0)  # written into a wider design
+    local_terms(u, centres, wide[:, 1:-1])
+    np.testing.assert_array_equal(wide[:, 1:-1], out)
+    assert (wide[:, [0, -1]] == 7.0).all()
+    segments = rng.standard_normal((10, 2))
+    np.testing.assert_array_equal(
+        static_terms(u, 3, segments, centres),
+        np.hstack([legendre_products(u, 3)[0], out, segment_lengths(u, segments)]))
+    np.testing.assert_array_equal(static_terms(u, 2, segments[:, :0]),
+                                  legendre_products(u, 2)[0])
 
 
 @pytest.mark.parametrize("delay_s", [0.0, 0.004, 0.013, 0.15, -0.013, 0.6])
