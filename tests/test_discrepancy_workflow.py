@@ -69,6 +69,8 @@ from exohil.emulators.discrepancy.folds import (
     fold_system,
     reduce,
     ridge_solve,
+    spd_solve,
+    triangular_inverse,
 )
 from exohil.emulators.discrepancy.hidden import (
     Case,
@@ -3060,6 +3062,31 @@ def test_fold_fits_are_the_plain_ridge_systems_with_kept_gram_matrices():
         assert red.shared_grams.factors  # the unweighted fits took the factored path
         assert red.whole_grams  # the weighted ones corrected the kept matrices
         assert not replace(red, xe=red.xe[:, :1]).whole_grams  # another design: none kept
+
+
+def test_cholesky_solves_and_triangular_inverses_are_the_general_ones():
+    """The fits' LAPACK shortcuts (a ridge system solved by Cholesky, a Cholesky factor
+    inverted as a triangle) give what NumPy's general solve and inverse give, on stacks of
+    systems as ill-conditioned as a ridge of 1e-7 leaves them; a system that is not positive
+    definite is solved all the same (by LU), and the input is left as it was."""
+    rng = np.random.default_rng(7)
+    x = rng.standard_normal((3, 80, 40)) * np.logspace(0, -3, 40)  # columns 1 … 1e-3
+    gram = np.einsum("fnp,fnq->fpq", x, x) + 1e-7 * np.eye(40)
+    rhs = rng.standard_normal((3, 40, 2))
+    kept = gram.copy()
+    want = np.linalg.solve(gram, rhs)
+    np.testing.assert_allclose(spd_solve(gram, rhs), want, rtol=1e-6,
+                               atol=1e-9 * np.abs(want).max())
+    np.testing.assert_array_equal(gram, kept)
+    chol = np.linalg.cholesky(gram)
+    want = np.linalg.inv(chol)
+    got = triangular_inverse(chol.copy())
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+    assert not np.triu(got, 1).any()  # lower triangular, as L⁻¹ is
+    indefinite = np.diag([2.0, -1.0, 3.0])[None] + 0.1
+    b = np.ones((1, 3, 1))
+    np.testing.assert_allclose(spd_solve(indefinite.copy(), b), np.linalg.solve(indefinite, b),
+                               rtol=1e-12)
 
 
 def test_designs_and_fold_products_are_their_plain_definitions():

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import lapack
 
 from exohil.emulators.discrepancy.data import N_BLOCKS, Trial
 
@@ -75,12 +76,24 @@ def equilibrate(gram: np.ndarray, loading: np.ndarray
     return g, scale
 
 
+def spd_solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a`` (..., P, P) symmetric positive definite solved for ``b`` (..., P, K): by
+    Cholesky (LAPACK ``posv``), half the work of the LU factorisation ``np.linalg.solve``
+    does; by LU where a system is not positive definite in floating point."""
+    out = np.empty(b.shape)
+    for i in np.ndindex(a.shape[:-2]):
+        # a symmetric matrix is its own transpose: passed as Fortran-ordered
+        _, x, info = lapack.dposv(a[i].T, b[i], lower=1)
+        out[i] = x if info == 0 else np.linalg.solve(a[i], b[i])
+    return out
+
+
 def ridge_solve(gram: np.ndarray, rhs: np.ndarray, loading: np.ndarray) -> np.ndarray:
     """Ridge solve with ``loading`` (..., P) added to the Gram matrix's diagonal
     (:func:`equilibrate`); ``gram`` (..., P, P) and ``rhs`` (..., P) may be stacks (one per
     fold)."""
     g, scale = equilibrate(gram, loading)
-    return np.linalg.solve(g, (rhs / scale)[..., None])[..., 0] / scale
+    return spd_solve(g, (rhs / scale)[..., None])[..., 0] / scale
 
 
 @dataclass(frozen=True)
@@ -137,7 +150,7 @@ class Ridge:
         # no reading passes on a dead sensor) gets coefficient 0, not a singular system
         g_ss, scale = equilibrate(gram_all[:n, :n], self.static_loading(diag_all[:n]))
         g_se = gram_all[:n, n:]
-        through = np.linalg.solve(g_ss, g_se / scale[:, None]) / scale[:, None]
+        through = spd_solve(g_ss, g_se / scale[:, None]) / scale[:, None]
         return self.added_loading(g_se, diag_all[n:], through)
 
     def added_loading(self, g_se: np.ndarray, diag_e: np.ndarray, through: np.ndarray
@@ -301,7 +314,7 @@ class SharedGrams:
             diag = np.diagonal(folds, axis1=-2, axis2=-1)
             g, scale = equilibrate(folds, ridge.static_loading(diag))
             try:
-                inverse = np.linalg.inv(np.linalg.cholesky(g))
+                inverse = triangular_inverse(np.linalg.cholesky(g))
             except np.linalg.LinAlgError:
                 self.factors[key] = None
             else:
@@ -309,13 +322,25 @@ class SharedGrams:
         return self.factors[key]
 
 
+def triangular_inverse(lower: np.ndarray) -> np.ndarray:
+    """L⁻¹ of each lower triangular L in ``lower`` (..., P, P), overwritten (LAPACK
+    ``trtri``: a third of the work of a general inverse)."""
+    for i in np.ndindex(lower.shape[:-2]):
+        # Lᵀ is L Fortran-ordered: (Lᵀ)⁻¹ = (L⁻¹)ᵀ is formed in place, without a copy
+        inverse, info = lapack.dtrtri(lower[i].T, lower=0, overwrite_c=1)
+        if info != 0:  # a zero on the diagonal: not reached from a Cholesky factor
+            raise np.linalg.LinAlgError(f"singular triangular factor (trtri info {info})")
+        lower[i] = inverse.T  # the same memory, unless LAPACK's wrapper made a copy
+    return lower
+
+
 @dataclass(frozen=True)
 class StaticFactors:
     """The static block A = L·Lᵀ of each fold's ridge system (:func:`equilibrate`): its
     scale (N_BLOCKS + 1, Ps) and the inverse of its Cholesky factor L⁻¹ (N_BLOCKS + 1,
-    Ps, Ps), the last the all-block fit's. (NumPy has no triangular solve; SciPy's LAPACK
-    runs on a second OpenBLAS whose threads contend with NumPy's: twice as slow on two
-    cores.)"""
+    Ps, Ps), the last the all-block fit's. The factor is inverted once
+    (:func:`triangular_inverse`) and applied as two products: NumPy has no triangular
+    solve, and every sensor and candidate that shares the block applies it again."""
 
     scale: np.ndarray
     inverse_chol: np.ndarray
