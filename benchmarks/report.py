@@ -20,8 +20,9 @@ import sys
 import threading
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import InvalidStateError
 from pathlib import Path
-from types import FrameType
+from types import FrameType, TracebackType
 from typing import Any, NoReturn
 
 from exohil.formats.atomic import same_file, write_text
@@ -113,6 +114,36 @@ def _interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
+def _raised_in_terminate_broken(tb: TracebackType | None) -> bool:
+    """Whether the traceback ``tb`` passes through the process pool's ``terminate_broken``
+    (``concurrent/futures/process.py``)."""
+    while tb is not None:
+        code = tb.tb_frame.f_code
+        if code.co_name == "terminate_broken" and Path(code.co_filename).parts[-3:] == (
+                "concurrent", "futures", "process.py"):
+            return True
+        tb = tb.tb_next
+    return False
+
+
+def _quiet_cancelled_future_race(hook: Callable[[threading.ExceptHookArgs], object]
+                                 ) -> Callable[[threading.ExceptHookArgs], None]:
+    """``threading.excepthook`` that drops the one error Python 3.11's process pool raises in
+    its manager thread on Ctrl-C, and hands any other to ``hook``.
+
+    On Ctrl-C the pool's map cancels its pending futures while the workers end; the manager
+    thread, finding the pool broken, then sets an exception on the futures just cancelled
+    and raises ``InvalidStateError`` (CPython gh-107219, fixed in 3.12): a traceback after
+    the one line this process means to print, now and then (a CI run of the Ctrl-C test)."""
+    def excepthook(args: threading.ExceptHookArgs) -> None:
+        if args.exc_type is InvalidStateError and _raised_in_terminate_broken(
+                args.exc_traceback):
+            return
+        hook(args)
+    excepthook.quiets_cancelled_future_race = True  # type: ignore[attr-defined]
+    return excepthook
+
+
 def run_main(main: Callable[[], object], interrupted: str = "nothing written") -> NoReturn:
     """Run a benchmark's ``main`` and exit: with the status it returns (0 for None), 2 with
     one line ``error: ...`` for bad input it found (the project's
@@ -122,6 +153,9 @@ def run_main(main: Callable[[], object], interrupted: str = "nothing written") -
     traceback. Worker processes end silently on Ctrl-C, so that pools stop at once."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, _interrupt)
+    if sys.version_info < (3, 12) and not getattr(threading.excepthook,
+                                                  "quiets_cancelled_future_race", False):
+        threading.excepthook = _quiet_cancelled_future_race(threading.excepthook)
     try:
         status = main()
     except KeyboardInterrupt:

@@ -216,6 +216,29 @@ def test_ctrl_c_stops_the_workers_at_once_without_tracebacks(tmp_path):
     assert proc.returncode == 130 and err == "interrupted; nothing written\n", err
 
 
+def test_the_pools_cancelled_future_race_is_quiet_and_other_thread_errors_are_not():
+    """The InvalidStateError Python 3.11's process pool raises in its manager thread's
+    ``terminate_broken`` on Ctrl-C (CPython gh-107219) is dropped; the same error raised
+    elsewhere, and any other error of that thread, still reach the hook before."""
+    import threading
+    from concurrent.futures import InvalidStateError
+
+    from benchmarks.report import _quiet_cancelled_future_race
+
+    seen = []
+    hook = _quiet_cancelled_future_race(lambda args: seen.append(args.exc_type))
+    namespace: dict = {"InvalidStateError": InvalidStateError}
+    source = "def terminate_broken(error):\n    raise error\n"
+    for where in (os.path.join("lib", "concurrent", "futures", "process.py"), "elsewhere.py"):
+        exec(compile(source, where, "exec"), namespace)
+        for error in (InvalidStateError("CANCELLED"), RuntimeError("a bug")):
+            try:
+                namespace["terminate_broken"](error)
+            except Exception as exc:  # noqa: BLE001 - handed to the hook as a thread's
+                hook(threading.ExceptHookArgs([type(exc), exc, exc.__traceback__, None]))
+    assert seen == [RuntimeError, InvalidStateError, RuntimeError]
+
+
 @pytest.mark.parametrize("args, message", [
     (("--seeds", "0"), "--seeds: must be at least 1"),
     (("--seeds", "-3"), "--seeds: must be at least 1"),
