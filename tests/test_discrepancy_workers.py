@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -99,3 +100,75 @@ def _running(pid: int) -> bool:
     except FileNotFoundError:
         return False
     return "State:\tZ" not in status
+
+
+CTRL_C_WHILE_THE_WORKERS_RUN = """
+import os, sys, time
+import exohil.emulators.discrepancy as discrepancy
+from exohil.emulators.discrepancy.workers import forked_map
+from exohil.harness.cli import main
+
+def job(k):
+    os.write(1, b"idle\\n" if k == 0 else b"busy\\n")  # the idle worker waits for its next job
+    time.sleep(30 * k)
+    return k
+
+def analysis(*args, **kwargs):
+    forked_map(job, [1, 0], workers=2)
+
+discrepancy.run = analysis
+main(["discrepancy", sys.argv[1], "--out", sys.argv[2]])
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="only Linux forks the workers")
+def test_ctrl_c_while_the_workers_run_stops_at_once_with_one_line(tmp_path):
+    """Ctrl-C at a terminal signals the whole process group, forked workers included: every
+    worker ends at once without a traceback (until 2026-12-07 a worker waiting for its next
+    job printed its KeyboardInterrupt's), and ``exohil discrepancy`` says its one line."""
+    from exohil.emulators.discrepancy.hidden import Case, make_recording
+    from exohil.formats.recording_writer import write_recording
+
+    path, out = tmp_path / "trial.mcap", tmp_path / "out"
+    write_recording(path, make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0)))
+    script = tmp_path / "ctrl_c.py"
+    script.write_text(CTRL_C_WHILE_THE_WORKERS_RUN)
+    proc = subprocess.Popen([sys.executable, str(script), str(path), str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        assert {proc.stdout.readline(), proc.stdout.readline()} == {"busy\n", "idle\n"}
+        time.sleep(0.5)  # the idle worker is back waiting on the pool's queue
+        started = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)  # what the terminal sends on Ctrl-C
+        _, err = proc.communicate(timeout=20)  # far less than the busy worker's 30 s
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert err == f"interrupted: {out} left as it was (no output of this run written)\n", err
+    assert time.monotonic() - started < 10 and not out.exists()
+
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="only Linux forks the workers")
+def test_a_sigint_to_this_process_alone_is_raised_once_the_pool_is_down(tmp_path):
+    """The KeyboardInterrupt is raised when the map ends, by the handler that was there, and
+    never inside the process pool's own code (raised there it was lost in a fork's hooks,
+    or left the pool waiting forever): sent to this process alone, the workers finish
+    every job, those not yet started included (until 2026-12-07 they were cancelled)."""
+    def job(k: int) -> int:
+        if k == 0:
+            os.kill(os.getppid(), signal.SIGINT)
+        time.sleep(0.2)
+        (tmp_path / str(k)).touch()
+        return k
+
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt):
+        forked_map(job, [0, 1, 2, 3, 4, 5], workers=2)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["0", "1", "2", "3", "4", "5"]
+    assert signal.getsignal(signal.SIGINT) is before
+    assert forked_map(job, [1, 2], workers=2) == [1, 2]  # no SIGINT: no KeyboardInterrupt

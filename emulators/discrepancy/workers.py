@@ -8,6 +8,10 @@ Two ways, for two sizes of job:
   they share the step's calibrated trial and model (hundreds of MB of designs and their
   caches), which a fork hands over without copying; only each candidate's fit comes back.
 
+On Ctrl-C (the terminal signals the whole process group) the forked workers abandon their
+jobs, and the process that owns the pool raises ``KeyboardInterrupt`` once the pool is down
+(:func:`forked_map`).
+
 Either way each process runs one BLAS thread: two OpenBLAS pools of two threads each on two
 cores took longer than one process alone (184 s against 130 s for the CI suite's 48 cases;
 73 s with one thread each). A process that is itself a worker runs its jobs in turn
@@ -21,9 +25,11 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
+from types import FrameType
 from typing import Any, TypeVar
 
 from threadpoolctl import threadpool_limits
@@ -73,6 +79,12 @@ def forked_map(job: Callable[[T], R], items: Sequence[T], workers: int) -> list[
     whatever it refers to are inherited by the fork. Call it inside :func:`one_blas_thread`
     so that the workers run one BLAS thread each. Items go out in order: put the longest
     first.
+
+    Ctrl-C stops the map and raises ``KeyboardInterrupt`` here, without a worker's
+    traceback: each worker abandons the job it runs as soon as that job is back in Python
+    code from a long NumPy or LAPACK call (under 2 s, docs/discrepancy.md), and this process's
+    ``KeyboardInterrupt`` waits until the pool is down (:func:`_ctrl_c_after`). A SIGINT
+    sent to this process alone, not to its workers, takes effect when the map ends.
     """
     global _FORKED_JOB
     if workers <= 1 or len(items) <= 1 or sys.platform != "linux":
@@ -82,20 +94,53 @@ def forked_map(job: Callable[[T], R], items: Sequence[T], workers: int) -> list[
     _FORKED_JOB = job
     try:
         context = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(min(workers, len(items)), mp_context=context,
-                                 initializer=_die_with, initargs=(os.getpid(),)) as pool:
+        with _ctrl_c_after(), \
+                ProcessPoolExecutor(min(workers, len(items)), mp_context=context,
+                                    initializer=_start_worker, initargs=(os.getpid(),)) as pool:
             return list(pool.map(_run_forked_job, items))
     finally:
         _FORKED_JOB = None
 
 
-def _die_with(parent: int) -> None:
-    """Have the kernel kill this forked worker when ``parent`` ends, however it ends.
+@contextmanager
+def _ctrl_c_after() -> Iterator[None]:
+    """SIGINT inside the block is noted, and handled as before (``KeyboardInterrupt``) when
+    the block ends, however it ends.
+
+    Raised at once, a ``KeyboardInterrupt`` lands anywhere in the process pool's own code.
+    Ctrl-C at 3–25 s into a four-minute analysis (2026-12-07) left a run that went on to its
+    end and wrote its outputs (the exception lost in ``os.fork``'s after-fork hooks, where
+    Python ignores exceptions), and one that never ended (waiting on the pool while a worker
+    waited to send its result). Only the main thread can set a handler; elsewhere, or where
+    SIGINT is ignored or has its default action, the block changes nothing."""
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield
+        return
+    seen: list[FrameType | None] = []
+    signal.signal(signal.SIGINT, lambda _signum, frame: seen.append(frame))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if seen:
+            previous(signal.SIGINT, seen[0])
+
+
+def _start_worker(parent: int) -> None:
+    """Make a forked worker end with ``parent``, however it ends, and ignore Ctrl-C between
+    jobs (:func:`_run_forked_job`).
 
     A fork inherits both ends of the pool's pipes, so a worker whose parent was killed
     (SIGTERM, SIGKILL, out of memory) never reads the end of its queue and would wait
     forever; the parent-death signal ends it instead (Linux, ``PR_SET_PDEATHSIG``). Where a
-    sandbox refuses the call the worker still works: it only loses this safety net."""
+    sandbox refuses the call the worker still works: it only loses this safety net.
+
+    Ctrl-C reaches the workers too (the terminal signals the whole process group). A worker
+    waiting for its next job printed its ``KeyboardInterrupt``'s traceback; one ended while
+    it sent its result would leave the pool waiting for the rest of it forever. Between
+    jobs the worker ignores it; the pool ends it when it shuts down."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     libc = ctypes.CDLL(None, use_errno=True)
     libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
     if os.getppid() != parent:  # the parent ended before the signal was set
@@ -103,9 +148,14 @@ def _die_with(parent: int) -> None:
 
 
 def _run_forked_job(item: Any) -> Any:
-    """The inherited job on one item (runs in a forked worker)."""
+    """The inherited job on one item (runs in a forked worker); Ctrl-C abandons it with
+    ``KeyboardInterrupt``, which the pool sends back as the job's result."""
     assert _FORKED_JOB is not None, "a forked worker inherits the job"
-    return _FORKED_JOB(item)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return _FORKED_JOB(item)
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def parallel_map(job: Callable[[T], dict], items: Iterable[T], workers: int | None = None
