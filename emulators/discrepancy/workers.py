@@ -108,7 +108,7 @@ def _ctrl_c_after() -> Iterator[None]:
     the block ends, however it ends.
 
     Raised at once, a ``KeyboardInterrupt`` lands anywhere in the process pool's own code.
-    Ctrl-C at 3–25 s into a four-minute analysis (2026-12-07) left a run that went on to its
+    Ctrl-C at 2–25 s into a four-minute analysis (2026-12-07) left a run that went on to its
     end and wrote its outputs (the exception lost in ``os.fork``'s after-fork hooks, where
     Python ignores exceptions), and one that never ended (waiting on the pool while a worker
     waited to send its result). Only the main thread can set a handler; elsewhere, or where
