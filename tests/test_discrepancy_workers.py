@@ -123,9 +123,10 @@ main(["discrepancy", sys.argv[1], "--out", sys.argv[2]])
 
 @pytest.mark.skipif(sys.platform != "linux", reason="only Linux forks the workers")
 def test_ctrl_c_while_the_workers_run_stops_at_once_with_one_line(tmp_path):
-    """Ctrl-C at a terminal signals the whole process group, forked workers included: every
-    worker ends at once without a traceback (until 2026-12-07 a worker waiting for its next
-    job printed its KeyboardInterrupt's), and ``exohil discrepancy`` says its one line."""
+    """Ctrl-C at a terminal signals the whole process group, forked workers included: the
+    busy worker abandons its job and the idle one waits on silently (until 2026-12-07 a
+    worker waiting for its next job printed its KeyboardInterrupt's traceback), and
+    ``exohil discrepancy`` stops at once with its one line."""
     from exohil.emulators.discrepancy.hidden import Case, make_recording
     from exohil.formats.recording_writer import write_recording
 
@@ -150,7 +151,6 @@ def test_ctrl_c_while_the_workers_run_stops_at_once_with_one_line(tmp_path):
     assert proc.returncode == 130, err
     assert err == f"interrupted: {out} left as it was (no output of this run written)\n", err
     assert time.monotonic() - started < 10 and not out.exists()
-
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="only Linux forks the workers")
