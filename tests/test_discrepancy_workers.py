@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -13,9 +14,11 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info
 
+from exohil.emulators.discrepancy import workers
 from exohil.emulators.discrepancy.workers import (
     default_workers,
     forked_map,
+    memory_reused,
     one_blas_thread,
     workers_for,
 )
@@ -23,6 +26,34 @@ from exohil.emulators.discrepancy.workers import (
 
 def _blas_threads() -> list[int]:
     return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+
+
+def _page_faults_to_fill(megabytes: int) -> int:
+    """Minor page faults this process takes to make and fill an array of ``megabytes``."""
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    np.empty(megabytes * 2**20 // 8).fill(1.0)  # freed at once
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+
+def _resident_mb() -> float:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+@pytest.mark.skipif(workers._mallopt() is None, reason="the C library is not glibc")
+def test_memory_freed_inside_the_block_is_reused_and_given_back_after_it():
+    _page_faults_to_fill(64)
+    assert _page_faults_to_fill(64) > 0  # by default every large array is mapped afresh
+    with memory_reused():
+        with memory_reused():  # nested: the outer block's settings hold
+            pass
+        _page_faults_to_fill(64)
+        assert _page_faults_to_fill(64) == 0  # the freed array's memory, written before
+        held = _resident_mb()
+        _page_faults_to_fill(256)
+        assert _resident_mb() > held + 150  # freed (64 MB of it held before), yet kept
+    assert _resident_mb() < held + 50  # given back on leaving
+    assert _page_faults_to_fill(64) > 0  # and mapped afresh again
 
 
 def test_forked_jobs_run_in_other_processes_and_come_back_in_order():

@@ -91,7 +91,12 @@ from exohil.emulators.discrepancy.timing import (
     refine_with_loop,
     skew_words,
 )
-from exohil.emulators.discrepancy.workers import forked_map, one_blas_thread, workers_for
+from exohil.emulators.discrepancy.workers import (
+    forked_map,
+    memory_reused,
+    one_blas_thread,
+    workers_for,
+)
 from exohil.formats.recording import Recording
 from exohil.formats.recording_metadata import rates_disagree
 
@@ -734,7 +739,7 @@ def run(rec: Recording, name: str = "recording", in_model: tuple[str, ...] = (),
         DiscrepancyError: the recording cannot be used (no mocap, too short, ...).
     """
     processes = workers_for(workers)
-    with one_blas_thread():
+    with one_blas_thread(), memory_reused():
         first = _run(rec, name, in_model, progress, processes)
         first = _filter_again(rec, name, in_model, progress, processes, first)
         first = _offset_again(rec, name, in_model, progress, processes, first)
