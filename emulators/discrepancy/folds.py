@@ -419,22 +419,22 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
     """Per-block Gram matrices (N_BLOCKS, P, P) and right-hand sides (N_BLOCKS, P) of the
     rows ``ok`` (M,) of the averaged design, each row times ``weights`` (M,; default 1; at
     most 1: the slopes of a stop), against ``target`` (M,; default the averaged
-    measurement). The shared columns' unweighted Gram matrices come formed
-    (``red.shared_grams``, the same for every sensor of a fit); weighted, the whole
-    design's unweighted ones are formed once per row selection and only the rows whose
-    weight is not 1 (in a stop's knee) correct them (:func:`_knee_corrected`). With
-    ``static`` False (unweighted only), the shared columns' block is left unset, for a
-    caller that has it factored."""
+    measurement). Unweighted, the shared columns' Gram matrices come formed
+    (``red.shared_grams``, the same for every sensor of a fit). Every row is read here:
+    :func:`fold_coefs` forms a weighted fit's systems with shared columns from the whole
+    design's unweighted matrices instead (:func:`_knee_folds`). With ``static`` False
+    (unweighted only), the shared columns' block is left unset, for a caller that has it
+    factored."""
     y = red.yd if target is None else target
-    if weights is not None and static and red.shared_grams is not None:
-        return _knee_corrected(red, ok, weights, y)
     ps = red.xs.shape[1]
     p = red.n_columns
     grams = np.empty((N_BLOCKS, p, p))
     rhs = np.empty((N_BLOCKS, p))
     bounds = red.rows.bounds
-    if static and red.shared_grams is not None:
-        grams[:, :ps, :ps] = red.shared_grams.of(red.xs, ok, bounds)
+    shared = red.shared_grams if weights is None else None  # the shared block's, formed
+    formed = shared is not None
+    if static and shared is not None:
+        grams[:, :ps, :ps] = shared.of(red.xs, ok, bounds)
     for b in range(N_BLOCKS):
         rows = slice(bounds[b], bounds[b + 1])
         xs, xe, yb, keep = red.xs[rows], red.xe[rows], y[rows], ok[rows]
@@ -442,7 +442,7 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
         if not keep.all():  # views where every row counts (no copy)
             xs, xe, yb = xs[keep], xe[keep], yb[keep]
             wb = None if wb is None else wb[keep]
-        if static and red.shared_grams is None:
+        if static and not formed:
             xw = xs if wb is None else xs * wb[:, None]
             grams[b, :ps, :ps] = xw.T @ xw
         own = xe if wb is None else xe * (wb**2)[:, None]  # Σ w²·x·xₑᵀ
@@ -499,15 +499,17 @@ def fold_system(red: Reduced, ok: np.ndarray, weights: np.ndarray, target: np.nd
 
 
 def _knee_corrected(red: Reduced, ok: np.ndarray, weights: np.ndarray, y: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`block_grams` with ``weights`` (at most 1): Σ w²·x·xᵀ is the unweighted Gram
-    matrix (formed once for the rows ``ok``, :func:`_whole_grams`) less the share 1 − w²
-    of each row whose weight is not 1. A fit through a stop (:mod:`.stops`) forms these at
-    every Gauss–Newton step, for every fold, with a knee holding a few percent to a third
-    of the rows: the other rows are not touched again."""
+                    ) -> tuple[list[np.ndarray], np.ndarray]:
+    """:func:`block_grams` with ``weights`` (at most 1), each block's Gram matrix apart:
+    Σ w²·x·xᵀ is the unweighted Gram matrix (formed once for the rows ``ok``,
+    :func:`_whole_grams`) less the share 1 − w² of each row whose weight is not 1. A fit
+    through a stop (:mod:`.stops`) forms these at every Gauss–Newton step, for every fold,
+    with a knee holding a few percent to a third of the rows: the other rows are not touched
+    again, and a block without a knee is the kept matrix itself (read only, never copied:
+    with a local map each block's is half a megabyte)."""
     whole = _whole_grams(red, ok)[0]
     ps = red.xs.shape[1]
-    grams = whole.copy()
+    grams: list[np.ndarray] = list(whole)
     rhs = np.empty((N_BLOCKS, red.n_columns))
     yw = np.where(ok, y * weights, 0.0)  # Σ w·x·t over the rows ok
     bent = ok & (weights != 1.0)
@@ -519,8 +521,30 @@ def _knee_corrected(red: Reduced, ok: np.ndarray, weights: np.ndarray, y: np.nda
         knee = bounds[b] + np.flatnonzero(bent[rows])
         if knee.size:
             z = _knee_rows(red, knee, weights)
-            grams[b] -= z.T @ z  # zᵀz of one array: a symmetric rank-k update in BLAS
+            grams[b] = grams[b] - z.T @ z  # zᵀz of one array: a symmetric rank-k update
     return grams, rhs
+
+
+def _knee_folds(red: Reduced, ok: np.ndarray, weights: np.ndarray, y: np.ndarray,
+                folds: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The weighted fit's systems from :func:`_knee_corrected`'s blocks: each fold's Gram
+    matrix (N_BLOCKS + 1, P, P; with ``folds`` False only the all-block one, (1, P, P)) and
+    right-hand side, and the all-block Gram matrix and right-hand side. The same numbers as
+    :func:`fold_sums` of the stacked blocks, without stacking them: the blocks are summed
+    in their order (as a sum over the stack's first axis is), and each fold's matrix is
+    written once."""
+    per_block, rhs = _knee_corrected(red, ok, weights, y)
+    gram_all = per_block[0].copy()
+    for gram in per_block[1:]:
+        gram_all += gram
+    rhs_all = rhs.sum(axis=0)
+    if not folds:
+        return gram_all[None], rhs_all[None], gram_all, rhs_all
+    fold_grams = np.empty((N_BLOCKS + 1,) + gram_all.shape)
+    for b, gram in enumerate(per_block):
+        np.subtract(gram_all, gram, out=fold_grams[b])
+    fold_grams[-1] = gram_all
+    return fold_grams, fold_sums(rhs, rhs_all), gram_all, rhs_all
 
 
 def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge, weights: np.ndarray | None = None,
@@ -534,12 +558,16 @@ def fold_coefs(red: Reduced, ok: np.ndarray, ridge: Ridge, weights: np.ndarray |
         factors = shared.factored(red.xs, ok, red.rows.bounds, ridge)
         if factors is not None:
             return _fold_coefs_factored(red, ok, ridge, factors, target, folds)
-    grams, rhs = block_grams(red, ok, weights, target)
-    gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
+    if weights is not None and shared is not None:
+        y = red.yd if target is None else target
+        fold_grams, fold_rhs, gram_all, rhs_all = _knee_folds(red, ok, weights, y, folds)
+    else:
+        grams, rhs = block_grams(red, ok, weights, target)
+        gram_all, rhs_all = grams.sum(axis=0), rhs.sum(axis=0)
+        # fold b's Gram matrix is the total minus block b's; the last is the total
+        fold_grams = fold_sums(grams, gram_all) if folds else gram_all[None]
+        fold_rhs = fold_sums(rhs, rhs_all) if folds else rhs_all[None]
     effect = ridge.effect_loading(gram_all)
-    # fold b's Gram matrix is the total minus block b's; the last is the total
-    fold_grams = fold_sums(grams, gram_all) if folds else gram_all[None]
-    fold_rhs = fold_sums(rhs, rhs_all) if folds else rhs_all[None]
     return ridge_solve(fold_grams, fold_rhs, ridge.loading(fold_grams, effect))
 
 
