@@ -29,6 +29,9 @@ from exohil.harness.acquisition import DeviceIdentity, SerialFrameSource, same_d
 from exohil.harness.frame_source import Frame
 
 WAIT_S = 30.0  # fail-safe bound on waits; never a pacing assumption
+#: Device timeout of a reader whose device a test kills and then stages something in its
+#: place, s: more than the staging takes on a loaded machine, less than ``WAIT_S``.
+STAGING_TIMEOUT_S = 6.0
 
 
 def _until(condition, timeout_s: float = WAIT_S, poll_s: float = 0.005) -> bool:
@@ -178,8 +181,11 @@ def test_killed_device_stale_link_to_an_unrelated_pty_is_refused(tmp_path: Path)
         assert proc.stdout is not None
         link = proc.stdout.readline().strip()
         target = os.readlink(link)
+        # the staging below (the kill, the reader noticing it, another process taking the
+        # pty's number) must end inside the device timeout: a fresh clone's CI run
+        # (2026-12-07, the discrepancy tests beside it) waited in vain with 1.5 s
         source = SerialFrameSource(link, backoff_initial_s=0.005, backoff_max_s=0.05,
-                                   device_timeout_s=1.5)
+                                   device_timeout_s=STAGING_TIMEOUT_S)
         with source:
             assert source.get(timeout=WAIT_S) is not None
             proc.send_signal(signal.SIGKILL)
@@ -189,6 +195,7 @@ def test_killed_device_stale_link_to_an_unrelated_pty_is_refused(tmp_path: Path)
             unrelated = _grab_pty(target)
             if unrelated is None:
                 pytest.skip(f"{target} was taken by another process; cannot stage the reuse")
+            assert source.alive, f"staged after the device timeout: {source.last_error}"
             tty.setraw(unrelated[1])
             before = termios.tcgetattr(unrelated[1])
             os.write(unrelated[0], b"".join(encode_frame(WireFrame(k, k * 4000, (999,) * 4))
