@@ -54,6 +54,14 @@ def test_memory_freed_inside_the_block_is_reused_and_given_back_after_it():
         assert _resident_mb() > held + 150  # freed (64 MB of it held before), yet kept
     assert _resident_mb() < held + 50  # given back on leaving
     assert _page_faults_to_fill(64) > 0  # and mapped afresh again
+    first, second = memory_reused(), memory_reused()  # overlapping, as two threads' are
+    first.__enter__()
+    second.__enter__()
+    first.__exit__(None, None, None)
+    _page_faults_to_fill(64)
+    assert _page_faults_to_fill(64) == 0  # the second block still holds
+    second.__exit__(None, None, None)
+    assert _page_faults_to_fill(64) > 0
 
 
 def test_forked_jobs_run_in_other_processes_and_come_back_in_order():

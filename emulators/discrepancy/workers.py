@@ -79,16 +79,18 @@ DEFAULT_TRIM_THRESHOLD, DEFAULT_MMAP_MAX = 128 * 1024, 65536
 #: Free memory at the top of the heap that glibc keeps rather than give back, inside
 #: :func:`memory_reused`: more than any analysis holds (the largest int ``mallopt`` takes).
 KEPT_TRIM_THRESHOLD = 2**31 - 1
-#: How deep :func:`memory_reused` blocks are nested in this process (the outermost one
-#: changes and restores the allocator).
-_MEMORY_REUSED_DEPTH = 0
+#: Blocks of :func:`memory_reused` open in this process, in any thread (the first to open
+#: changes the allocator, the last to close restores it), and the lock that guards the count.
+_memory_reused_blocks = 0
+_MEMORY_REUSED_LOCK = threading.Lock()
 
 
 @contextmanager
 def memory_reused() -> Iterator[None]:
     """Inside the block, arrays freed in this process leave their memory in its heap for the
-    next ones (glibc's allocator; elsewhere the block changes nothing); on leaving, the
-    allocator's defaults return and the heap's free memory goes back to the system.
+    next ones (glibc's allocator; elsewhere the block changes nothing); when the last block
+    open in the process (in any thread) is left, the allocator's defaults return and the
+    heap's free memory goes back to the system.
 
     By default glibc maps every allocation over a threshold (at most 32 MB) afresh and unmaps
     it when freed, and the kernel clears each page of a fresh mapping when it is first
@@ -100,25 +102,22 @@ def memory_reused() -> Iterator[None]:
     (1.14–1.17 GB either way). Setting either parameter ends glibc's own adjustment of its
     mapping threshold for the rest of the process.
     """
-    global _MEMORY_REUSED_DEPTH
+    global _memory_reused_blocks
     mallopt = _mallopt()
-    if mallopt is None or _MEMORY_REUSED_DEPTH:
-        _MEMORY_REUSED_DEPTH += 1
-        try:
-            yield
-        finally:
-            _MEMORY_REUSED_DEPTH -= 1
-        return
-    mallopt(M_MMAP_MAX, 0)
-    mallopt(M_TRIM_THRESHOLD, KEPT_TRIM_THRESHOLD)
-    _MEMORY_REUSED_DEPTH = 1
+    with _MEMORY_REUSED_LOCK:
+        _memory_reused_blocks += 1
+        if mallopt is not None and _memory_reused_blocks == 1:
+            mallopt(M_MMAP_MAX, 0)
+            mallopt(M_TRIM_THRESHOLD, KEPT_TRIM_THRESHOLD)
     try:
         yield
     finally:
-        _MEMORY_REUSED_DEPTH = 0
-        mallopt(M_MMAP_MAX, DEFAULT_MMAP_MAX)
-        mallopt(M_TRIM_THRESHOLD, DEFAULT_TRIM_THRESHOLD)
-        ctypes.CDLL(None).malloc_trim(0)
+        with _MEMORY_REUSED_LOCK:
+            _memory_reused_blocks -= 1
+            if mallopt is not None and _memory_reused_blocks == 0:
+                mallopt(M_MMAP_MAX, DEFAULT_MMAP_MAX)
+                mallopt(M_TRIM_THRESHOLD, DEFAULT_TRIM_THRESHOLD)
+                ctypes.CDLL(None).malloc_trim(0)
 
 
 def _mallopt() -> Callable[[int, int], int] | None:
