@@ -432,7 +432,6 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
     rhs = np.empty((N_BLOCKS, p))
     bounds = red.rows.bounds
     shared = red.shared_grams if weights is None else None  # the shared block's, formed
-    formed = shared is not None
     if static and shared is not None:
         grams[:, :ps, :ps] = shared.of(red.xs, ok, bounds)
     for b in range(N_BLOCKS):
@@ -442,7 +441,7 @@ def block_grams(red: Reduced, ok: np.ndarray, weights: np.ndarray | None = None,
         if not keep.all():  # views where every row counts (no copy)
             xs, xe, yb = xs[keep], xe[keep], yb[keep]
             wb = None if wb is None else wb[keep]
-        if static and not formed:
+        if static and shared is None:
             xw = xs if wb is None else xs * wb[:, None]
             grams[b, :ps, :ps] = xw.T @ xw
         own = xe if wb is None else xe * (wb**2)[:, None]  # Σ w²·x·xₑᵀ
