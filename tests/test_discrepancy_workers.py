@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info
 
-from exohil.emulators.discrepancy import workers
 from exohil.emulators.discrepancy.workers import (
     default_workers,
     forked_map,
+    glibc,
     memory_reused,
     one_blas_thread,
     workers_for,
@@ -40,7 +40,7 @@ def _resident_mb() -> float:
         return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-@pytest.mark.skipif(workers._mallopt() is None, reason="the C library is not glibc")
+@pytest.mark.skipif(glibc() is None, reason="the C library is not glibc")
 def test_memory_freed_inside_the_block_is_reused_and_given_back_after_it():
     _page_faults_to_fill(64)
     assert _page_faults_to_fill(64) > 0  # by default every large array is mapped afresh

@@ -103,31 +103,30 @@ def memory_reused() -> Iterator[None]:
     mapping threshold for the rest of the process.
     """
     global _memory_reused_blocks
-    mallopt = _mallopt()
+    libc = glibc()
     with _MEMORY_REUSED_LOCK:
         _memory_reused_blocks += 1
-        if mallopt is not None and _memory_reused_blocks == 1:
-            mallopt(M_MMAP_MAX, 0)
-            mallopt(M_TRIM_THRESHOLD, KEPT_TRIM_THRESHOLD)
+        if libc is not None and _memory_reused_blocks == 1:
+            libc.mallopt(M_MMAP_MAX, 0)
+            libc.mallopt(M_TRIM_THRESHOLD, KEPT_TRIM_THRESHOLD)
     try:
         yield
     finally:
         with _MEMORY_REUSED_LOCK:
             _memory_reused_blocks -= 1
-            if mallopt is not None and _memory_reused_blocks == 0:
-                mallopt(M_MMAP_MAX, DEFAULT_MMAP_MAX)
-                mallopt(M_TRIM_THRESHOLD, DEFAULT_TRIM_THRESHOLD)
-                ctypes.CDLL(None).malloc_trim(0)
+            if libc is not None and _memory_reused_blocks == 0:
+                libc.mallopt(M_MMAP_MAX, DEFAULT_MMAP_MAX)
+                libc.mallopt(M_TRIM_THRESHOLD, DEFAULT_TRIM_THRESHOLD)
+                libc.malloc_trim(0)
 
 
-def _mallopt() -> Callable[[int, int], int] | None:
-    """glibc's ``mallopt``, or None where this process's C library is not glibc."""
+def glibc() -> ctypes.CDLL | None:
+    """This process's C library where it is glibc (Linux), else None (musl's ``mallopt``
+    takes the calls and does nothing; other systems have none)."""
     if not sys.platform.startswith("linux"):
         return None
     libc = ctypes.CDLL(None)
-    if not hasattr(libc, "gnu_get_libc_version") or not hasattr(libc, "malloc_trim"):
-        return None  # musl's mallopt takes the calls and does nothing
-    return libc.mallopt
+    return libc if hasattr(libc, "gnu_get_libc_version") else None
 
 
 def forked_map(job: Callable[[T], R], items: Sequence[T], workers: int) -> list[R]:
