@@ -27,6 +27,9 @@ from exohil.emulators.discrepancy import (
 )
 from exohil.emulators.discrepancy.candidates import (
     CREEP_HOLD_S,
+    LAG_LOG_TOL,
+    LAG_NAMED_STEPS,
+    _parabolic_step,
     best_candidate,
     creep_families,
     drift_options,
@@ -2308,13 +2311,19 @@ def test_a_sawtooth_drift_is_counted_before_nothing_is_named():
 
 
 def test_a_low_pass_behind_a_delay_is_fitted_as_both(tmp_path):
-    """A 30 ms low-pass followed by 20 ms of transport delay: neither single lag model."""
+    """A 30 ms low-pass followed by 20 ms of transport delay: neither single lag model.
+
+    The generator's low-pass (``hidden.py``, y[n] = a·x[n] + (1 − a)·y[n − 1]) answers in the
+    sample it is given; the workflow's, like the emulator's, is step-invariant and answers
+    one sample later, with the same pole: the same filter one sample (4 ms) behind. In the
+    workflow's terms the suit's delay is therefore 16 ms."""
     outcome = run(make_recording(Case("lag", "other", 1, seed=102)), "delayed low-pass")
     s = outcome.summary
     assert s["effects"][:1] == ["lag"], s["effects"]
     params = s["steps"][0]["params"]
     assert params["model"] == "first_order_delay", params
-    assert abs(params["tau_s"] - 0.03) < 0.006 and abs(params["delay_s"] - 0.02) < 0.006, params
+    delay_s = 0.02 - 1.0 / outcome.trial.rate_hz
+    assert abs(params["tau_s"] - 0.03) < 0.006 and abs(params["delay_s"] - delay_s) < 0.006, params
     floor = s["noise_floor"]
     assert s["gap_after"] ** 2 - floor**2 < 0.05 * (s["gap_before"] ** 2 - floor**2), s
     _assert_the_profile_reproduces(outcome, tmp_path, ('"first_order_delay"', '"second_order"'),
@@ -2393,9 +2402,38 @@ def _slew_limited_recording(seed: int, duration_s: float, sign: float = 1.0) -> 
         trajectory.frame_times(250.0), y), {"case": "slew limit"})
 
 
+def test_the_lag_search_steps_to_the_vertex_and_stops_where_nothing_is_left():
+    """Successive parabolic interpolation: on a parabola the first step is its vertex; the
+    best point at an end of those tried moves halfway to that end of the range; values that
+    make no parabola take a golden-section step into the wider side."""
+    def bowl(x: float) -> float:
+        return (x - 0.3) ** 2 + 1.0
+
+    tried = {x: bowl(x) for x in (-1.0, 0.0, 1.0, 2.0)}
+    assert _parabolic_step(tried, -2.0, 3.0) == pytest.approx(0.3)
+    tried[0.3] = bowl(0.3)
+    assert _parabolic_step(tried, -2.0, 3.0) is None  # the vertex is tried already
+    # the best at the lowest point tried: halfway to the range's end, then no further
+    assert _parabolic_step({0.0: 1.0, 1.0: 2.0}, -1.0, 2.0) == -0.5
+    golden_step = 1.0 - (5**0.5 - 1) / 2  # a golden-section point's share of its side
+    # the best at the range's end already: into the side between it and the next point
+    assert _parabolic_step({-1.0: 1.0, 1.0: 2.0}, -1.0, 2.0) == pytest.approx(
+        -1.0 + golden_step * 2.0)
+    assert _parabolic_step({0.0: 1.0, 1.0: 1.0, 2.0: 1.0}, 0.0, 2.0) == pytest.approx(
+        golden_step)  # flat: no parabola
+    assert _parabolic_step({0.0: math.inf, 1.0: math.inf}, 0.0, 1.0) is None
+    # a neighbour whose fit does not count: a golden-section step into the wider side
+    nxt = _parabolic_step({0.0: math.inf, 1.0: 1.0, 1.5: 2.0}, 0.0, 2.0)
+    assert nxt == pytest.approx(1.0 - golden_step)
+    # converged: the next point would lie within the tolerance of one tried
+    step = LAG_LOG_TOL / 4
+    assert _parabolic_step({-step: 1.0 + 1e-9, 0.0: 1.0, step: 1.0 + 2e-9}, -1.0, 1.0) is None
+
+
 def test_a_reading_that_runs_ahead_gets_no_rate_limit():
     trial = prepare_trial(_slew_limited_recording(seed=7, duration_s=30.0, sign=-1.0))
-    found = rate_limit_candidate(trial, make_inputs(trial, Spec(degree=3)), Spec(degree=3))
+    found = rate_limit_candidate(trial, make_inputs(trial, Spec(degree=3)), Spec(degree=3),
+                                 steps=LAG_NAMED_STEPS)
     assert found.spec.lag_rates == (math.inf,) * trial.n_sensors
     assert all(c[-1] == 0.0 for c in found.coef)
 
@@ -2408,7 +2446,7 @@ def test_the_rate_limit_search_ignores_frames_held_still():
     inputs.static[: int(0.8 * trial.n)] = inputs.static[0]  # held still for 80 % of frames
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        found = rate_limit_candidate(trial, inputs, Spec(degree=3))
+        found = rate_limit_candidate(trial, inputs, Spec(degree=3), steps=LAG_NAMED_STEPS)
     assert not np.isnan(found.spec.lag_rates).any() and min(found.spec.lag_rates) > 0
 
 
