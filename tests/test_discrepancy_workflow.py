@@ -28,7 +28,7 @@ from exohil.emulators.discrepancy import (
 from exohil.emulators.discrepancy.candidates import (
     CREEP_HOLD_S,
     LAG_LOG_TOL,
-    LAG_NAMED_STEPS,
+    RATE_LIMIT_STEPS,
     _parabolic_step,
     best_candidate,
     creep_families,
@@ -2404,18 +2404,20 @@ def _slew_limited_recording(seed: int, duration_s: float, sign: float = 1.0) -> 
 
 def test_the_lag_search_steps_to_the_vertex_and_stops_where_nothing_is_left():
     """Successive parabolic interpolation: on a parabola the first step is its vertex; the
-    best point at an end of those tried moves halfway to that end of the range; values that
-    make no parabola take a golden-section step into the wider side."""
+    best point at an end of those tried moves halfway to that end of the range; a vertex
+    next to a point tried, or values that make no parabola, take a golden-section step into
+    the wider side of the best point; a bracket narrower than twice the tolerance ends it."""
+    golden_step = 1.0 - (5**0.5 - 1) / 2  # a golden-section point's share of its side
+
     def bowl(x: float) -> float:
         return (x - 0.3) ** 2 + 1.0
 
     tried = {x: bowl(x) for x in (-1.0, 0.0, 1.0, 2.0)}
     assert _parabolic_step(tried, -2.0, 3.0) == pytest.approx(0.3)
-    tried[0.3] = bowl(0.3)
-    assert _parabolic_step(tried, -2.0, 3.0) is None  # the vertex is tried already
-    # the best at the lowest point tried: halfway to the range's end, then no further
+    tried[0.3] = bowl(0.3)  # the vertex again: into the wider side, towards 1.0
+    assert _parabolic_step(tried, -2.0, 3.0) == pytest.approx(0.3 + golden_step * 0.7)
+    # the best at the lowest point tried: halfway to the range's end
     assert _parabolic_step({0.0: 1.0, 1.0: 2.0}, -1.0, 2.0) == -0.5
-    golden_step = 1.0 - (5**0.5 - 1) / 2  # a golden-section point's share of its side
     # the best at the range's end already: into the side between it and the next point
     assert _parabolic_step({-1.0: 1.0, 1.0: 2.0}, -1.0, 2.0) == pytest.approx(
         -1.0 + golden_step * 2.0)
@@ -2425,15 +2427,18 @@ def test_the_lag_search_steps_to_the_vertex_and_stops_where_nothing_is_left():
     # a neighbour whose fit does not count: a golden-section step into the wider side
     nxt = _parabolic_step({0.0: math.inf, 1.0: 1.0, 1.5: 2.0}, 0.0, 2.0)
     assert nxt == pytest.approx(1.0 - golden_step)
-    # converged: the next point would lie within the tolerance of one tried
-    step = LAG_LOG_TOL / 4
+    # a far neighbour on a steep wall: the vertex falls next to the best point
+    wall = {1.921: 0.911, 3.595: 0.0791, 3.993: 0.125}
+    assert _parabolic_step(wall, 1.0, 5.0) == pytest.approx(3.595 - golden_step * 1.674)
+    # converged: the best point's bracket is narrower than twice the tolerance
+    step = LAG_LOG_TOL / 2
     assert _parabolic_step({-step: 1.0 + 1e-9, 0.0: 1.0, step: 1.0 + 2e-9}, -1.0, 1.0) is None
 
 
 def test_a_reading_that_runs_ahead_gets_no_rate_limit():
     trial = prepare_trial(_slew_limited_recording(seed=7, duration_s=30.0, sign=-1.0))
     found = rate_limit_candidate(trial, make_inputs(trial, Spec(degree=3)), Spec(degree=3),
-                                 steps=LAG_NAMED_STEPS)
+                                 steps=RATE_LIMIT_STEPS)
     assert found.spec.lag_rates == (math.inf,) * trial.n_sensors
     assert all(c[-1] == 0.0 for c in found.coef)
 
@@ -2446,7 +2451,7 @@ def test_the_rate_limit_search_ignores_frames_held_still():
     inputs.static[: int(0.8 * trial.n)] = inputs.static[0]  # held still for 80 % of frames
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        found = rate_limit_candidate(trial, inputs, Spec(degree=3), steps=LAG_NAMED_STEPS)
+        found = rate_limit_candidate(trial, inputs, Spec(degree=3), steps=RATE_LIMIT_STEPS)
     assert not np.isnan(found.spec.lag_rates).any() and min(found.spec.lag_rates) > 0
 
 
