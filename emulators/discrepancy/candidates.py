@@ -44,7 +44,8 @@ LAG_MODELS = ("first_order", "delay", "rate_limit")
 LAG_TAU_S = (0.01, 0.02, 0.04, 0.08, 0.2)
 LAG_DELAY_S = (0.01, 0.025, 0.06, 0.15)
 #: Relative precision of a lag searched between its grid neighbours (log seconds): a
-#: search stops where its next point would lie closer than this to one already fitted.
+#: search ends once the best point's bracket is narrower than twice this
+#: (:func:`_parabolic_step`).
 LAG_LOG_TOL = 0.02
 #: Steps of successive parabolic interpolation (:func:`_parabolic_step`) after the grid of
 #: the low-pass and of the delay while the candidates are compared.
@@ -307,7 +308,7 @@ def rate_limit_candidate(trial: Trial, inputs: Inputs, spec: Spec, *, steps: int
     fastest moves, whatever their frequency. Each sensor's limit is searched on its own
     (sensors are fitted independently, so every fit tries one limit per sensor): at the
     ``RATE_LIMIT_QUANTILES`` of its static prediction's speed, then by ``steps`` steps of
-    GOLDEN-section search on the log limit between the best one's neighbours (the held-out
+    golden-section search on the log limit between the best one's neighbours (the held-out
     error is sharp in the limit: on a suit limited at its 99.5th percentile of speed, the
     99th and 99.7th leave a third of the effect or more): ``RATE_LIMIT_COMPARE_STEPS`` while
     the candidates are compared, ``RATE_LIMIT_STEPS`` once a rate limit is named.
@@ -340,7 +341,7 @@ def rate_limit_candidate(trial: Trial, inputs: Inputs, spec: Spec, *, steps: int
         k == len(grid) - 1, math.log(2.0), 0.0)
     x1, x2 = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
     f1, f2 = at(x1)[1], at(x2)[1]
-    for _ in range(steps):  # every sensor's bracket shrinks by the GOLDEN ratio
+    for _ in range(steps):  # every sensor's bracket shrinks by the golden ratio
         left = f1 < f2  # the minimum lies in [lo, x2]
         hi, lo = np.where(left, x2, hi), np.where(left, lo, x1)
         x1, x2, f1, f2 = (np.where(left, hi - GOLDEN * (hi - lo), x2),
