@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -160,7 +161,17 @@ def test_recording_sizes_are_in_bytes(report_module):
     assert "1234567  B" in line
 
 
-def test_run_main_turns_input_errors_into_one_line_and_ctrl_c_into_130(report_module, capsys):
+@pytest.fixture
+def sigint_restored() -> Iterator[None]:
+    """SIGINT's handler in this process restored after the test (``run_main`` sets its own,
+    and a test that runs later in this process must find the one it inherited)."""
+    before = signal.getsignal(signal.SIGINT)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
+def test_run_main_turns_input_errors_into_one_line_and_ctrl_c_into_130(report_module, capsys,
+                                                                         sigint_restored):
     from exohil.estimator.checkpoint import CheckpointError
 
     def raising(exc):
@@ -182,7 +193,6 @@ def test_run_main_turns_input_errors_into_one_line_and_ctrl_c_into_130(report_mo
         with pytest.raises(SystemExit) as exit_:
             report_module.run_main(lambda returned=returned: returned)
         assert exit_.value.code == status
-    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 CTRL_C = """

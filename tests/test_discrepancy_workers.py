@@ -8,6 +8,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -142,7 +144,7 @@ def _running(pid: int) -> bool:
 
 
 CTRL_C_WHILE_THE_WORKERS_RUN = """
-import os, sys, time
+import os, signal, sys, time
 import exohil.emulators.discrepancy as discrepancy
 from exohil.emulators.discrepancy.workers import forked_map
 from exohil.harness.cli import main
@@ -156,6 +158,7 @@ def analysis(*args, **kwargs):
     forked_map(job, [1, 0], workers=2)
 
 discrepancy.run = analysis
+signal.signal(signal.SIGINT, signal.default_int_handler)  # as at a terminal, not as inherited
 main(["discrepancy", sys.argv[1], "--out", sys.argv[2]])
 """
 
@@ -192,6 +195,18 @@ def test_ctrl_c_while_the_workers_run_stops_at_once_with_one_line(tmp_path):
     assert time.monotonic() - started < 10 and not out.exists()
 
 
+@contextmanager
+def sigint_handled_by(handler: Callable | signal.Handlers) -> Iterator[None]:
+    """SIGINT's handler in this process inside the block, restored after: a test must not
+    rely on the one it inherits (a command a script starts in the background ignores
+    SIGINT, and Python then leaves it ignored)."""
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 @pytest.mark.skipif(sys.platform != "linux", reason="only Linux forks the workers")
 def test_a_sigint_to_this_process_alone_is_raised_once_the_pool_is_down(tmp_path):
     """The KeyboardInterrupt is raised when the map ends, by the handler that was there, and
@@ -205,9 +220,9 @@ def test_a_sigint_to_this_process_alone_is_raised_once_the_pool_is_down(tmp_path
         (tmp_path / str(k)).touch()
         return k
 
-    before = signal.getsignal(signal.SIGINT)
-    with pytest.raises(KeyboardInterrupt):
-        forked_map(job, [0, 1, 2, 3, 4, 5], workers=2)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["0", "1", "2", "3", "4", "5"]
-    assert signal.getsignal(signal.SIGINT) is before
-    assert forked_map(job, [1, 2], workers=2) == [1, 2]  # no SIGINT: no KeyboardInterrupt
+    with sigint_handled_by(signal.default_int_handler):
+        with pytest.raises(KeyboardInterrupt):
+            forked_map(job, [0, 1, 2, 3, 4, 5], workers=2)
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["0", "1", "2", "3", "4", "5"]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        assert forked_map(job, [1, 2], workers=2) == [1, 2]  # no SIGINT: no KeyboardInterrupt
