@@ -226,3 +226,26 @@ def test_a_sigint_to_this_process_alone_is_raised_once_the_pool_is_down(tmp_path
         assert sorted(p.name for p in tmp_path.iterdir()) == ["0", "1", "2", "3", "4", "5"]
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
         assert forked_map(job, [1, 2], workers=2) == [1, 2]  # no SIGINT: no KeyboardInterrupt
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="only Linux forks the workers")
+def test_where_this_process_ignores_sigint_its_workers_ignore_it_too(tmp_path):
+    """A SIGINT to this process and to the worker running a job changes nothing where this
+    process ignores SIGINT: every job ends and nothing is raised (until 2026-12-07 the
+    worker's job was abandoned and the map raised ``KeyboardInterrupt``)."""
+    def job(k: int) -> int:
+        if k == 0:
+            os.kill(os.getppid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)
+        (tmp_path / str(k)).touch()
+        return k
+
+    with sigint_handled_by(signal.SIG_IGN):
+        try:
+            done = forked_map(job, [0, 1, 2, 3], workers=2)
+        except KeyboardInterrupt:  # fail this test, rather than end pytest's whole run
+            pytest.fail("the map raised KeyboardInterrupt")
+        assert done == [0, 1, 2, 3]
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["0", "1", "2", "3"]

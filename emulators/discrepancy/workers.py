@@ -46,6 +46,8 @@ PR_SET_PDEATHSIG = 1
 #: The job of the forked pool now running (:func:`forked_map`): a fork inherits it, so it
 #: may be any callable (a closure over the step's state), never pickled.
 _FORKED_JOB: Callable | None = None
+#: What SIGINT does while a forked worker runs a job (set by :func:`_start_worker`).
+_JOB_SIGINT: Callable | signal.Handlers = signal.SIG_IGN
 
 
 def default_workers() -> int:
@@ -143,7 +145,9 @@ def forked_map(job: Callable[[T], R], items: Sequence[T], workers: int) -> list[
     traceback: each worker abandons the job it runs as soon as that job is back in Python
     code from a long NumPy or LAPACK call (under 2 s, docs/discrepancy.md), and this process's
     ``KeyboardInterrupt`` waits until the pool is down (:func:`_ctrl_c_after`). A SIGINT
-    sent to this process alone, not to its workers, takes effect when the map ends.
+    sent to this process alone, not to its workers, takes effect when the map ends. Where this
+    process does not handle SIGINT (ignored, as in a command a script starts in the
+    background, or the default action), the workers ignore it too.
     """
     global _FORKED_JOB
     if workers <= 1 or len(items) <= 1 or sys.platform != "linux":
@@ -151,11 +155,13 @@ def forked_map(job: Callable[[T], R], items: Sequence[T], workers: int) -> list[
     if _FORKED_JOB is not None:
         raise RuntimeError("forked_map is not re-entrant")
     _FORKED_JOB = job
+    interruptible = callable(signal.getsignal(signal.SIGINT))
     try:
         context = multiprocessing.get_context("fork")
         with _ctrl_c_after(), \
                 ProcessPoolExecutor(min(workers, len(items)), mp_context=context,
-                                    initializer=_start_worker, initargs=(os.getpid(),)) as pool:
+                                    initializer=_start_worker,
+                                    initargs=(os.getpid(), interruptible)) as pool:
             return list(pool.map(_run_forked_job, items))
     finally:
         _FORKED_JOB = None
@@ -186,9 +192,10 @@ def _ctrl_c_after() -> Iterator[None]:
             previous(signal.SIGINT, seen[0])
 
 
-def _start_worker(parent: int) -> None:
+def _start_worker(parent: int, interruptible: bool) -> None:
     """Make a forked worker end with ``parent``, however it ends, and ignore Ctrl-C between
-    jobs (:func:`_run_forked_job`).
+    jobs, and in them too unless ``interruptible`` (``parent`` handles SIGINT;
+    :func:`_run_forked_job`).
 
     A fork inherits both ends of the pool's pipes, so a worker whose parent was killed
     (SIGTERM, SIGKILL, out of memory) never reads the end of its queue and would wait
@@ -199,7 +206,9 @@ def _start_worker(parent: int) -> None:
     waiting for its next job printed its ``KeyboardInterrupt``'s traceback; one ended while
     it sent its result would leave the pool waiting for the rest of it forever. Between
     jobs the worker ignores it; the pool ends it when it shuts down."""
+    global _JOB_SIGINT
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _JOB_SIGINT = signal.default_int_handler if interruptible else signal.SIG_IGN
     libc = ctypes.CDLL(None, use_errno=True)
     libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
     if os.getppid() != parent:  # the parent ended before the signal was set
@@ -208,9 +217,10 @@ def _start_worker(parent: int) -> None:
 
 def _run_forked_job(item: Any) -> Any:
     """The inherited job on one item (runs in a forked worker); Ctrl-C abandons it with
-    ``KeyboardInterrupt``, which the pool sends back as the job's result."""
+    ``KeyboardInterrupt``, which the pool sends back as the job's result, where the worker's
+    parent handles SIGINT (:func:`_start_worker`)."""
     assert _FORKED_JOB is not None, "a forked worker inherits the job"
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGINT, _JOB_SIGINT)
     try:
         return _FORKED_JOB(item)
     finally:
