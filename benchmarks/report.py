@@ -150,8 +150,10 @@ def run_main(main: Callable[[], object], interrupted: str = "nothing written") -
     :class:`~exohil.formats.errors.InputError`: a checkpoint, a recording, a session; an
     operating-system error), 130 with
     ``interrupted; <interrupted>`` on Ctrl-C. Other exceptions are bugs and keep their
-    traceback. Worker processes end silently on Ctrl-C, so that pools stop at once."""
-    if threading.current_thread() is threading.main_thread():
+    traceback. Worker processes end silently on Ctrl-C, so that pools stop at once. Started
+    with SIGINT ignored (a command a script starts in the background), the benchmark and its
+    workers ignore it."""
+    if threading.current_thread() is threading.main_thread() and _sigint_handled():
         signal.signal(signal.SIGINT, _interrupt)
     if sys.version_info < (3, 12) and not getattr(threading.excepthook,
                                                   "quiets_cancelled_future_race", False):
@@ -171,7 +173,13 @@ def run_main(main: Callable[[], object], interrupted: str = "nothing written") -
     sys.exit(status if isinstance(status, int) else 0)
 
 
-if "--multiprocessing-fork" in sys.orig_argv:  # imported in a spawned worker
+def _sigint_handled() -> bool:
+    """Whether SIGINT is not ignored in this process (a process started with it ignored
+    leaves it ignored, and so do the processes it spawns)."""
+    return signal.getsignal(signal.SIGINT) is not signal.SIG_IGN
+
+
+if "--multiprocessing-fork" in sys.orig_argv and _sigint_handled():  # a spawned worker
     signal.signal(signal.SIGINT, _exit_quietly)
 
 

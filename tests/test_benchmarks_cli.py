@@ -226,6 +226,55 @@ def test_ctrl_c_stops_the_workers_at_once_without_tracebacks(tmp_path):
     assert proc.returncode == 130 and err == "interrupted; nothing written\n", err
 
 
+def test_run_main_leaves_an_ignored_sigint_ignored(report_module, sigint_restored):
+    seen = []
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with pytest.raises(SystemExit) as exit_:
+        report_module.run_main(lambda: seen.append(signal.getsignal(signal.SIGINT)))
+    assert exit_.value.code == 0 and seen == [signal.SIG_IGN]
+
+
+SIGINT_IGNORED = """
+import os, signal, sys, time
+from concurrent.futures import ProcessPoolExecutor
+import multiprocessing
+sys.path.insert(0, {root!r})
+from benchmarks.report import run_main
+
+def nap(k):
+    print("napping", flush=True)
+    time.sleep(2)
+    return k
+
+def main():
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        print(list(pool.map(nap, range(2))), flush=True)
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as a script's `cmd &` starts it
+    run_main(main)
+"""
+
+
+def test_a_benchmark_started_with_sigint_ignored_and_its_workers_run_on(tmp_path):
+    """Until 2026-12-07 its spawned workers ended at the group's SIGINT (and the benchmark
+    with 130)."""
+    script = tmp_path / "ignored.py"
+    script.write_text(SIGINT_IGNORED.format(root=str(ROOT)))
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        assert proc.stdout is not None
+        assert [proc.stdout.readline(), proc.stdout.readline()] == ["napping\n"] * 2
+        os.killpg(proc.pid, signal.SIGINT)  # what the terminal sends on Ctrl-C
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 0 and out == "[0, 1]\n" and err == "", (out, err)
+
+
 def test_the_pools_cancelled_future_race_is_quiet_and_other_thread_errors_are_not():
     """The InvalidStateError Python 3.11's process pool raises in its manager thread's
     ``terminate_broken`` on Ctrl-C (CPython gh-107219) is dropped; the same error raised
