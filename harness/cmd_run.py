@@ -49,7 +49,9 @@ def status_line(status: Status) -> None:
 
 @contextmanager
 def stop_on_signals() -> Iterator[threading.Event]:
-    """An event set by SIGINT or SIGTERM while the block runs (previous handlers restored)."""
+    """An event set by SIGINT or SIGTERM while the block runs (previous handlers restored);
+    one this process ignores (SIGINT, in a command a script starts in the background) stays
+    ignored."""
     stop = threading.Event()
 
     def handler(signum, frame) -> None:
@@ -58,7 +60,8 @@ def stop_on_signals() -> Iterator[threading.Event]:
         click.echo("\nstopping (again to abort) ...", err=True)
         stop.set()
 
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)
+                if signal.getsignal(sig) is not signal.SIG_IGN}
     try:
         yield stop
     finally:

@@ -210,6 +210,7 @@ def main():
         print("ready", flush=True)
         list(pool.map(nap, range(4)))
 
+signal.signal(signal.SIGINT, signal.default_int_handler)  # as at a terminal, not as inherited
 run_main(main)
 """
 

@@ -3,6 +3,7 @@ and its report folder; `exohil run --out` against a separately started `exohil e
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from collections import Counter
@@ -14,6 +15,7 @@ from cli_interrupt import interrupt_once_streaming
 from click.testing import CliRunner
 from PIL import Image
 
+from exohil.harness import cmd_run
 from exohil.harness.cli import main
 from exohil.harness.paths import FIXTURES_DIR
 
@@ -589,3 +591,19 @@ def test_a_demo_of_a_recording_in_volts_names_the_file(tmp_path):
     errors = [line for line in result.output.splitlines() if line.startswith("Error")]
     assert errors == [f"Error: {volts}: sensor values are in 'V'; wire protocol v1 carries "
                       "mm, and the emulator streams the recording over it"], result.output
+
+
+def test_a_signal_this_process_ignores_stays_ignored_while_a_run_waits_for_one():
+    """SIGTERM stops a demo or run; a SIGINT that the process was started ignoring (a
+    script's `exohil run ... &`) does not (until 2026-12-07 the run took it as Ctrl-C)."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with cmd_run.stop_on_signals() as stop:
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            os.kill(os.getpid(), signal.SIGINT)
+            assert not stop.wait(0.2)
+            os.kill(os.getpid(), signal.SIGTERM)
+            assert stop.wait(2.0)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
