@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from cli_interrupt import sigint_handled_by, started_with_sigint
 
 ROOT = Path(__file__).resolve().parents[1]
 FIXTURE = ROOT / "fixtures" / "paper_protocol.mcap"
@@ -210,7 +211,6 @@ def main():
         print("ready", flush=True)
         list(pool.map(nap, range(4)))
 
-signal.signal(signal.SIGINT, signal.default_int_handler)  # as at a terminal, not as inherited
 run_main(main)
 """
 
@@ -218,8 +218,9 @@ run_main(main)
 def test_ctrl_c_stops_the_workers_at_once_without_tracebacks(tmp_path):
     script = tmp_path / "ctrl_c.py"
     script.write_text(CTRL_C.format(root=str(ROOT)))
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(started_with_sigint(signal.SIG_DFL, [sys.executable, str(script)]),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # SIGINT as at a terminal
     assert proc.stdout is not None and proc.stdout.readline() == "ready\n"
     time.sleep(1.0)  # the workers have started their naps
     os.killpg(proc.pid, signal.SIGINT)  # what the terminal sends on Ctrl-C
@@ -227,16 +228,15 @@ def test_ctrl_c_stops_the_workers_at_once_without_tracebacks(tmp_path):
     assert proc.returncode == 130 and err == "interrupted; nothing written\n", err
 
 
-def test_run_main_leaves_an_ignored_sigint_ignored(report_module, sigint_restored):
+def test_run_main_leaves_an_ignored_sigint_ignored(report_module):
     seen = []
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    with pytest.raises(SystemExit) as exit_:
+    with sigint_handled_by(signal.SIG_IGN), pytest.raises(SystemExit) as exit_:
         report_module.run_main(lambda: seen.append(signal.getsignal(signal.SIGINT)))
     assert exit_.value.code == 0 and seen == [signal.SIG_IGN]
 
 
 SIGINT_IGNORED = """
-import os, signal, sys, time
+import sys, time
 from concurrent.futures import ProcessPoolExecutor
 import multiprocessing
 sys.path.insert(0, {root!r})
@@ -252,7 +252,6 @@ def main():
         print(list(pool.map(nap, range(2))), flush=True)
 
 if __name__ == "__main__":
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as a script's `cmd &` starts it
     run_main(main)
 """
 
@@ -262,8 +261,9 @@ def test_a_benchmark_started_with_sigint_ignored_and_its_workers_run_on(tmp_path
     with 130)."""
     script = tmp_path / "ignored.py"
     script.write_text(SIGINT_IGNORED.format(root=str(ROOT)))
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(started_with_sigint(signal.SIG_IGN, [sys.executable, str(script)]),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # SIGINT as a script's `cmd &` has it
     try:
         assert proc.stdout is not None
         assert [proc.stdout.readline(), proc.stdout.readline()] == ["napping\n"] * 2

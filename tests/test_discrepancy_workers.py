@@ -8,12 +8,11 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_interrupt import sigint_handled_by, started_with_sigint
 from threadpoolctl import threadpool_info
 
 from exohil.emulators.discrepancy.workers import (
@@ -144,7 +143,7 @@ def _running(pid: int) -> bool:
 
 
 CTRL_C_WHILE_THE_WORKERS_RUN = """
-import os, signal, sys, time
+import os, sys, time
 import exohil.emulators.discrepancy as discrepancy
 from exohil.emulators.discrepancy.workers import forked_map
 from exohil.harness.cli import main
@@ -158,7 +157,6 @@ def analysis(*args, **kwargs):
     forked_map(job, [1, 0], workers=2)
 
 discrepancy.run = analysis
-signal.signal(signal.SIGINT, signal.default_int_handler)  # as at a terminal, not as inherited
 main(["discrepancy", sys.argv[1], "--out", sys.argv[2]])
 """
 
@@ -176,7 +174,9 @@ def test_ctrl_c_while_the_workers_run_stops_at_once_with_one_line(tmp_path):
     write_recording(path, make_recording(Case("clean", "lib", 1, seed=3, duration_s=12.0)))
     script = tmp_path / "ctrl_c.py"
     script.write_text(CTRL_C_WHILE_THE_WORKERS_RUN)
-    proc = subprocess.Popen([sys.executable, str(script), str(path), str(out)],
+    proc = subprocess.Popen(started_with_sigint(signal.SIG_DFL,  # as at a terminal
+                                                [sys.executable, str(script), str(path),
+                                                 str(out)]),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
@@ -193,18 +193,6 @@ def test_ctrl_c_while_the_workers_run_stops_at_once_with_one_line(tmp_path):
     assert proc.returncode == 130, err
     assert err == f"interrupted: {out} left as it was (no output of this run written)\n", err
     assert time.monotonic() - started < 10 and not out.exists()
-
-
-@contextmanager
-def sigint_handled_by(handler: Callable | signal.Handlers) -> Iterator[None]:
-    """SIGINT's handler in this process inside the block, restored after: a test must not
-    rely on the one it inherits (a command a script starts in the background ignores
-    SIGINT, and Python then leaves it ignored)."""
-    previous = signal.signal(signal.SIGINT, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="only Linux forks the workers")

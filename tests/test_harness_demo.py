@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_interrupt import interrupt_once_streaming
+from cli_interrupt import interrupt_once_streaming, sigint_handled_by
 from click.testing import CliRunner
 from PIL import Image
 
@@ -596,8 +596,7 @@ def test_a_demo_of_a_recording_in_volts_names_the_file(tmp_path):
 def test_a_signal_this_process_ignores_stays_ignored_while_a_run_waits_for_one():
     """SIGTERM stops a demo or run; a SIGINT that the process was started ignoring (a
     script's `exohil run ... &`) does not (until 2026-12-07 the run took it as Ctrl-C)."""
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
+    with sigint_handled_by(signal.SIG_IGN):
         with cmd_run.stop_on_signals() as stop:
             assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
             os.kill(os.getpid(), signal.SIGINT)
@@ -605,5 +604,3 @@ def test_a_signal_this_process_ignores_stays_ignored_while_a_run_waits_for_one()
             os.kill(os.getpid(), signal.SIGTERM)
             assert stop.wait(2.0)
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
-    finally:
-        signal.signal(signal.SIGINT, previous)
