@@ -236,14 +236,14 @@ def test_run_main_leaves_an_ignored_sigint_ignored(report_module):
 
 
 SIGINT_IGNORED = """
-import sys, time
+import os, sys, time
 from concurrent.futures import ProcessPoolExecutor
 import multiprocessing
 sys.path.insert(0, {root!r})
 from benchmarks.report import run_main
 
 def nap(k):
-    print("napping", flush=True)
+    os.write(1, b"napping\\n")  # one write: two workers' prints came out interleaved
     time.sleep(2)
     return k
 
