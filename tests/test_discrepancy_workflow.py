@@ -109,6 +109,7 @@ from exohil.emulators.discrepancy.model import (
     local_terms,
     loop_width_terms,
     make_inputs,
+    map_inputs,
     map_ridge,
     restrict_to_coverage,
     segment_lengths,
@@ -1438,6 +1439,42 @@ def test_no_lead_is_searched_where_the_motion_capture_covers_under_half_the_read
         stream, t=stream.t[head], angles=stream.angles[head])})
     found = lead_search(rec, prepare_trial(rec, "partly tracked"))
     assert found == {"lead_s": 0.0, "share": 0.0}
+
+
+def test_the_search_scores_each_lead_on_the_frames_its_reading_covers(
+        default_suit_calibration):
+    """Motion capture stamped 0.5 s late with a 5 s dropout in its middle: each lead is
+    scored over the frames whose reading it covers, many leads at a time, the frames it
+    does not cover weighing nothing. The share the search reports is what a cubic fitted
+    to those frames alone removes (here a lead at a time, by a least-squares solver), and
+    the search finds the same in one process or two."""
+    stream = default_suit_calibration.mocap["shoulder"]
+    middle = 0.5 * (stream.t[0] + stream.t[-1])
+    kept = np.abs(stream.t - middle) > 2.5
+    rec = _stamped_late(replace(default_suit_calibration, mocap={"shoulder": replace(
+        stream, t=stream.t[kept], angles=stream.angles[kept])}), 0.5)
+    trial = prepare_trial(rec, "dropout")
+    found = lead_search(rec, trial)
+    assert found == lead_search(rec, trial, workers=2)
+    assert found["lead_s"] == pytest.approx(0.5, abs=0.02)
+
+    t_mocap, names = rec.mocap["shoulder"].t, rec.mocap["shoulder"].names
+    angles = rec.mocap["shoulder"].angles[:, [names.index(a) for a in trial.angle_names]]
+    rows = np.arange(0, trial.n, round(trial.rate_hz * 0.1))
+
+    def left(lead: float) -> float:
+        read = trial.t[rows] + lead
+        inside = (read >= t_mocap[0]) & (read <= t_mocap[-1]) & ~in_mocap_gap(read, t_mocap)
+        assert 0 < inside.sum() < len(rows)
+        at = np.column_stack([np.interp(read[inside], t_mocap, a) for a in angles.T])
+        u = map_inputs(at, trial.angle_names, angles.min(axis=0), angles.max(axis=0))[0]
+        basis = legendre_products(u, 3)[0]
+        y = trial.y[rows[inside]]
+        y = (y - y.mean(axis=0)) / y.std(axis=0)
+        coef = np.linalg.lstsq(basis, y, rcond=None)[0]
+        return float(np.mean((y - basis @ coef) ** 2))
+
+    assert found["share"] == pytest.approx(1.0 - left(found["lead_s"]) / left(0.0), abs=1e-4)
 
 
 def test_a_clock_offset_is_said_in_milliseconds_under_a_second_else_in_seconds():

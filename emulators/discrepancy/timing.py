@@ -36,6 +36,7 @@ from exohil.emulators.discrepancy.model import (
     restrict_to_coverage,
 )
 from exohil.emulators.discrepancy.rules import rules_on_blocks
+from exohil.emulators.discrepancy.workers import forked_map
 from exohil.formats.alignment import in_mocap_gap
 from exohil.formats.recording import Recording
 
@@ -63,6 +64,8 @@ SEARCH_FINE_S = 0.01
 SEARCH_ROW_S = 0.1
 SEARCH_DEGREE = 3
 SEARCH_MIN_S = 0.1
+#: Frames (leads × rows) that :func:`lead_search` scores at once: a few tens of megabytes.
+SEARCH_BATCH_ROWS = 20_000
 #: Leads whose cubic leaves at most this many times the least are as good as the best to
 #: :func:`lead_search`, which keeps the shortest of them.
 SEARCH_ALIAS = 1.25
@@ -134,7 +137,7 @@ def held_out_trend(trial: Trial, model: Fit, floor: float) -> dict:
                            block_mse(trial, model.residual - line[:, None] * slope), floor)
 
 
-def lead_search(rec: Recording, trial: Trial) -> dict:
+def lead_search(rec: Recording, trial: Trial, workers: int = 1) -> dict:
     """Where a coarse search finds the readings match the motion capture best when it is read
     later (or earlier) than ``trial`` reads it: ``lead_s``, s (positive: the readings run
     ahead of it; negative: behind), and ``share``, the part of what a cubic map leaves at
@@ -161,45 +164,71 @@ def lead_search(rec: Recording, trial: Trial) -> dict:
     lo, hi = raw.min(axis=0), raw.max(axis=0)
     rows = np.arange(0, len(trial.t), max(1, round(trial.rate_hz * SEARCH_ROW_S)))
     rows = rows[np.all(np.isfinite(trial.y[rows]), axis=1)]
-    t = trial.t[rows]
+    t, y = trial.t[rows], trial.y[rows]
     read0 = t + trial.mocap_late_s + trial.mocap_skew * (t - trial.t[0])
 
-    def left(lead: float) -> float:
-        """What the polynomial leaves with the motion capture read ``lead`` s later: mean
-        square over frames and sensors in units of each sensor's variance; inf where less
-        than half the frames are covered."""
-        read = read0 + lead
-        inside = (read >= t_mocap[0]) & (read <= t_mocap[-1]) & ~in_mocap_gap(read, t_mocap)
-        if 2 * int(inside.sum()) < len(rows):
-            return np.inf
-        angles = np.column_stack([np.interp(read[inside], t_mocap, raw[:, k])
-                                  for k in range(raw.shape[1])])
+    def left(leads: np.ndarray) -> np.ndarray:
+        """What the polynomial leaves with the motion capture read each of ``leads`` s
+        later: mean square over the frames it covers and the sensors that vary there, in
+        units of each sensor's variance; inf where less than half the frames are covered.
+        Scored in batches of ``SEARCH_BATCH_ROWS`` frames in ``workers`` processes: the
+        same scores in any number."""
+        size = max(1, SEARCH_BATCH_ROWS // max(1, len(rows)))
+        batches = [leads[first:first + size] for first in range(0, len(leads), size)]
+        return np.concatenate(forked_map(left_in_batch, batches, workers))
+
+    def left_in_batch(leads: np.ndarray) -> np.ndarray:
+        """:func:`left` of a batch of leads: each lead's frames that the motion capture
+        does not cover weighted 0, which sums what reading them apart would."""
+        read = read0[None, :] + leads[:, None]  # (L, R)
+        inside = ((read >= t_mocap[0]) & (read <= t_mocap[-1])
+                  & ~in_mocap_gap(read.ravel(), t_mocap).reshape(read.shape))
+        scores = np.full(len(leads), np.inf)
+        enough = np.flatnonzero(2 * inside.sum(axis=1) >= len(rows))
+        if enough.size:
+            scores[enough] = left_covered(read[enough], inside[enough])
+        return scores
+
+    def left_covered(read: np.ndarray, inside: np.ndarray) -> np.ndarray:
+        """:func:`left` of the leads whose reading times are ``read`` (L, R), of which the
+        motion capture covers ``inside`` (L, R), at least half of each."""
+        angles = np.stack([np.interp(read, t_mocap, raw[:, k]) for k in range(raw.shape[1])],
+                          axis=-1).reshape(-1, raw.shape[1])
         u = map_inputs(angles, trial.angle_names, lo, hi)[0]
         basis = legendre_products(u, SEARCH_DEGREE - (u.shape[1] > 3))[0]
-        y = trial.y[rows[inside]]
-        y = y - y.mean(axis=0)
-        scale = y.std(axis=0)
-        y = y[:, scale > 0] / scale[scale > 0]
-        gram = basis.T @ basis  # normal equations: a least-squares solver is 10x slower
-        gram[np.diag_indices_from(gram)] += 1e-9 * np.trace(gram) / len(gram)
-        coef = np.linalg.solve(gram, basis.T @ y)
-        return float(np.mean((y - basis @ coef) ** 2))
+        basis = basis.reshape(read.shape + (-1,))  # (L, R, P)
+        w = inside.astype(float)
+        n = w.sum(axis=1)  # (L,)
+        dev = y[None] - ((w @ y) / n[:, None])[:, None, :]  # (L, R, S) about each mean
+        scale = np.sqrt(np.einsum("lr,lrs->ls", w, dev * dev) / n[:, None])
+        varies = scale > 0
+        z = dev * (w[..., None] / np.where(varies, scale, 1.0)[:, None, :])  # 0 outside
+        weighted = basis * w[..., None]
+        # normal equations: a least-squares solver is 10x slower
+        gram = np.swapaxes(weighted, 1, 2) @ basis
+        ridge = 1e-9 * np.trace(gram, axis1=1, axis2=2) / gram.shape[1]
+        gram[:, np.arange(gram.shape[1]), np.arange(gram.shape[1])] += ridge[:, None]
+        coef = np.linalg.solve(gram, np.swapaxes(weighted, 1, 2) @ z)
+        rest = (z - weighted @ coef) * varies[:, None, :]
+        cells = n * varies.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(cells > 0, np.sum(rest * rest, axis=(1, 2)) / cells, np.inf)
 
-    stamped = left(0.0)
     steps = int(min(SEARCH_MAX_S, 0.25 * float(trial.t[-1] - trial.t[0])) / SEARCH_STEP_S
                 + 1e-9)
+    coarse = SEARCH_STEP_S * np.arange(-steps, steps + 1)
+    scores = left(coarse)
+    stamped = float(scores[steps])
     if steps < 1 or not 0.0 < stamped < np.inf:
         return {"lead_s": 0.0, "share": 0.0}
-    coarse = SEARCH_STEP_S * np.arange(-steps, steps + 1)
-    scores = np.array([stamped if lead == 0.0 else left(lead) for lead in coarse])
     near = coarse[scores <= SEARCH_ALIAS * scores.min()]
     pick = float(near[int(np.argmin(np.abs(near)))])
     fine = pick + SEARCH_FINE_S * np.arange(-round(SEARCH_STEP_S / SEARCH_FINE_S),
                                             round(SEARCH_STEP_S / SEARCH_FINE_S) + 1)
-    fine_scores = [stamped if abs(lead) < 1e-12 else left(lead) for lead in fine]
+    fine_scores = np.where(np.abs(fine) < 1e-12, stamped, left(fine))
     best = int(np.argmin(fine_scores))
     return {"lead_s": round(float(fine[best]), 3),
-            "share": round(max(0.0, 1.0 - fine_scores[best] / stamped), 4)}
+            "share": round(max(0.0, 1.0 - float(fine_scores[best]) / stamped), 4)}
 
 
 def first_order_lead(trial: Trial, model: Fit, floor: float) -> float | None:
@@ -331,7 +360,8 @@ def _searched_clock(searched: dict) -> bool:
 
 
 def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
-                 floor: float, static_map: MapFit) -> tuple[Trial, Inputs, Fit, dict | None]:
+                 floor: float, static_map: MapFit, workers: int = 1
+                 ) -> tuple[Trial, Inputs, Fit, dict | None]:
     """The trial read with the motion capture's clock offset where the readings run ahead
     of it (or a second or more behind it), with its scaled inputs and static map
     (``static_map``, refitted on the trial so read); the evidence (None: nothing found;
@@ -354,9 +384,10 @@ def clock_offset(rec: Recording, name: str, trial: Trial, scaled: Inputs, static
     the noise: an offset moves every sensor by its own speed alike and, where it is the
     cause, explains nearly all of it, while an effect whose loop reads a little ahead (a
     Bouc–Wen loop on the hidden suite reads 7 ms ahead) keeps most of its residual. The
-    evidence holds the search's ``searched`` where it led the way.
+    evidence holds the search's ``searched`` where it led the way. The search runs in
+    ``workers`` processes.
     """
-    tried, searched = None, lead_search(rec, trial)
+    tried, searched = None, lead_search(rec, trial, workers)
     if _searched_clock(searched):
         shifted, inputs, refit = read_later(rec, name, trial, searched["lead_s"], None,
                                             static_map)

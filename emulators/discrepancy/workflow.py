@@ -1034,7 +1034,8 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
                                    best_candidate(other, inputs, "hysteresis", spec))[0]
 
     trial, scaled, static_fit, clock = refine_with_loop(
-        rec, name, *clock_offset(rec, name, trial, scaled, static_fit, floor, static_map),
+        rec, name, *clock_offset(rec, name, trial, scaled, static_fit, floor, static_map,
+                                 workers),
         floor, loop, lambda other, inputs, spec: _static_input_again(
             other, inputs, fit(other, inputs, spec))[0], static_map)
     if clock is not None:
