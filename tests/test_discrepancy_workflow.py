@@ -165,7 +165,7 @@ from exohil.emulators.protocols import Trajectory, calibration_protocol
 from exohil.emulators.simulate import simulate
 from exohil.emulators.suit_profile import ProfileError, load_default_profile
 from exohil.formats.alignment import in_mocap_gap
-from exohil.formats.recording import Recording, SensorStream
+from exohil.formats.recording import AngleStream, Recording, SensorStream
 from exohil.formats.recording_reader import read_recording
 from exohil.formats.recording_writer import write_recording
 from exohil.harness.cli import main
@@ -1936,6 +1936,26 @@ def test_a_stop_the_map_absorbs_is_judged_on_the_frames_it_holds():
     assert frames["delta_mse"] > held["noise_floor"] ** 2, frames
     assert 0 < frames["share"] < 0.15 and frames["delta_mse_without_best_block"] > 0, frames
     assert f"on the {frames['share']:.1%} of their frames it holds" in markdown(s)
+
+
+def test_stops_that_make_their_sensors_worse_are_not_named_for_the_frames_they_hold():
+    """The default suit with its effects, its motion capture read as a knee's single angle
+    (the elevation φ alone): a map of one angle misses a suit of two by 28 mm, 170 times
+    the noise. The saturation candidate's map passed its stops on 5 % of one sensor's
+    frames and removed 4.2 mm RMS there, but made that sensor worse over all its frames
+    (held-out ΔMSE −0.50 mm²). Named for the frames it held, it raised the gap 28.24 →
+    28.25 mm. Stops that make their sensors worse explain nothing: nothing is named, and
+    the sensor's worse fit is in the evidence."""
+    rec = simulate(calibration_protocol(3), load_default_profile(), 3)
+    stream = rec.mocap["shoulder"]
+    knee = replace(rec, mocap={"knee": AngleStream(
+        stream.t, ("knee_angle",), stream.angles[:, [stream.names.index("shoulder_elv")]])})
+    s = run(knee, "one angle").summary
+    assert s["effects"] == [] and s["gap_before"] > 100 * s["noise_floor"], s
+    stops = [c for c in s["not_added"] if c["effect"] == "saturation"]
+    held = stops[0]["evidence"]["held_at_stops"]
+    assert held["frames_held"]["beyond_noise"] and held["delta_mse"] < 0, held
+    assert not held["significant"]
 
 
 def _suit_and_arm_axis(seed: int, duration_s: float) -> tuple:

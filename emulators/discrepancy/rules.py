@@ -24,8 +24,10 @@ sensors at a hard stop (each sits on a plateau while the joint moves, its physic
 signature, see :func:`~.stops.plateaus`) is also significant
 when rules 1 and 2 hold on those sensors alone, against their own noise, or on the frames
 it holds there alone (without rule 2's count, as those frames lie only in the blocks where
-the arm reached the stop): a stop reached on 5 % of the frames changes only those, and a map
-fitted through it spreads what it cannot bend over the rest. Those frames must be as many
+the arm reached the stop) while it lowers those sensors' held-out error as a whole: a stop
+reached on 5 % of the frames changes only those, and a map fitted through it spreads what
+it cannot bend over the rest, but a map so foreign to the suit that the stops make it worse
+overall explains nothing by them. Those frames must be as many
 as a plateau spans (the share of the signature): a map that passes the stop on a handful
 of frames shows no plateau there.
 
@@ -111,7 +113,8 @@ def adds_stops(base: Fit, cand: Fit) -> bool:
 
 def held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
     """Rules 1 and 2 on the sensors ``cand`` holds at a hard stop, against their own noise,
-    over all their frames and over the frames it holds (see the module's docstring); None
+    over all their frames, or over the frames it holds where it also lowers those sensors'
+    held-out error over all their frames (see the module's docstring); None
     unless ``cand`` adds the stops and holds a sensor at one on as many frames as a plateau
     spans (``PLATEAU_SHARE`` of the scored frames)."""
     if not adds_stops(base, cand):
@@ -135,8 +138,10 @@ def held_at_stops(trial: Trial, base: Fit, cand: Fit) -> dict | None:
                     block_mse(trial, np.where(at_stop, cand.residual[:, held], np.nan)), noise)
     return {"sensors": [trial.sensor_names[j] for j in held], **sensors,
             # the frames held lie only in the folds where the arm reached the stop (four of
-            # eight can never pass rule 2's count); the plateau there is the evidence
-            "significant": sensors["significant"] or frames["beyond_noise"],
+            # eight can never pass rule 2's count); the plateau there is the evidence, where
+            # the stops do not make the held sensors' held-out error worse as a whole
+            "significant": sensors["significant"] or (frames["beyond_noise"]
+                                                      and sensors["delta_mse"] > 0),
             "frames_held": {"share": round(float(at_stop[trial.scored].mean()), 4), **frames}}
 
 
