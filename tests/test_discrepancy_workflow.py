@@ -1477,6 +1477,20 @@ def test_the_search_scores_each_lead_on_the_frames_its_reading_covers(
     assert found["share"] == pytest.approx(1.0 - left(found["lead_s"]) / left(0.0), abs=1e-4)
 
 
+def test_no_lead_is_searched_where_no_frame_it_samples_holds_a_reading(
+        default_suit_calibration):
+    """Readings missing at every frame the search samples (one every 0.1 s): nothing to
+    score a lead by, so nothing is searched, without a warning."""
+    values = default_suit_calibration.sensors.values.copy()
+    values[::25] = np.nan
+    rec = replace(default_suit_calibration, sensors=replace(
+        default_suit_calibration.sensors, values=values))
+    trial = prepare_trial(rec, "sampled frames missing")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert lead_search(rec, trial) == {"lead_s": 0.0, "share": 0.0}
+
+
 def test_a_clock_offset_is_said_in_milliseconds_under_a_second_else_in_seconds():
     assert [late_words(s) for s in (0.0419, 0.5, -0.012, 2.942, 150.4)] == [
         "41.9 ms", "500 ms", "-12 ms", "2.94 s", "150 s"]

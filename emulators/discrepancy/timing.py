@@ -64,7 +64,7 @@ SEARCH_FINE_S = 0.01
 SEARCH_ROW_S = 0.1
 SEARCH_DEGREE = 3
 SEARCH_MIN_S = 0.1
-#: Frames (leads × rows) that :func:`lead_search` scores at once: a few tens of megabytes.
+#: Frames (leads × rows) that :func:`lead_search` scores at once: a few megabytes each array.
 SEARCH_BATCH_ROWS = 20_000
 #: Leads whose cubic leaves at most this many times the least are as good as the best to
 #: :func:`lead_search`, which keeps the shortest of them.
@@ -184,7 +184,7 @@ def lead_search(rec: Recording, trial: Trial, workers: int = 1) -> dict:
         inside = ((read >= t_mocap[0]) & (read <= t_mocap[-1])
                   & ~in_mocap_gap(read.ravel(), t_mocap).reshape(read.shape))
         scores = np.full(len(leads), np.inf)
-        enough = np.flatnonzero(2 * inside.sum(axis=1) >= len(rows))
+        enough = np.flatnonzero(2 * inside.sum(axis=1) >= max(1, len(rows)))
         if enough.size:
             scores[enough] = left_covered(read[enough], inside[enough])
         return scores
