@@ -166,9 +166,8 @@ def test_recording_sizes_are_in_bytes(report_module):
 def sigint_restored() -> Iterator[None]:
     """SIGINT's handler in this process restored after the test (``run_main`` sets its own,
     and a test that runs later in this process must find the one it inherited)."""
-    before = signal.getsignal(signal.SIGINT)
-    yield
-    signal.signal(signal.SIGINT, before)
+    with sigint_handled_by(signal.getsignal(signal.SIGINT)):
+        yield
 
 
 def test_run_main_turns_input_errors_into_one_line_and_ctrl_c_into_130(report_module, capsys,
