@@ -33,14 +33,16 @@ MIN_BLOCK_S = BLOCK_S
 #: Invalid runs longer than this, s, do not count towards a held-out block's length
 #: (:func:`held_out_blocks`): a dropout, not frames lost here and there.
 SKIPPED_RUN_S = 0.1
-#: The motion capture's angles may be low-passed at this cutoff, Hz, with a Butterworth
-#: filter of order ``MOCAP_FILTER_ORDER`` run forward and back (zero phase: no lag is added
-#: to the pose). Arm movement holds little above 5 Hz, where the filter passes 99.9 % of the
-#: amplitude; above the cutoff a tracker's white noise may be all there is, which the static
-#: map would read as sensor motion the suit never made (0.3° of it on a clean suit was named
-#: hysteresis: the play operator smoothed it away). The workflow chooses (see
+#: The motion capture's angles may be low-passed at these cutoffs, Hz, each tried in turn,
+#: the next only where the one before it predicted the held-out readings better, with a
+#: Butterworth filter of order ``MOCAP_FILTER_ORDER`` run forward and back (zero phase: no
+#: lag is added to the pose). Arm movement holds little above 5 Hz, where the filter at 12 Hz
+#: passes 99.9 % of the amplitude; above the cutoff a tracker's white noise may be all there
+#: is, which the static map would read as sensor motion the suit never made (0.3° of it on a
+#: clean suit was named hysteresis: the play operator smoothed it away; 0.5° still was with
+#: the angles low-passed at 12 Hz, and nothing at 6 Hz). The workflow chooses (see
 #: :func:`exohil.emulators.discrepancy.timing.mocap_filter`).
-MOCAP_CUTOFF_HZ = 12.0
+MOCAP_CUTOFFS_HZ = (12.0, 6.0)
 MOCAP_FILTER_ORDER = 4
 #: Motion capture sampled so slowly that the cutoff is above this share of its Nyquist
 #: frequency is used as it is (the filter would remove next to nothing).

@@ -6,8 +6,8 @@ sensors on held-out blocks. Readings that run ahead of the motion capture mean i
 late (:func:`clock_offset`, and once the effects are modelled :func:`lead_after_effects`);
 a lead that grows or shrinks steadily over the recording means the two clocks run at
 different rates (:func:`clock_skew`);
-angles that hold more above ``MOCAP_CUTOFF_HZ`` than the readings follow are a tracker's
-noise and are low-passed (:func:`mocap_filter`).
+angles that hold more above a cutoff (``MOCAP_CUTOFFS_HZ``) than the readings follow are a
+tracker's noise and are low-passed (:func:`mocap_filter`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from exohil.emulators.discrepancy.data import (
-    MOCAP_CUTOFF_HZ,
+    MOCAP_CUTOFFS_HZ,
     Trial,
     mocap_samples,
     prepare_trial,
@@ -273,29 +273,42 @@ def read_trial(rec: Recording, name: str, late: float, low_pass_hz: float | None
 
 def mocap_filter(rec: Recording, name: str, trial: Trial, scaled: Inputs, static: Fit,
                  static_map: MapFit) -> tuple[Trial, Inputs, Fit, dict | None]:
-    """The trial with its motion capture low-passed at ``MOCAP_CUTOFF_HZ`` where that
-    predicts the held-out readings better, with its scaled inputs and static map; the
-    evidence (None: the motion capture samples too slowly to filter).
+    """The trial with its motion capture low-passed at the cutoff of ``MOCAP_CUTOFFS_HZ``
+    that predicts the held-out readings best, or as sampled where none predicts them
+    better, with its scaled inputs and static map; the evidence (None: the motion capture
+    samples too slowly to filter).
 
-    What the motion capture holds above the cutoff is either a tracker's noise, which the
+    What the motion capture holds above a cutoff is either a tracker's noise, which the
     suit never felt, or movement the tendons followed (a tremor; joint angles solved from
     markers frame by frame and replayed). Only the sensors can tell: the map of
-    ``trial`` (read as sampled) is refitted on the low-passed angles, and whichever leaves
-    the smaller held-out gap is kept; the filtered trial then gets its static map chosen
-    again (``static_map``).
+    ``trial`` (read as sampled) is refitted on the angles low-passed at each cutoff in
+    turn, the next (lower) tried only where this one left a smaller held-out gap than the
+    reading before it; the smallest gap's reading is kept, and a low-passed trial then gets
+    its static map chosen again (``static_map``).
     """
-    filtered = prepare_trial(rec, name, trial.mocap_late_s, MOCAP_CUTOFF_HZ, trial.mocap_skew)
-    if filtered.mocap_low_pass_hz is None:
+    tried: dict[str, float] = {}
+    best: tuple[Trial, Inputs, float] | None = None
+    gap = static.gap
+    for cutoff_hz in MOCAP_CUTOFFS_HZ:
+        filtered = prepare_trial(rec, name, trial.mocap_late_s, cutoff_hz, trial.mocap_skew)
+        if filtered.mocap_low_pass_hz is None:  # too close to the mocap's Nyquist
+            break
+        inputs = make_inputs(filtered)
+        restrict_to_coverage(filtered, inputs.u)
+        same_map = fit(filtered, inputs, static.spec)
+        tried[f"{cutoff_hz:g}"] = significant(same_map.gap)
+        if same_map.gap >= gap:
+            break
+        best, gap = (filtered, inputs, cutoff_hz), same_map.gap
+    if not tried:
         return trial, scaled, static, None
-    inputs = make_inputs(filtered)
-    restrict_to_coverage(filtered, inputs.u)
-    same_map = fit(filtered, inputs, static.spec)
-    applied = same_map.gap < static.gap
-    evidence = {"low_pass_hz": filtered.mocap_low_pass_hz, "applied": applied,
+    low_pass_hz = MOCAP_CUTOFFS_HZ[0] if best is None else best[2]
+    evidence = {"low_pass_hz": low_pass_hz, "applied": best is not None,
                 "gap_as_sampled": significant(static.gap),
-                "gap_low_passed": significant(same_map.gap)}
-    if not applied:
+                "gap_low_passed": tried[f"{low_pass_hz:g}"], "gaps_low_passed": tried}
+    if best is None:
         return trial, scaled, static, evidence
+    filtered, inputs, _ = best
     return filtered, inputs, static_map(filtered, inputs), evidence
 
 
@@ -306,19 +319,22 @@ def filter_words(evidence: dict | None, units: str) -> str:
         return "motion capture read as sampled (too slow to low-pass)"
     model = "final model" if "after_effects" in evidence else "static map"
     low, raw = f"{evidence['gap_low_passed']:.4g}", f"{evidence['gap_as_sampled']:.4g}"
+    hz = f"{evidence['low_pass_hz']:g} Hz"
+    others = "".join(f"; at {other} Hz {gap:.4g}"
+                     for other, gap in evidence.get("gaps_low_passed", {}).items()
+                     if other != f"{evidence['low_pass_hz']:g}")
     if low == raw:  # no difference the figures show: no claim of what lies above the cutoff
-        hz = f"{evidence['low_pass_hz']:g} Hz"
         how, which = ((f"low-passed at {hz}, zero phase", "smaller low-passed, beyond the "
                        "digits shown") if evidence["applied"]
                       else ("read as sampled", f"low-passed at {hz}, no smaller"))
         return (f"motion capture {how}: the {model}'s held-out gap is {low} {units} either way "
-                f"({which}), so the readings cannot tell what it holds above {hz}")
-    gaps = f"the {model}'s held-out gap {low} against {raw} {units} as sampled"
+                f"({which}{others}), so the readings cannot tell what it holds above {hz}")
+    gaps = f"the {model}'s held-out gap {low} against {raw} {units} as sampled{others}"
     if evidence["applied"]:
-        return (f"motion capture low-passed at {evidence['low_pass_hz']:g} Hz, zero phase: "
-                f"{gaps}; what it held above that the readings do not follow")
-    return (f"motion capture read as sampled: low-passed at {evidence['low_pass_hz']:g} Hz, "
-            f"{gaps}; the readings follow what it holds above that")
+        return (f"motion capture low-passed at {hz}, zero phase: {gaps}; what it held above "
+                "that the readings do not follow")
+    return (f"motion capture read as sampled: low-passed at {hz}, {gaps}; the readings follow "
+            "what it holds above that")
 
 
 def reread_evidence(without: Fit, reread: Fit, floor: float) -> dict:

@@ -34,7 +34,6 @@ from exohil.emulators.discrepancy.candidates import (
 )
 from exohil.emulators.discrepancy.data import (
     FRAME_COUNTER,
-    MOCAP_CUTOFF_HZ,
     RESAMPLED_SPREAD,
     RESAMPLED_STRIDES,
     SPIKE_SIGMAS,
@@ -880,7 +879,7 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
     if chosen is None:
         return first
     trial, final = first.trial, first.after
-    other = None if chosen["applied"] else MOCAP_CUTOFF_HZ
+    other = None if chosen["applied"] else chosen["low_pass_hz"]
     read, inputs = read_trial(rec, name, trial.mocap_late_s, other, final.spec,
                               trial.mocap_skew)
     refit = fit(read, inputs, final.spec)
@@ -888,7 +887,7 @@ def _filter_again(rec: Recording, name: str, in_model: tuple[str, ...],
     if refit.gap >= final.gap or rules["blocks_improved"] < rules["blocks_needed"]:
         return first
     gaps = (refit.gap, final.gap) if other is None else (final.gap, refit.gap)
-    found = {"low_pass_hz": MOCAP_CUTOFF_HZ, "applied": other is not None,
+    found = {"low_pass_hz": chosen["low_pass_hz"], "applied": other is not None,
              "gap_as_sampled": significant(gaps[0]), "gap_low_passed": significant(gaps[1]),
              "after_effects": True}
     effects = ", ".join(first.summary["effects"]) or "nothing"
@@ -982,8 +981,9 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
     :func:`~.timing.rate_after_effects`; None: the sensors' rate) and, given
     ``filter_found`` (by :func:`_filter_again`), filtered as it says instead of as
     :func:`~.timing.mocap_filter` would choose."""
-    low_pass = filter_found is not None and filter_found["applied"]
-    trial = prepare_trial(rec, name, mocap_late_s, MOCAP_CUTOFF_HZ if low_pass else None,
+    low_pass_hz = (filter_found["low_pass_hz"]
+                   if filter_found is not None and filter_found["applied"] else None)
+    trial = prepare_trial(rec, name, mocap_late_s, low_pass_hz,
                           0.0 if rate_found is None else 1e-6 * rate_found["mocap_skew_ppm"])
     floors = trial.noise
     floor = pooled_noise(trial)
