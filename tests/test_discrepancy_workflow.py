@@ -3347,6 +3347,28 @@ def test_the_mocap_filter_line_gives_the_gap_at_each_other_cutoff_tried():
                             "held-out gap 0.2554 against 0.5038 mm as sampled; at 12 Hz "
                             "0.3048; what it held above"), lower
     assert "at 6 Hz 0.2554" not in lower
+    rules = {"low_pass_hz": 6.0, "significant": False}
+    kept = filter_words({"low_pass_hz": 12.0, "applied": True, "gap_as_sampled": 0.8305455,
+                         "gap_low_passed": 0.8305442, "lower_cutoff_rules": rules,
+                         "gaps_low_passed": {"12": 0.8305442, "6": 0.830357}}, "mm")
+    assert ("the static map's held-out gap is 0.8305 mm either way (smaller low-passed, "
+            "beyond the digits shown; at 6 Hz 0.8304, not lower by rules 1 and 2)") in kept, kept
+
+
+def test_a_lower_cutoff_is_kept_only_where_it_clears_the_rules_an_effect_must():
+    """Exact angles and a suit with a loop: at 6 Hz the static map's gap fell 0.0002 mm
+    below 12 Hz's, the smoothing standing in for part of the loop, and the final model then
+    left 0.181 mm where 0.177 at 12 Hz. A lower cutoff must clear rules 1 and 2 against the
+    one above it, as an effect must; this one does not, and 12 Hz is kept."""
+    outcome = run(make_recording(Case("hysteresis", "alt", 1, seed=1001, duration_s=90.0)),
+                  "loop")
+    chosen = outcome.summary["mocap_filter"]
+    assert chosen["applied"] and chosen["low_pass_hz"] == 12.0
+    assert chosen["gaps_low_passed"]["6"] < chosen["gaps_low_passed"]["12"]
+    rules = chosen["lower_cutoff_rules"]
+    assert rules["low_pass_hz"] == 6.0 and not rules["significant"]
+    assert 0 < rules["delta_mse"] < rules["noise_floor"] ** 2
+    assert outcome.summary["effects"] == ["hysteresis"]
 
 
 @pytest.mark.parametrize(("corrupt", "error"), [
