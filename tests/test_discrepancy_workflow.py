@@ -3342,11 +3342,13 @@ def test_the_mocap_filter_line_gives_the_gap_at_each_other_cutoff_tried():
 
     lower = filter_words({"low_pass_hz": 6.0, "applied": True, "gap_as_sampled": 0.5038,
                           "gap_low_passed": 0.2554, "gaps_low_passed": {"12": 0.3048,
-                                                                        "6": 0.2554}}, "mm")
+                                                                        "6": 0.2554},
+                          "lower_cutoff_rules": {"low_pass_hz": 6.0, "significant": True}},
+                         "mm")
     assert lower.startswith("motion capture low-passed at 6 Hz, zero phase: the static map's "
                             "held-out gap 0.2554 against 0.5038 mm as sampled; at 12 Hz "
                             "0.3048; what it held above"), lower
-    assert "at 6 Hz 0.2554" not in lower
+    assert "at 6 Hz 0.2554" not in lower and "rules" not in lower
     rules = {"low_pass_hz": 6.0, "significant": False}
     kept = filter_words({"low_pass_hz": 12.0, "applied": True, "gap_as_sampled": 0.8305455,
                          "gap_low_passed": 0.8305442, "lower_cutoff_rules": rules,

@@ -329,9 +329,10 @@ def filter_words(evidence: dict | None, units: str) -> str:
     model = "final model" if "after_effects" in evidence else "static map"
     low, raw = f"{evidence['gap_low_passed']:.4g}", f"{evidence['gap_as_sampled']:.4g}"
     hz = f"{evidence['low_pass_hz']:g} Hz"
-    lower = evidence.get("lower_cutoff_rules", {"significant": True})
+    rules = evidence.get("lower_cutoff_rules")
+    refused = ("" if rules is None or rules["significant"] else f"{rules['low_pass_hz']:g}")
     others = "".join(f"; at {other} Hz {gap:.4g}"
-                     + ("" if lower["significant"] else ", not lower by rules 1 and 2")
+                     + (", not lower by rules 1 and 2" if other == refused else "")
                      for other, gap in evidence.get("gaps_low_passed", {}).items()
                      if other != f"{evidence['low_pass_hz']:g}")
     if low == raw:  # no difference the figures show: no claim of what lies above the cutoff
