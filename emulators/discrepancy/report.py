@@ -14,7 +14,12 @@ from typing import cast
 
 import numpy as np
 
-from exohil.emulators.discrepancy.data import FRAME_COUNTER, invalid_words, spike_counts
+from exohil.emulators.discrepancy.data import (
+    FRAME_COUNTER,
+    MOCAP_CUTOFFS_HZ,
+    invalid_words,
+    spike_counts,
+)
 from exohil.emulators.discrepancy.localise import (
     SAME_POSE_DEG,
     SIGNATURES,
@@ -208,8 +213,21 @@ def _placed_words(summary: dict) -> str:
 
 
 def _filter_sentence(summary: dict, units: str) -> str:
-    """How the motion capture was read, as a sentence of its own."""
-    return f" {_sentence(filter_words(summary['mocap_filter'], units))}."
+    """How the motion capture was read, as a sentence of its own; where its angles were
+    low-passed at the lowest cutoff and a loop was named, what such angles' noise can be
+    named (discrepancy-limitations.md: 1° of white noise per sample, low-passed at 6 Hz,
+    was named hysteresis on 3 of 3 clean suits)."""
+    chosen = summary["mocap_filter"]
+    line = f" {_sentence(filter_words(chosen, units))}."
+    lowest = min(MOCAP_CUTOFFS_HZ)
+    if (chosen is not None and chosen["applied"] and chosen["low_pass_hz"] == lowest
+            and "hysteresis" in summary["effects"]):
+        line += (f" Angles noisy enough to be low-passed at {lowest:g} Hz can be read as a "
+                 "loop: the noise the filter leaves, smoothed by the hysteresis term, "
+                 "predicts the readings better though the suit has none (1° of white angle "
+                 "noise per sample was named hysteresis on 3 of 3 clean suits), so weigh the "
+                 "hysteresis named here against the motion capture's noise.")
+    return line
 
 
 def _unused(value: object) -> bool:
