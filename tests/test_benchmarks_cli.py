@@ -326,6 +326,20 @@ def test_the_sphere_refuses_meaningless_values_before_it_starts(args, message):
     refused(run_module("benchmarks.bench_discrepancy_sphere", *args), message)
 
 
+@pytest.mark.parametrize("args, message", [
+    (("--seeds", "0"), "--seeds: must be at least 1"),
+    (("--noise", "half"), "--noise: not a list of numbers: 'half'"),
+    (("--noise", "0.5,-1"), "--noise: each SD must be a finite number ≥ 0: '0.5,-1'"),
+    (("--noise", "nan"), "--noise: each SD must be a finite number ≥ 0: 'nan'"),
+    (("--duration", "0"), "--duration: must be a positive number"),
+    (("--workers", "0"), "--workers: must be at least 1"),
+])
+def test_the_angle_noise_benchmark_refuses_meaningless_values_before_it_starts(args, message):
+    out = run_module("benchmarks.bench_discrepancy_angle_noise", *args)
+    refused(out, message)
+    assert out.stdout == ""
+
+
 def test_the_sphere_answer_key_is_the_list_the_blind_scorer_reads(monkeypatch, tmp_path):
     monkeypatch.syspath_prepend(str(ROOT))
     from benchmarks.bench_discrepancy_blind import load_truth

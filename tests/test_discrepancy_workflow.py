@@ -77,6 +77,7 @@ from exohil.emulators.discrepancy.folds import (
 )
 from exohil.emulators.discrepancy.hidden import (
     Case,
+    angle_noise_recording,
     make_recording,
     random_geometry,
     random_trajectory,
@@ -542,26 +543,12 @@ def test_white_noise_in_the_motion_capture_is_no_effect_of_the_suit():
     assert outcome.summary["effects"] == []
 
 
-def _noisy_angles(seed: int, sd_deg: float, axial_deg: float) -> Recording:
-    """A clean suit of random geometry (90 s, sensor noise 0.15 mm) whose motion capture
-    holds white noise of ``sd_deg`` per sample on every angle (ψ moving ±``axial_deg``)."""
-    trajectory = random_trajectory(seed, 90.0, axial_deg=axial_deg)
-    geometry, gains, offsets = random_geometry(seed)
-    rng = np.random.default_rng(seed)
-    lengths = suit_lengths(trajectory, geometry, gains, offsets)
-    rec = suit_recording(trajectory, geometry, Noise(sigma_mm=0.15).apply(lengths, rng), {})
-    stream = rec.mocap["shoulder"]
-    noise = (np.random.default_rng(7) if axial_deg == 0 else rng).normal(
-        0.0, sd_deg, stream.angles.shape)
-    return replace(rec, mocap={"shoulder": replace(stream, angles=stream.angles + noise)})
-
-
 def test_noise_that_a_loop_still_smooths_at_12_hz_is_low_passed_further():
     """0.5° of white noise on a clean suit's angles (90 s, a tracker at 120 Hz): low-passed
-    at 12 Hz the static map's gap fell 0.50 → 0.30 mm, yet a play operator still smoothed
+    at 12 Hz the static map's gap fell to 0.30 mm, yet a play operator still smoothed
     what was left and hysteresis was named (0.30 → 0.26 mm). At 6 Hz the gap is smaller
     again, that reading is kept, and nothing is named."""
-    outcome = run(_noisy_angles(100, 0.5, 0.0), "noisy")
+    outcome = run(angle_noise_recording(100, 0.5), "noisy")
     chosen = outcome.summary["mocap_filter"]
     assert chosen["applied"] and chosen["low_pass_hz"] == 6.0
     assert outcome.summary["mocap_low_pass_hz"] == 6.0
@@ -572,10 +559,10 @@ def test_noise_that_a_loop_still_smooths_at_12_hz_is_low_passed_further():
 
 
 def test_a_loop_named_on_angles_low_passed_at_6_hz_is_said_to_be_weighed_against_their_noise():
-    """1° of white noise (ψ moving ±40°): the angles are low-passed at 6 Hz and hysteresis
-    is still named on a clean suit (discrepancy-limitations.md). The report says what such
-    noise can be named, beside how the angles were read."""
-    outcome = run(_noisy_angles(101, 1.0, 40.0), "noisier")
+    """1° of white noise: the angles are low-passed at 6 Hz and hysteresis is still named on
+    a clean suit (discrepancy-limitations.md). The report says what such noise can be
+    named, beside how the angles were read."""
+    outcome = run(angle_noise_recording(100, 1.0), "noisier")
     assert outcome.summary["mocap_low_pass_hz"] == 6.0
     assert "hysteresis" in outcome.summary["effects"]
     report = markdown(outcome.summary)

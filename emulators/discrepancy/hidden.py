@@ -17,7 +17,7 @@ asymptote exponentially, a low-pass behind a transport delay, and a random-walk 
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.signal import fftconvolve, lfilter
@@ -301,6 +301,25 @@ def make_recording(case: Case) -> Recording:
     return suit_recording(trajectory, geometry, signal,
                           {"generator": "exohil.emulators.discrepancy.hidden",
                            "case": case.label})
+
+
+def angle_noise_recording(seed: int, noise_deg: float, duration_s: float = 90.0
+                          ) -> Recording:
+    """A clean suit (random geometry and movement of ``seed``, sensor noise ``NOISE_MM``)
+    whose motion capture holds white noise of ``noise_deg`` (°, SD per sample) on every
+    angle: a tracker's jitter, which the suit never felt. One seed draws the same sensor
+    noise and the same angle noise pattern, scaled, at every ``noise_deg``."""
+    trajectory = random_trajectory(seed, duration_s)
+    geometry, gains, offsets = random_geometry(seed)
+    rng = np.random.default_rng([seed, len(KINDS)])  # no hidden-effect case's stream
+    signal = Noise(sigma_mm=NOISE_MM).apply(suit_lengths(trajectory, geometry, gains, offsets),
+                                            rng)
+    rec = suit_recording(trajectory, geometry, signal,
+                         {"generator": "exohil.emulators.discrepancy.hidden",
+                          "case": f"angle-noise/{noise_deg:g}deg/s{seed}"})
+    stream = rec.mocap["shoulder"]
+    jitter = noise_deg * rng.standard_normal(stream.angles.shape)
+    return replace(rec, mocap={"shoulder": replace(stream, angles=stream.angles + jitter)})
 
 
 def cases(seeds: range, magnitudes: tuple[int, ...] = (1, 2), duration_s: float = 60.0,
