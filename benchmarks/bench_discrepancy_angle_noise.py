@@ -19,11 +19,16 @@ from __future__ import annotations
 
 import argparse
 import functools
-import math
 import time
 from collections import Counter
 
-from benchmarks.report import description, positive_float, positive_int, run_main
+from benchmarks.report import (
+    description,
+    non_negative_float,
+    positive_float,
+    positive_int,
+    run_main,
+)
 from exohil.emulators.discrepancy import run
 from exohil.emulators.discrepancy.hidden import angle_noise_recording
 from exohil.emulators.discrepancy.workers import parallel_map
@@ -31,14 +36,14 @@ from exohil.harness.machine import machine
 
 
 def noise_levels(value: str) -> tuple[float, ...]:
-    """``--noise``: comma-separated SDs, °, each finite and at least 0."""
+    """``--noise``: comma-separated SDs, °, each a :func:`non_negative_float`."""
     try:
-        levels = tuple(float(item) for item in value.split(","))
+        return tuple(non_negative_float(item) for item in value.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a list of numbers: {value!r}") from None
-    if not all(math.isfinite(x) and x >= 0 for x in levels):
-        raise argparse.ArgumentTypeError(f"each SD must be a finite number ≥ 0: {value!r}")
-    return levels
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"each SD must be a finite number ≥ 0: {value!r}") from None
 
 
 def run_noisy(duration_s: float, case: tuple[int, float]) -> dict:
