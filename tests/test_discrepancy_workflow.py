@@ -3334,8 +3334,6 @@ def test_the_report_runs_the_profile_in_simulate_only_for_a_shoulder(hysteresis_
 
 @pytest.mark.parametrize("applied", [True, False])
 def test_the_mocap_filter_line_claims_nothing_when_the_gaps_agree_to_the_digits_shown(applied):
-    from exohil.emulators.discrepancy.timing import filter_words
-
     tie = filter_words({"low_pass_hz": 12.0, "applied": applied, "gap_as_sampled": 3.953715,
                         "gap_low_passed": 3.953714}, "mm")
     assert "held-out gap is 3.954 mm either way" in tie, tie
@@ -3347,8 +3345,6 @@ def test_the_mocap_filter_line_claims_nothing_when_the_gaps_agree_to_the_digits_
 
 
 def test_the_mocap_filter_line_gives_the_gap_at_each_other_cutoff_tried():
-    from exohil.emulators.discrepancy.timing import filter_words
-
     lower = filter_words({"low_pass_hz": 6.0, "applied": True, "gap_as_sampled": 0.5038,
                           "gap_low_passed": 0.2554, "gaps_low_passed": {"12": 0.3048,
                                                                         "6": 0.2554},
