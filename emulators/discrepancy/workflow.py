@@ -15,7 +15,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
 from exohil.emulators.discrepancy.candidates import (
     COSTLIEST_FIRST,
@@ -75,6 +74,7 @@ from exohil.emulators.discrepancy.rules import (
     remainder,
     rules_on_blocks,
     stops_leave_curve_nothing,
+    windowed_mean,
 )
 from exohil.emulators.discrepancy.stops import pinned_at_rail
 from exohil.emulators.discrepancy.timing import (
@@ -520,12 +520,8 @@ def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
     a drift of one function per window can remove from each sensor's held-out error. Under
     each sensor's noise variance no refined drift can pass rule 1, pooled or on one sensor,
     and its dozen fits are spared."""
-    window = max(int(round(DRIFT_SPAN_S * trial.rate_hz)), 1)
-    finite = np.isfinite(residual)
-    sums = uniform_filter1d(np.where(finite, residual, 0.0), window, axis=0, mode="constant")
-    counts = uniform_filter1d(finite.astype(float), window, axis=0, mode="constant")
-    slow = np.where(finite, sums / np.maximum(counts, 1e-12), np.nan)
-    return np.nanmean(slow**2, axis=0)  # every sensor analysed has finite frames
+    # every sensor analysed has finite frames
+    return np.nanmean(windowed_mean(trial, residual, DRIFT_SPAN_S)**2, axis=0)
 
 
 def _conclusion(steps: list[dict], spec: Spec, left: dict) -> str:
