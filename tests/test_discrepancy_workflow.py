@@ -67,6 +67,7 @@ from exohil.emulators.discrepancy.folds import (
     Groups,
     Reduced,
     Ridge,
+    block_mse,
     fold_coefs,
     fold_products,
     fold_system,
@@ -133,10 +134,12 @@ from exohil.emulators.discrepancy.report import (
     plots,
 )
 from exohil.emulators.discrepancy.rules import (
+    MOVEMENT_S,
     SIGN_TEST_LEVEL,
     blocks_needed,
     candidate_evidence,
     held_at_stops,
+    over_movements,
     pooled_noise,
     remainder,
     rules_on_blocks,
@@ -558,18 +561,53 @@ def test_noise_that_a_loop_still_smooths_at_12_hz_is_low_passed_further():
     assert "can be read as a loop" not in markdown(outcome.summary)
 
 
-def test_a_loop_named_on_angles_low_passed_at_6_hz_is_said_to_be_weighed_against_their_noise():
-    """1° of white noise: the angles are low-passed at 6 Hz and hysteresis is still named on
-    a clean suit (discrepancy-limitations.md). The report says what such noise can be
-    named, beside how the angles were read."""
-    outcome = run(angle_noise_recording(100, 1.0), "noisier")
-    assert outcome.summary["mocap_low_pass_hz"] == 6.0
-    assert "hysteresis" in outcome.summary["effects"]
-    report = markdown(outcome.summary)
-    said = filter_words(outcome.summary["mocap_filter"], "mm")
-    assert (f"{said[:1].upper()}{said[1:]}. Angles noisy enough to be low-passed at 6 Hz can "
-            "be read as a loop: ") in report, report
-    assert "so weigh the hysteresis named here against the motion capture's noise." in report
+def test_a_loop_that_smooths_angle_noise_only_from_frame_to_frame_is_not_named():
+    """1° of white noise on a clean suit's angles, low-passed at 6 Hz: a play operator
+    smoothed what the filter left, cleared rules 1 and 2 and was named hysteresis. Its gain
+    is all fast: averaged over half a second the residual's error rises, so rule 4 refuses
+    it, and the progress line and the report say why."""
+    lines: list[str] = []
+    outcome = run(angle_noise_recording(100, 1.0), "noisier", progress=lines.append)
+    summary = outcome.summary
+    assert summary["mocap_low_pass_hz"] == 6.0 and summary["effects"] == []
+    loop = next(item["evidence"] for item in summary["not_added"]
+                if item["effect"] == "hysteresis")
+    assert loop["beyond_noise"] and loop["blocks_improved"] >= loop["blocks_needed"]
+    assert loop["over_movements"] == {**loop["over_movements"], "window_s": MOVEMENT_S,
+                                      "holds": False, "fails_alone": True}
+    assert loop["over_movements"]["delta_mse"] < 0
+    assert ("hysteresis lowered the error only from frame to frame, not averaged over 0.5 s "
+            "(rule 4)") in lines[-2], lines
+    assert (f"it lowers the error only from frame to frame: averaged over 0.5 s its mean "
+            f"square rises by {-loop['over_movements']['delta_mse']:.3g} mm² (rule 4)"
+            ) in markdown(summary)
+
+
+def test_rule_4_asks_the_gain_to_hold_when_the_residual_is_averaged_over_movements():
+    """A residual with a slow offset that flips with each movement (±0.3, 0.6 Hz) under
+    fast noise (RMS 1): a candidate that takes the offset away holds over movements; one
+    that cuts the fast noise to a third and doubles the offset lowers the held-out error
+    by far more, clears rules 1 and 2, and is refused by rule 4 alone."""
+    trial = prepare_trial(make_recording(Case("clean", "lib", 1, seed=100, duration_s=30.0)))
+    base = fit(trial, make_inputs(trial, Spec(degree=2)), Spec(degree=2))
+    rng = np.random.default_rng(4)
+    offset = 0.3 * np.sign(np.sin(2 * np.pi * 0.6 * trial.t))[:, None]
+    fast = rng.normal(0.0, 1.0, base.residual.shape)
+    scored = np.isfinite(base.residual)
+
+    def with_residual(r: np.ndarray) -> Fit:
+        r = np.where(scored, r, np.nan)
+        return replace(base, residual=r, block_mse=block_mse(trial, r))
+
+    before = with_residual(offset + fast)
+    loop, smoother = with_residual(fast), with_residual(2 * offset + fast / 3)
+    assert over_movements(trial, before, loop)["holds"]
+    moved = over_movements(trial, before, smoother)
+    assert not moved["holds"] and moved["delta_mse"] < 0 and moved["window_s"] == MOVEMENT_S
+    evidence = candidate_evidence(trial, before, smoother, 0.1)
+    assert evidence["beyond_noise"] and evidence["blocks_improved"] == N_BLOCKS
+    assert not evidence["significant"] and evidence["over_movements"]["fails_alone"]
+    assert candidate_evidence(trial, before, loop, 0.1)["significant"]
 
 
 def test_what_the_model_leaves_beyond_the_noise_is_said_with_what_may_cause_it():
@@ -3270,32 +3308,53 @@ def test_designs_and_fold_products_are_their_plain_definitions():
             np.testing.assert_allclose(full, dense @ coefs[-1], rtol=1e-12, atol=tol)
 
 
+#: Rule 4's evidence (``rules.over_movements``) where it holds.
+SLOW_GAIN = {"window_s": MOVEMENT_S, "delta_mse": 1e-4, "blocks_improved": 6, "holds": True,
+             "fails_alone": False}
+
+
 def test_the_report_says_which_rule_a_candidate_left_unnamed_fails(hysteresis_outcome):
     """The "Not added" lines gave a count of blocks beside the number rule 2 needs, so a drift
     that improved 7 blocks of the 7 needed read as a pass although it removed less than the
-    noise. Each line now names the rules it fails, and the section says what they ask."""
+    noise. Each line now names the rules it fails, and the section says what they ask; a
+    gain only from frame to frame (rule 4) is said with how much the slow part rose, and
+    only where the candidate lowers the error at all."""
     summary = hysteresis_outcome[1].summary
     floor = summary["noise_floor"]
     evidence = {"removed_rms": floor / 3, "delta_mse": (floor / 3) ** 2, "noise_floor": floor,
-                "blocks_improved": 7, "blocks_needed": 7, "delta_mse_without_best_block": 1e-4}
+                "blocks_improved": 7, "blocks_needed": 7, "delta_mse_without_best_block": 1e-4,
+                "over_movements": SLOW_GAIN}
     few = {**evidence, "removed_rms": 2 * floor, "delta_mse": 4 * floor**2,
            "blocks_improved": 5, "delta_mse_without_best_block": -1e-4}
     stops = {**evidence, "removed_rms": 2 * floor, "delta_mse": 4 * floor**2,
              "against_smooth_curve": {"curve_gap": 0.2, "removed_rms": floor / 2,
                                       "curve_over_stops": {"removed_rms": floor / 4}}}
+    fast_only = {**SLOW_GAIN, "delta_mse": -0.00125, "holds": False, "fails_alone": True}
+    loop = {**evidence, "removed_rms": 2 * floor, "delta_mse": 4 * floor**2,
+            "over_movements": fast_only}
+    worse = {**evidence, "removed_rms": 0.0, "delta_mse": -1e-3, "blocks_improved": 1,
+             "over_movements": {**fast_only, "fails_alone": False}}
     left = [{"effect": "drift", "gap": 0.25, "evidence": evidence},
             {"effect": "lag", "gap": 0.25, "evidence": few},
-            {"effect": "saturation", "gap": 0.25, "evidence": stops}]
+            {"effect": "saturation", "gap": 0.25, "evidence": stops},
+            {"effect": "hysteresis", "gap": 0.25, "evidence": loop},
+            {"effect": "creep", "gap": 0.25, "evidence": worse}]
     text = markdown({**summary, "not_added": left})
     section = text[text.index("## Not added"):].split("\n## ")[0]
     assert "removes more than the noise (rule 1" in section  # the legend
-    drift, lag, sat = (next(line for line in section.splitlines()
-                            if line.startswith(f"- {name}:"))
-                       for name in ("drift", "lag", "saturation"))
+    assert "averaged over half a second, the held-out error must be lower with it (rule 4" \
+        in section
+    drift, lag, sat, hyst, creep = (next(line for line in section.splitlines()
+                                         if line.startswith(f"- {name}:"))
+                                    for name in ("drift", "lag", "saturation", "hysteresis",
+                                                 "creep"))
     assert drift.endswith("(rule 2 needs 7): it removes less than the noise (rule 1)"), drift
     assert "it rests on its best block (rule 2); improves too few blocks (rule 2)" in lag, lag
     assert "rule 1" not in lag
     assert "it bends no more than a smooth curve (rule 3)" in sat, sat
+    assert hyst.endswith("(rule 2 needs 7): it lowers the error only from frame to frame: "
+                         "averaged over 0.5 s its mean square rises by 0.00125 mm² (rule 4)"), hyst
+    assert "rule 4" not in creep and "removes less than the noise (rule 1)" in creep, creep
 
 
 def test_a_drift_counted_on_its_refined_form_is_judged_on_that_count_in_the_report(
@@ -3304,8 +3363,10 @@ def test_a_drift_counted_on_its_refined_form_is_judged_on_that_count_in_the_repo
     floor = summary["noise_floor"]
     evidence = {"removed_rms": 2 * floor, "delta_mse": 4 * floor**2, "noise_floor": floor,
                 "blocks_improved": 5, "blocks_needed": 7, "delta_mse_without_best_block": 1e-4,
+                "over_movements": SLOW_GAIN,
                 "refined": {"heldout_gap": 0.2345, "delta_mse": 2 * floor**2,
-                            "blocks_improved": 6, "blocks_needed": 7}}
+                            "blocks_improved": 6, "blocks_needed": 7,
+                            "over_movements": SLOW_GAIN}}
     text = markdown({**summary, "not_added": [{"effect": "drift", "gap": 0.25,
                                                "evidence": evidence}]})
     line = next(line for line in text.splitlines() if line.startswith("- drift:"))

@@ -404,8 +404,9 @@ def _remainder_lines(summary: dict) -> list[str]:
              f"With {model} the model leaves {head}, more than the one noise variance an "
              f"effect must remove to be named; beyond its own noise on {where}. "
              + ("None of the five effects explains it (each candidate of the last step "
-                "stayed under the noise or improved too few held-out blocks: \"Not added\" "
-                "below)." if summary["not_added"] else "All five effects are in the model."),
+                "stayed under the noise, improved too few held-out blocks or lowered the "
+                "error only from frame to frame: \"Not added\" below)."
+                if summary["not_added"] else "All five effects are in the model."),
              ""]
     shoulder = [f"`{name}`, {meaning}" for name, meaning in SHOULDER_ANGLES.items()
                 if summary["joint"] == "shoulder" and name not in summary["angles"]]
@@ -637,7 +638,8 @@ def markdown(summary: dict) -> str:
     lines += _parameter_lines(summary)
     lines += _signature_lines(summary["steps"])
     if summary["not_added"]:
-        lines += ["", "## Not added (not beyond the noise, or not on enough blocks)", "",
+        lines += ["", "## Not added (not beyond the noise, not on enough blocks, or not "
+                      "over whole movements)", "",
                   RULES_LEGEND, ""]
         for item in summary["not_added"]:
             ev = item["evidence"]
@@ -645,7 +647,7 @@ def markdown(summary: dict) -> str:
             lines.append(f"- {item['effect']}: held-out gap {item['gap']:.4g}, removed RMS "
                          f"{ev['removed_rms']:.4g} vs noise floor {ev['noise_floor']:.4g}, "
                          f"{_blocks(ev['blocks_improved'])} improved (rule 2 needs "
-                         f"{ev['blocks_needed']}): {_rules_failed(ev)}"
+                         f"{ev['blocks_needed']}): {_rules_failed(ev, u)}"
                          + ("" if curve is None else
                             f"; over a smooth transfer curve of each sensor (held-out gap "
                             f"{curve['curve_gap']:.4g}, the stops' {item['gap']:.4g}) the "
@@ -664,13 +666,16 @@ RULES_LEGEND = (
     "removed RMS above the noise floor), not on its best block alone and on enough blocks "
     "that chance would rarely do it (rule 2), and, for stops, bends more than a smooth curve "
     "of each sensor would (rule 3); judged over all sensors together and on each sensor "
-    "alone (stops: on the frames they hold).")
+    "alone (stops: on the frames they hold). Its gain must also hold over whole movements: "
+    "averaged over half a second, the held-out error must be lower with it (rule 4; noise in "
+    "the motion capture's angles changes from frame to frame).")
 
 
-def _rules_failed(evidence: dict) -> str:
+def _rules_failed(evidence: dict, units: str) -> str:
     """Which rules a candidate left unnamed fails over all sensors together
-    (:func:`~.rules.rules_on_blocks`): a drift counted on the drift it would become is judged
-    on that count, a saturation that passes both on its curve (rule 3)."""
+    (:func:`~.rules.rules_on_blocks`, :func:`~.rules.over_movements`): a drift counted on
+    the drift it would become is judged on that count, a saturation that passes rules 1 and
+    2 on its curve (rule 3); ``units``: the sensors'."""
     counted = evidence.get("refined")
     if counted is not None:
         failed = [] if counted["delta_mse"] > evidence["noise_floor"] ** 2 else [
@@ -678,6 +683,7 @@ def _rules_failed(evidence: dict) -> str:
         if counted["blocks_improved"] < counted["blocks_needed"]:
             failed.append(f"improves too few blocks (rule 2: {counted['blocks_improved']} of "
                           f"{counted['blocks_needed']} needed)")
+        failed += _movements_failed(counted, units)
         head = (f"counted on the drift it would become (held-out gap "
                 f"{counted['heldout_gap']:.4g}), it ")
     else:
@@ -690,9 +696,20 @@ def _rules_failed(evidence: dict) -> str:
             failed.append("improves too few blocks (rule 2)")
         if not failed and evidence.get("against_smooth_curve") is not None:
             failed.append("bends no more than a smooth curve (rule 3)")
+        failed += _movements_failed(evidence, units)
         head = "it "
     return head + ("; ".join(failed) if failed else
                    "falls short of rule 1 or 2 by less than the figures' precision")
+
+
+def _movements_failed(evidence: dict, units: str) -> list[str]:
+    """Rule 4's failure (:func:`~.rules.over_movements`) as a phrase of the "Not added"
+    line, where the candidate lowers the held-out error at all; else nothing."""
+    moved = evidence["over_movements"]
+    if moved["holds"] or evidence["delta_mse"] <= 0:
+        return []
+    return [f"lowers the error only from frame to frame: averaged over {moved['window_s']:g} s "
+            f"its mean square rises by {-moved['delta_mse']:.3g} {units}² (rule 4)"]
 
 
 def _profile_line(summary: dict) -> str:

@@ -106,7 +106,8 @@ def windowed_mean(trial: Trial, residual: np.ndarray, span_s: float) -> np.ndarr
 def over_movements(trial: Trial, base: Fit, cand: Fit) -> dict:
     """Rule 4 (the module's docstring): the held-out ΔMSE of the residual averaged over
     ``MOVEMENT_S`` windows, ``cand`` over ``base``, sensor units², and the blocks whose
-    error it lowers; ``holds`` where that ΔMSE is positive."""
+    error it lowers; ``holds`` where that ΔMSE is positive (``fails_alone`` is set by
+    :func:`candidate_evidence`)."""
     delta = (block_mse(trial, windowed_mean(trial, base.residual, MOVEMENT_S))
              - block_mse(trial, windowed_mean(trial, cand.residual, MOVEMENT_S)))
     delta = delta[np.isfinite(delta)]
@@ -234,6 +235,7 @@ def candidate_evidence(trial: Trial, base: Fit, cand: Fit, floor: float) -> dict
         if extra is not None:
             rules["significant"] = rules["significant"] or extra["significant"]
     movements = over_movements(trial, base, cand)
+    movements["fails_alone"] = bool(rules["significant"] and not movements["holds"])
     rules["significant"] = rules["significant"] and movements["holds"]
     return {
         "heldout_gap": significant(cand.gap),

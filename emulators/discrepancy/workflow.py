@@ -68,6 +68,7 @@ from exohil.emulators.discrepancy.model import (
     with_static_of,
 )
 from exohil.emulators.discrepancy.rules import (
+    MOVEMENT_S,
     beyond_noise_somewhere,
     candidate_evidence,
     pooled_noise,
@@ -460,7 +461,7 @@ def _counted_refined(trial: Trial, inputs: Inputs, base: Fit, cand: Fit, evidenc
     creep for its flexibility."""
     refined = candidate_evidence(trial, base, refine_drift(trial, inputs, cand), floor)
     keys = ("heldout_gap", "delta_mse", "delta_mse_without_best_block", "blocks_improved",
-            "blocks_needed", "significant")
+            "blocks_needed", "over_movements", "significant")
     alone = refined.get("on_one_sensor") or {"sensors": {}, "beyond_noise_sensors": []}
     return {**evidence, "significant": refined["significant"],
             "refined": {**{k: refined[k] for k in keys},
@@ -522,6 +523,16 @@ def _slow_part(trial: Trial, residual: np.ndarray) -> np.ndarray:
     and its dozen fits are spared."""
     # every sensor analysed has finite frames
     return np.nanmean(windowed_mean(trial, residual, DRIFT_SPAN_S)**2, axis=0)
+
+
+def _fast_only_words(scored: list[tuple[str, Fit, dict]]) -> str:
+    """The candidates of ``scored`` that rule 4 alone kept from being named
+    (:func:`~.rules.over_movements`; a drift counted on its refined form, on that), as a
+    clause of the progress line; empty if none."""
+    fast = [kind for kind, _, e in scored
+            if e.get("refined", e)["over_movements"]["fails_alone"]]
+    return (f"; {', '.join(fast)} lowered the error only from frame to frame, not averaged "
+            f"over {MOVEMENT_S:g} s (rule 4)" if fast else "")
 
 
 def _conclusion(steps: list[dict], spec: Spec, left: dict) -> str:
@@ -1088,7 +1099,7 @@ def _run(rec: Recording, name: str, in_model: tuple[str, ...],
             rejected = [{"effect": k, "gap": e["heldout_gap"], "evidence": {**e, **sig}}
                         for k, _, e in scored]
             progress(f"[{step}] no candidate beats the noise (gap {base.gap:.4g}, floor "
-                     f"{floor:.4g}; tried {table}): nothing added")
+                     f"{floor:.4g}; tried {table}{_fast_only_words(scored)}): nothing added")
             break
         kind, cand, named = winner
         cand, inputs, own_input, (lag_before, drift_before) = _add_effect(
