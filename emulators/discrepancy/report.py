@@ -214,19 +214,19 @@ def _placed_words(summary: dict) -> str:
 
 def _filter_sentence(summary: dict, units: str) -> str:
     """How the motion capture was read, as a sentence of its own; where its angles were
-    low-passed at the lowest cutoff and a loop was named, what such angles' noise can be
-    named (discrepancy-limitations.md: 1° of white noise per sample, low-passed at 6 Hz,
-    was named hysteresis on 3 of 3 clean suits)."""
+    low-passed at the lowest cutoff and stops were named, what such angles' noise can be
+    named (discrepancy-limitations.md: 2° of white noise per sample, low-passed at 6 Hz,
+    was named saturation on 3 of 3 clean suits)."""
     chosen = summary["mocap_filter"]
     line = f" {_sentence(filter_words(chosen, units))}."
     lowest = min(MOCAP_CUTOFFS_HZ)
     if (chosen is not None and chosen["applied"] and chosen["low_pass_hz"] == lowest
-            and "hysteresis" in summary["effects"]):
-        line += (f" Angles noisy enough to be low-passed at {lowest:g} Hz can be read as a "
-                 "loop: the noise the filter leaves, smoothed by the hysteresis term, "
-                 "predicts the readings better though the suit has none (1° of white angle "
-                 "noise per sample was named hysteresis on 3 of 3 clean suits), so weigh the "
-                 "hysteresis named here against the motion capture's noise.")
+            and "saturation" in summary["effects"]):
+        line += (f" Angles noisy enough to be low-passed at {lowest:g} Hz can be read as "
+                 "stops: the map, fitted to noisy angles, overshoots the readings at the ends "
+                 "of their range, where stops clip it (2° of white angle noise per sample was "
+                 "named saturation on 3 of 3 clean suits, 1° on 1 of 3), so weigh the "
+                 "saturation named here against the motion capture's noise.")
     return line
 
 
