@@ -1,13 +1,14 @@
 """Discrepancy workflow on clean suits whose motion capture's angles are noisy.
 
 ``python -m benchmarks.bench_discrepancy_angle_noise [--seeds 3] [--first-seed 100]
-[--noise 0.1,0.3,0.5,1] [--duration 90] [--workers N]``
+[--noise 0.1,0.3,0.5,1,2] [--duration 90] [--workers N]``
 
 The workflow takes the motion capture's angles as exact once low-passed (method step 1),
-so a tracker's white angle noise that the filter leaves reaches the readings' prediction,
-and a play operator, which ignores reversals narrower than its width, can read it as a
-loop (discrepancy-limitations.md, "Noise in the motion capture's angles can be read as a
-loop"). Each recording is a clean suit of ``hidden.py``'s random geometry and movement
+so a tracker's white angle noise that the filter leaves reaches the readings' prediction:
+a play operator, which ignores reversals narrower than its width, can read it as a loop
+(rule 4 refuses one whose gain is only from frame to frame), and stops can clip a map
+fitted to noisy angles where it overshoots the readings' range (discrepancy-limitations.md,
+"Noise in the motion capture's angles can be read as stops"). Each recording is a clean suit of ``hidden.py``'s random geometry and movement
 (:func:`~exohil.emulators.discrepancy.hidden.angle_noise_recording`: 0.15 mm of sensor
 noise at 250 Hz, mocap at 120 Hz) with white noise of each SD added to every angle per
 sample; one seed keeps the same suit, movement and noise pattern at every SD. Prints one
@@ -65,9 +66,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seeds", type=positive_int, default=3,
                         help="seeds from --first-seed (default 3)")
     parser.add_argument("--first-seed", type=int, default=100, help="first seed (default 100)")
-    parser.add_argument("--noise", type=noise_levels, default=(0.1, 0.3, 0.5, 1.0),
+    parser.add_argument("--noise", type=noise_levels, default=(0.1, 0.3, 0.5, 1.0, 2.0),
                         help="white angle noise SDs, ° per sample, comma-separated "
-                             "(default 0.1,0.3,0.5,1)")
+                             "(default 0.1,0.3,0.5,1,2)")
     parser.add_argument("--duration", type=positive_float, default=90.0,
                         help="s per recording (default 90)")
     parser.add_argument("--workers", type=positive_int, default=None,
