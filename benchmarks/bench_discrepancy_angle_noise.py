@@ -8,7 +8,8 @@ so a tracker's white angle noise that the filter leaves reaches the readings' pr
 a play operator, which ignores reversals narrower than its width, can read it as a loop
 (rule 4 refuses one whose gain is only from frame to frame), and stops can clip a map
 fitted to noisy angles where it overshoots the readings' range (discrepancy-limitations.md,
-"Noise in the motion capture's angles can be read as stops"). Each recording is a clean suit of ``hidden.py``'s random geometry and movement
+"Noise in the motion capture's angles can be read as stops").
+Each recording is a clean suit of ``hidden.py``'s random geometry and movement
 (:func:`~exohil.emulators.discrepancy.hidden.angle_noise_recording`: 0.15 mm of sensor
 noise at 250 Hz, mocap at 120 Hz) with white noise of each SD added to every angle per
 sample; one seed keeps the same suit, movement and noise pattern at every SD. Prints one
