@@ -108,12 +108,11 @@ def over_movements(trial: Trial, base: Fit, cand: Fit) -> dict:
     ``MOVEMENT_S`` windows, ``cand`` over ``base``, sensor units², and the blocks whose
     error it lowers; ``holds`` where that ΔMSE is positive (``fails_alone`` is set by
     :func:`candidate_evidence`)."""
-    delta = (block_mse(trial, windowed_mean(trial, base.residual, MOVEMENT_S))
-             - block_mse(trial, windowed_mean(trial, cand.residual, MOVEMENT_S)))
-    delta = delta[np.isfinite(delta)]
-    dmse = float(np.mean(delta)) if delta.size else 0.0
-    return {"window_s": MOVEMENT_S, "delta_mse": significant(dmse, MSE_DIGITS),
-            "blocks_improved": int(np.sum(delta > 0)), "holds": bool(dmse > 0)}
+    slow = rules_on_blocks(block_mse(trial, windowed_mean(trial, base.residual, MOVEMENT_S)),
+                           block_mse(trial, windowed_mean(trial, cand.residual, MOVEMENT_S)),
+                           0.0)
+    return {"window_s": MOVEMENT_S, "delta_mse": slow["delta_mse"],
+            "blocks_improved": slow["blocks_improved"], "holds": slow["delta_mse"] > 0}
 
 
 def blocks_needed(n: int, level: float = SIGN_TEST_LEVEL) -> int:
