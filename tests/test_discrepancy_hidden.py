@@ -19,6 +19,7 @@ from exohil.emulators.discrepancy.hidden import (
     first_effect,
     make_recording,
     run_cases,
+    stamped_late,
 )
 from exohil.emulators.protocols import mot_trajectory
 
@@ -92,3 +93,15 @@ def test_a_case_can_be_driven_by_real_motion():
     assert real.sensors.t[-1] != pytest.approx(random.sensors.t[-1], abs=1.0)
     np.testing.assert_allclose(stream.angles, trajectory.sample(stream.t))
     assert real.sensor_names == random.sensor_names  # the same seeded suit
+
+
+def test_stamped_late_moves_every_motion_capture_stream_and_nothing_else():
+    rec = make_recording(Case("clean", "lib", 1, 100, duration_s=10.0))
+    rec.mocap["elbow"] = rec.mocap["shoulder"]  # a second joint on the same clock
+    t_before = rec.mocap["shoulder"].t.copy()
+    early = stamped_late(rec, -1.5)
+    for joint in ("shoulder", "elbow"):
+        np.testing.assert_array_equal(early.mocap[joint].t, t_before - 1.5)
+        assert early.mocap[joint].angles is rec.mocap[joint].angles
+    assert early.sensors is rec.sensors
+    np.testing.assert_array_equal(rec.mocap["shoulder"].t, t_before)  # the input is kept

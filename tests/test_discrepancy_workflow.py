@@ -82,6 +82,7 @@ from exohil.emulators.discrepancy.hidden import (
     make_recording,
     random_geometry,
     random_trajectory,
+    stamped_late,
     suit_lengths,
     suit_recording,
 )
@@ -1318,8 +1319,7 @@ def test_readings_ahead_of_the_motion_capture_are_a_clock_offset_not_an_effect(c
     can do. It was called clean with 4× the noise left (a lag cannot run ahead); the
     offset is now calibrated away with the static map, and nothing is named."""
     rec, gap_on_time = clean_101
-    stream = rec.mocap["shoulder"]
-    late = replace(rec, mocap={"shoulder": replace(stream, t=stream.t + 0.015)})
+    late = stamped_late(rec, 0.015)
     outcome = run(late, "late")
     clock = outcome.summary["clock_offset"]
     assert clock["applied"] and clock["mocap_late_s"] == pytest.approx(0.015, abs=0.001)
@@ -1352,12 +1352,6 @@ def default_suit_calibration():
                     EffectChain([Noise(sigma_mm=0.15)]))
 
 
-def _stamped_late(rec: Recording, late_s: float) -> Recording:
-    """``rec`` with its motion capture stamped ``late_s`` s late (negative: early)."""
-    stream = rec.mocap["shoulder"]
-    return replace(rec, mocap={"shoulder": replace(stream, t=stream.t + late_s)})
-
-
 def test_a_clock_seconds_late_is_found_by_a_search_and_read_away(default_suit_calibration):
     """Motion capture stamped 3 s late: the first order (the residual's slope on dŝ/dt)
     read nothing there, and the static map was left at 41.6 mm against 0.157 with the
@@ -1365,7 +1359,7 @@ def test_a_clock_seconds_late_is_found_by_a_search_and_read_away(default_suit_ca
     leaves what it leaves on time."""
     _, on_time, _, _, clock = _static_and_clock(default_suit_calibration)
     assert clock is None
-    _, static, _, kept, clock = _static_and_clock(_stamped_late(default_suit_calibration, 3.0))
+    _, static, _, kept, clock = _static_and_clock(stamped_late(default_suit_calibration, 3.0))
     assert static.gap > 100 * on_time.gap
     assert clock is not None and clock["applied"]
     assert clock["mocap_late_s"] == pytest.approx(3.0, abs=0.001)
@@ -1384,7 +1378,7 @@ def test_a_clock_seconds_early_is_found_by_the_search_and_read_away(
     cubic leaves is the clock: read 1.5 s early, the map leaves what it leaves on time.
     Before, the clock was left as stamped and the static map at 41.0 mm against 0.157."""
     _, on_time, _, _, _ = _static_and_clock(default_suit_calibration)
-    early = _stamped_late(default_suit_calibration, -1.5)
+    early = stamped_late(default_suit_calibration, -1.5)
     found = lead_search(early, prepare_trial(early, "early"))
     assert found["lead_s"] == pytest.approx(-1.5, abs=0.02) and found["share"] > 0.99
     _, static, _, kept, clock = _static_and_clock(early)
@@ -1409,7 +1403,7 @@ def test_a_clock_read_by_the_static_map_is_read_again_with_the_loop_modelled(see
     1.7 ms off (0.170 mm), and driven by its own static part 0.4 ms (0.162 mm)."""
     rec = make_recording(Case("hysteresis", "lib", 2, seed=seed))
     on_time = run(rec, "on time").summary
-    summary = run(_stamped_late(rec, late_s), "stamped").summary
+    summary = run(stamped_late(rec, late_s), "stamped").summary
     clock = summary["clock_offset"]
     looped = clock["with_loop"]
     assert clock["applied"] and looped["applied"]
@@ -1432,7 +1426,7 @@ def test_a_clock_offset_the_static_map_left_to_the_effects_is_read_with_the_loop
     clock, the loop reads the lead whole: the clock is read 14 ms late and the loop named."""
     rec = make_recording(Case("hysteresis", "lib", 1, seed=100))
     on_time = run(rec, "on time").summary
-    summary = run(_stamped_late(rec, 0.015), "late").summary
+    summary = run(stamped_late(rec, 0.015), "late").summary
     clock = summary["clock_offset"]
     looped = clock["with_loop"]
     assert clock["applied"] and looped["applied"] and not looped["static_applied"]
@@ -1537,7 +1531,7 @@ def test_the_search_scores_each_lead_on_the_frames_its_reading_covers(
     stream = default_suit_calibration.mocap["shoulder"]
     middle = 0.5 * (stream.t[0] + stream.t[-1])
     kept = np.abs(stream.t - middle) > 2.5
-    rec = _stamped_late(replace(default_suit_calibration, mocap={"shoulder": replace(
+    rec = stamped_late(replace(default_suit_calibration, mocap={"shoulder": replace(
         stream, t=stream.t[kept], angles=stream.angles[kept])}), 0.5)
     trial = prepare_trial(rec, "dropout")
     found = lead_search(rec, trial)
@@ -1650,8 +1644,7 @@ def test_a_clock_offset_under_a_larger_effect_is_found_once_the_effect_is_added(
     is mostly the creep's, so the offset is found in the final model's residual, and the
     workflow runs again with it."""
     rec = make_recording(Case("creep", "lib", 2, seed=101, duration_s=30.0))
-    stream = rec.mocap["shoulder"]
-    late = replace(rec, mocap={"shoulder": replace(stream, t=stream.t + 0.015)})
+    late = stamped_late(rec, 0.015)
     lines: list[str] = []
     outcome = run(late, "late", progress=lines.append)
     clock = outcome.summary["clock_offset"]
@@ -1675,7 +1668,7 @@ def test_an_offset_found_again_after_the_effects_says_how_the_run_before_read_it
     and the report's sentence says both, not the last step alone. The screen and the
     second run are stood in for (the real ones take minutes on four minutes of data)."""
     rec = make_recording(Case("hysteresis", "lib", 2, seed=101, duration_s=30.0))
-    first = workflow._run(_stamped_late(rec, -1.5), "early", (), lambda line: None, 1)
+    first = workflow._run(stamped_late(rec, -1.5), "early", (), lambda line: None, 1)
     read = first.summary["clock_offset"]
     assert read["applied"] and read["searched"]["lead_s"] == pytest.approx(-1.5, abs=0.02)
     found = {**{k: v for k, v in read.items() if k != "searched"},
@@ -1731,8 +1724,7 @@ def test_a_clock_offset_turned_down_after_the_effects_is_recorded_and_reported()
     and the report say what was found and why it was not read so (only a progress line did
     before)."""
     rec = make_recording(Case("creep", "lib", 2, seed=101, duration_s=40.0))
-    stream = rec.mocap["shoulder"]
-    late = replace(rec, mocap={"shoulder": replace(stream, t=stream.t + 0.015)})
+    late = stamped_late(rec, 0.015)
     summary = run(late, "late").summary
     found = summary["timing_after_effects"]["clock_offset"]
     assert not found["applied"] and found["share_of_excess"] < 0.5

@@ -322,6 +322,15 @@ def angle_noise_recording(seed: int, noise_deg: float, duration_s: float = 90.0
     return replace(rec, mocap={"shoulder": replace(stream, angles=stream.angles + jitter)})
 
 
+def stamped_late(rec: Recording, late_s: float) -> Recording:
+    """``rec`` with every motion-capture stream's times moved by ``late_s`` seconds: stamped
+    late (the readings run ahead of it) where positive, early where negative. A clock
+    offset between the two, which the workflow reads back (method step 2); the sensors and
+    the angles are as they were."""
+    return replace(rec, mocap={joint: replace(stream, t=stream.t + late_s)
+                               for joint, stream in rec.mocap.items()})
+
+
 def cases(seeds: range, magnitudes: tuple[int, ...] = (1, 2), duration_s: float = 60.0,
           families: tuple[str, ...] = ("lib", "alt"), motion: tuple[str, ...] = ()
           ) -> list[Case]:
