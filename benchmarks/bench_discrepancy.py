@@ -10,7 +10,9 @@
    floor, no model can halve it (a held-out gap keeps the noise).
 2. Timing: the workflow on a four-minute 250 Hz recording (the paper protocol fixture, every
    effect on; ``--time-on FILE`` times another recording instead), p50/p99/max over
-   ``--repeats`` runs, with the machine. Target: ≤ 60 s.
+   ``--repeats`` runs, with the machine. Target: ≤ 60 s. ``--mocap-late SECONDS`` times it
+   with its motion capture stamped that late (negative: early): a clock offset, which the
+   workflow reads back, and the slowest case measured (docs/discrepancy-results.md).
 
 Run from the repository root: ``python -m benchmarks.bench_discrepancy [--seeds 5]
 [--duration 90] [--repeats 3] [--families lib,alt] [--first-seed 1000]``. ``--families other``
@@ -36,6 +38,7 @@ import numpy as np
 
 from benchmarks.report import (
     description,
+    finite_float,
     non_negative_int,
     positive_float,
     positive_int,
@@ -50,6 +53,7 @@ from exohil.emulators.discrepancy.hidden import (
     cases,
     first_effect,
     run_cases,
+    stamped_late,
 )
 from exohil.emulators.discrepancy.workers import default_workers, workers_for
 from exohil.emulators.protocols import mot_trajectory
@@ -128,12 +132,18 @@ def print_rates(rows: list[tuple[str, str, float]]) -> None:
 
 
 def timing(repeats: int, path: Path = FIXTURE, workers: int | None = None,
-           rec: Recording | None = None) -> None:
-    """Time the workflow on ``rec`` (read from ``path`` when not given)."""
+           rec: Recording | None = None, mocap_late_s: float = 0.0) -> None:
+    """Time the workflow on ``rec`` (read from ``path`` when not given), its motion capture
+    stamped ``mocap_late_s`` seconds late (:func:`~.hidden.stamped_late`)."""
     rec = read_recording(path) if rec is None else rec
     span = rec.sensors.t[-1] - rec.sensors.t[0]
     processes = workers_for(workers)
-    print(f"\ntiming: {path.name}, {len(rec.sensors)} sensor frames ({span:.1f} s) x "
+    moved = ""
+    if mocap_late_s:
+        rec = stamped_late(rec, mocap_late_s)
+        moved = (f", motion capture stamped {abs(mocap_late_s):g} s "
+                 f"{'late' if mocap_late_s > 0 else 'early'}")
+    print(f"\ntiming: {path.name}{moved}, {len(rec.sensors)} sensor frames ({span:.1f} s) x "
           f"{len(rec.sensor_names)} sensors; candidates on {processes} "
           f"process{'es' if processes > 1 else ''}")
     seconds = []
@@ -162,6 +172,10 @@ def main() -> None:
     parser.add_argument("--no-sweep", action="store_true", help="timing only")
     parser.add_argument("--time-on", type=Path, default=FIXTURE, metavar="FILE",
                         help="the recording to time (default: the paper protocol fixture)")
+    parser.add_argument("--mocap-late", type=finite_float, default=0.0, metavar="SECONDS",
+                        help="time it with its motion capture stamped SECONDS late "
+                             "(negative: early), a clock offset the workflow reads back "
+                             "(default 0: as recorded)")
     parser.add_argument("--motion", type=Path, metavar="DIR",
                         help="drive the suits with the real motion of DIR/*.mot (OpenSim "
                              "inverse kinematics), joined in name order")
@@ -175,6 +189,8 @@ def main() -> None:
     families = tuple(args.families.split(","))
     if args.no_sweep and args.repeats == 0:
         parser.error("--no-sweep with --repeats 0 does nothing")
+    if args.mocap_late and args.repeats == 0:
+        parser.error("--mocap-late with --repeats 0 times nothing")
     timed = None
     if args.repeats > 0:  # before the sweep, not after it
         if not args.time_on.is_file():
@@ -199,7 +215,7 @@ def main() -> None:
         sweep(range(args.first_seed, args.first_seed + args.seeds), args.duration, families,
               args.workers, motion)
     if args.repeats > 0:
-        timing(args.repeats, args.time_on, args.time_workers, timed)
+        timing(args.repeats, args.time_on, args.time_workers, timed, args.mocap_late)
 
 
 if __name__ == "__main__":

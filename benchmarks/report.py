@@ -226,6 +226,14 @@ def generator_parser(doc: str) -> argparse.ArgumentParser:
     return parser
 
 
+def finite_float(value: str) -> float:
+    """argparse type: a finite number."""
+    number = float(value)
+    if not math.isfinite(number):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {value}")
+    return number
+
+
 def non_negative_float(value: str) -> float:
     """argparse type: a finite number ≥ 0."""
     number = float(value)

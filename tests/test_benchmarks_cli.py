@@ -309,6 +309,8 @@ def test_the_pools_cancelled_future_race_is_quiet_and_other_thread_errors_are_no
     (("--repeats", "-1"), "--repeats: must be at least 0"),
     (("--no-sweep", "--repeats", "0"), "does nothing"),
     (("--time-on", "README.md"), "--time-on: README.md: not an MCAP file"),
+    (("--mocap-late", "nan"), "--mocap-late: must be a finite number"),
+    (("--mocap-late", "0.5", "--repeats", "0"), "--mocap-late with --repeats 0 times nothing"),
 ])
 def test_the_discrepancy_sweep_refuses_meaningless_values_before_it_starts(args, message):
     out = run_module("benchmarks.bench_discrepancy", *args)
