@@ -771,8 +771,7 @@ def test_no_mocap_and_too_short_are_one_clear_error():
     just_short = make_recording(Case("clean", "lib", 1, seed=3, duration_s=19.99))
     with pytest.raises(DiscrepancyError, match=r": 19\.9\d s of sensors .* at least 20 s"):
         prepare_trial(just_short, "x.mcap")  # never rounded up to the length it asks for
-    stream = rec.mocap["shoulder"]
-    other_clock = replace(rec, mocap={"shoulder": replace(stream, t=stream.t + 1000.0)})
+    other_clock = stamped_late(rec, 1000.0)
     with pytest.raises(DiscrepancyError, match="do not overlap in time"):
         prepare_trial(other_clock, "x.mcap")
 
