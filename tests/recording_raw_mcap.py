@@ -109,8 +109,10 @@ def write_sensor_messages(
     sensor_bodies: list[bytes],
     metadata: dict[str, str] | None = None,
     metadata_name: str = "exohil.recording",
+    shoulder_bodies: list[bytes] = (),
 ) -> Path:
-    """An unchunked file with the given raw ``/suit/sensors`` message bodies, 4 ms apart."""
+    """An unchunked file with the given raw ``/suit/sensors`` message bodies, 4 ms apart (and
+    ``/mocap/shoulder`` ones, 10 ms apart)."""
     with open(path, "wb") as stream:
         writer = Writer(stream, compression=CompressionType.NONE, use_chunking=False)
         writer.start()
@@ -119,6 +121,10 @@ def write_sensor_messages(
         writer.add_metadata(metadata_name, GOOD_METADATA if metadata is None else metadata)
         for k, body in enumerate(sensor_bodies):
             writer.add_message(channel, k * 4_000_000, body, k * 4_000_000)
+        if shoulder_bodies:
+            mocap = writer.register_channel("/mocap/shoulder", "json", schema)
+            for k, body in enumerate(shoulder_bodies):
+                writer.add_message(mocap, k * 10_000_000, body, k * 10_000_000)
         writer.finish()
     return path
 

@@ -285,6 +285,63 @@ def test_bad_files_raise_one_clear_error(tmp_path: Path, case: str, problem: str
     assert str(path) in message and "\n" not in message
 
 
+#: A frame that breaks the schema in one way (its body, with the problem the error names).
+ONE_BAD_FRAME = {
+    "bool value": (b'{"seq": 700, "t": 2.8, "values": [1, true, 3, 4]}',
+                   "message 700 violates the v1 schema: 'values' must be a list of numbers"),
+    "no values": (b'{"seq": 700, "t": 2.8}',
+                  "message 700 violates the v1 schema: 'values' must be a list of numbers"),
+    "seq a float": (b'{"seq": 700.0, "t": 2.8, "values": [1, 2, 3, 4]}',
+                    "message 700 violates the v1 schema: 'seq' must be an integer"),
+    "t a string": (b'{"seq": 700, "t": "2.8", "values": [1, 2, 3, 4]}',
+                   "message 700 violates the v1 schema: 't' must be a number"),
+    "three values": (b'{"seq": 700, "t": 2.8, "values": [1, 2, 3]}',
+                     "frame 700 \\(seq 700\\) has 3 values; metadata lists 4 sensors"),
+    "not an object": (b'[700, 2.8, [1, 2, 3, 4]]',
+                      "message 700 violates the v1 schema: message is not a JSON object"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(ONE_BAD_FRAME))
+def test_one_bad_frame_among_many_is_named(tmp_path: Path, case: str) -> None:
+    """The error names the one frame of a thousand that breaks the schema, by its index in
+    log-time order."""
+    body, problem = ONE_BAD_FRAME[case]
+    bodies = [frame(k) for k in range(1000)]
+    bodies[700] = body
+    with pytest.raises(RecordingError, match=problem):
+        read_recording(write_sensor_messages(tmp_path / "one_bad.mcap", bodies))
+
+
+def _sample(k: int, **angles: object) -> bytes:
+    return json.dumps({"t": k / 100, "elv_angle": 10.0 + k, "shoulder_elv": 20, **angles}).encode()
+
+
+def test_mocap_fields_in_another_order_are_read_by_name(tmp_path: Path) -> None:
+    samples = [_sample(k) for k in range(300)]
+    samples[200] = b'{"shoulder_elv": 20, "elv_angle": 210.0, "t": 2.0}'
+    rec = read_recording(write_sensor_messages(tmp_path / "order.mcap", [frame(0)],
+                                               shoulder_bodies=samples))
+    shoulder = rec.mocap["shoulder"]
+    assert shoulder.names == ("elv_angle", "shoulder_elv")
+    np.testing.assert_array_equal(shoulder.angles[:, 0], 10.0 + np.arange(300))
+    np.testing.assert_array_equal(shoulder.t, np.arange(300) / 100)
+
+
+@pytest.mark.parametrize(("sample", "problem"), [
+    (_sample(200, shoulder_rot=0.0), "message 200 violates the v1 schema: fields"),
+    (_sample(200, shoulder_elv=True), "message 200 violates the v1 schema: angle fields must"),
+    (b'{"elv_angle": 210.0, "shoulder_elv": 20}', "message 200 violates the v1 schema: 't'"),
+])
+def test_one_bad_mocap_sample_among_many_is_named(tmp_path: Path, sample: bytes,
+                                                  problem: str) -> None:
+    samples = [_sample(k) for k in range(300)]
+    samples[200] = sample
+    with pytest.raises(RecordingError, match=problem):
+        read_recording(write_sensor_messages(tmp_path / "bad_sample.mcap", [frame(0)],
+                                             shoulder_bodies=samples))
+
+
 def test_a_negative_time_is_named_in_seconds(tmp_path: Path) -> None:
     """Another lab's clock that starts at -5 s was refused as 'has time np.float64(-5.0)':
     numpy's repr, and no word on what to do."""
