@@ -3,6 +3,7 @@ missing (docs/discrepancy.md)."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -94,9 +95,10 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     the missing effect, add it, and show the held-out gap shrink, step by step.
 
     MEASURED needs sensor frames and a /mocap/<joint> stream of the joint's angles over at
-    least 8 x 2.5 s of them. One progress line per step goes to stderr; the last line, to
-    stdout, names the effects added and the held-out gap (cross-validated RMS of simulation
-    minus measurement, in the recording's units) before and after. Where it says "what
+    least 8 x 2.5 s of them. One progress line per step goes to stderr, then how long the
+    run took (reading, analysis, writing the outputs); the last line, to stdout, names the
+    effects added and the held-out gap (cross-validated RMS of simulation minus
+    measurement, in the recording's units) before and after. Where it says "what
     remains ... none of the five effects explains", the written profile is the best fit
     found, not a faithful model of the suit. Exit status: 0 done (whatever was named), 1
     unusable recording or profile, 2 wrong command line, 130 stopped with Ctrl-C (the output
@@ -142,12 +144,15 @@ def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
     files written."""
     from exohil.emulators.discrepancy import DiscrepancyError, run
     from exohil.emulators.discrepancy.report import write_outputs
+    from exohil.emulators.discrepancy.workers import workers_for
     from exohil.formats.errors import RecordingError
     from exohil.formats.recording_reader import read_recording
     from exohil.harness.machine import available_memory_bytes
 
+    started = time.perf_counter()
     try:
         rec = read_recording(measured)
+        read_s = time.perf_counter() - started
         measured_on = _sensors_words(_usable(rec), rec.sensor_units)
         if calibrated_on is not None and calibrated_on != measured_on:
             click.echo(f"warning: {profile_path} was calibrated on {calibrated_on}, "
@@ -156,12 +161,24 @@ def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
         warning = memory_warning(len(rec.sensors), available_memory_bytes())
         if warning is not None:
             click.echo(warning, err=True)
+        analysis_started = time.perf_counter()
         outcome = run(rec, measured.name, in_model=in_model,
                       progress=lambda line: click.echo(line, err=True), workers=workers)
     except (RecordingError, DiscrepancyError) as exc:
         raise click.ClickException(str(exc)) from exc
-    return outcome.summary, write_outputs(outcome, out_dir, profile_name(name, measured.stem),
-                                          workers)
+    writing_started = time.perf_counter()
+    written = write_outputs(outcome, out_dir, profile_name(name, measured.stem), workers)
+    done = time.perf_counter()
+    click.echo(time_words(done - started, read_s, writing_started - analysis_started,
+                          done - writing_started, workers_for(workers)), err=True)
+    return outcome.summary, written
+
+
+def time_words(total_s: float, read_s: float, analysed_s: float, wrote_s: float,
+               processes: int) -> str:
+    """The run's wall-clock time and its parts, s, as the last progress line says it."""
+    return (f"took {total_s:.1f} s: read {read_s:.1f} s, analysed {analysed_s:.1f} s, wrote "
+            f"the outputs {wrote_s:.1f} s ({processes} process{'' if processes == 1 else 'es'})")
 
 
 def profile_name(base: str, stem: str) -> str:

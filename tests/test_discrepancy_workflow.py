@@ -157,6 +157,7 @@ from exohil.emulators.discrepancy.timing import (
     offset_words,
     read_before_words,
 )
+from exohil.emulators.discrepancy.workers import default_workers
 from exohil.emulators.discrepancy.workflow import (
     _against_curve,
     _conclusion,
@@ -2894,6 +2895,12 @@ def test_cli_writes_the_contract_and_reports_each_step(hysteresis_outcome, tmp_p
                                          "sensor_noise_variances", "beyond_noise_sensors"}
     (last,) = result.stdout.strip().splitlines()  # the result alone; progress on stderr
     assert last.startswith(f"{summary['conclusion']}: held-out gap ")
+    took = re.fullmatch(r"took (\d+\.\d) s: read (\d+\.\d) s, analysed (\d+\.\d) s, wrote "
+                        r"the outputs (\d+\.\d) s \((\d+) process(?:es)?\)",
+                        result.stderr.splitlines()[-1])  # the last progress line
+    assert took is not None, result.stderr.splitlines()[-1]
+    assert sum(float(took[k]) for k in (2, 3, 4)) <= float(took[1]) + 0.15  # each to 0.1 s
+    assert int(took[5]) == default_workers()
     report = (out / "report.md").read_text()
     assert report.startswith("# Discrepancy report")
     assert "## Sudden changes of the reading" in report
