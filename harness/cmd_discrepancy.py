@@ -115,6 +115,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
       exohil discrepancy trial.mcap --out disc/
       exohil record cut session.mcap --stop 900 --out part1.mcap
     """
+    started = time.perf_counter()  # the imports of the analysis, about 2 s, are in its time
     from exohil.emulators.discrepancy.report import OUTPUT_NAMES
 
     refuse_overwriting_inputs([("--out", out_dir / name) for name in OUTPUT_NAMES],
@@ -127,7 +128,7 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
     name, in_model, calibrated_on = _in_model(profile_path)
     try:
         summary, written = _analyse_and_write(measured, profile_path, out_dir, workers, name,
-                                              in_model, calibrated_on)
+                                              in_model, calibrated_on, started)
     except KeyboardInterrupt:
         click.echo(f"interrupted: {out_dir} left as it was (no output of this run written)",
                    err=True)
@@ -139,9 +140,11 @@ def discrepancy(measured: Path, profile_path: Path | None, out_dir: Path,
 
 def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
                        workers: int | None, name: str, in_model: tuple[str, ...],
-                       calibrated_on: str | None) -> tuple[dict, list[Path]]:
+                       calibrated_on: str | None, started: float
+                       ) -> tuple[dict, list[Path]]:
     """Analyse ``measured`` and write the outputs into ``out_dir``: the run's summary and the
-    files written."""
+    files written. The last progress line says how long since ``started`` (the command's
+    start, ``time.perf_counter``) and its parts (:func:`time_words`)."""
     from exohil.emulators.discrepancy import DiscrepancyError, run
     from exohil.emulators.discrepancy.report import write_outputs
     from exohil.emulators.discrepancy.workers import workers_for
@@ -149,10 +152,10 @@ def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
     from exohil.formats.recording_reader import read_recording
     from exohil.harness.machine import available_memory_bytes
 
-    started = time.perf_counter()
+    reading_started = time.perf_counter()
     try:
         rec = read_recording(measured)
-        read_s = time.perf_counter() - started
+        read_s = time.perf_counter() - reading_started
         measured_on = _sensors_words(_usable(rec), rec.sensor_units)
         if calibrated_on is not None and calibrated_on != measured_on:
             click.echo(f"warning: {profile_path} was calibrated on {calibrated_on}, "
@@ -176,7 +179,8 @@ def _analyse_and_write(measured: Path, profile_path: Path | None, out_dir: Path,
 
 def time_words(total_s: float, read_s: float, analysed_s: float, wrote_s: float,
                processes: int) -> str:
-    """The run's wall-clock time and its parts, s, as the last progress line says it."""
+    """The command's wall-clock time (from its start, the analysis's imports included; the
+    interpreter's start is not) and its parts, s, as the last progress line says it."""
     return (f"took {total_s:.1f} s: read {read_s:.1f} s, analysed {analysed_s:.1f} s, wrote "
             f"the outputs {wrote_s:.1f} s ({processes} process{'' if processes == 1 else 'es'})")
 
