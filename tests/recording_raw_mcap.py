@@ -4,6 +4,7 @@ writer, so the reader is checked against an independent implementation of the sp
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -109,7 +110,7 @@ def write_sensor_messages(
     sensor_bodies: list[bytes],
     metadata: dict[str, str] | None = None,
     metadata_name: str = "exohil.recording",
-    shoulder_bodies: list[bytes] = (),
+    shoulder_bodies: Sequence[bytes] = (),
 ) -> Path:
     """An unchunked file with the given raw ``/suit/sensors`` message bodies, 4 ms apart (and
     ``/mocap/shoulder`` ones, 10 ms apart)."""
